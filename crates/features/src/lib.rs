@@ -1,0 +1,31 @@
+//! From [`Scene`](scbg_scene::Scene) to model-ready samples, framework-free.
+//!
+//! Main types:
+//! - [`PreparedScene`]: a compact, scene-level form of a `Scene` (tracks relative to an
+//!   origin, road polylines already subsampled and typed), with its [`Window`]s and
+//!   [`InteractingPair`]s. This is what the cache stores, once per scenario.
+//! - [`AgentSample`]: the Multipath++ agent-centric features of one target agent in one
+//!   window (plus, optionally, the conditioning future of the other agent of a pair), built on
+//!   demand by [`extract_sample`] — so the cache never materialises every agent's view.
+//! - [`cache`]: sharded, memory-mappable files of prepared scenes and their manifest.
+//!
+//! **Architecture invariant:** no tensors and no deep-learning framework here: samples are
+//! plain `Vec<f32>` arrays with documented shapes and `valid` masks. No file formats other
+//! than the cache's own; protobuf/TFRecord are unknown to this crate.
+
+pub mod cache;
+mod codec;
+mod pairs;
+mod prepared;
+mod sample;
+mod stats;
+mod window;
+
+pub use pairs::{InteractingPair, PairConfig, PairSource, select_pairs};
+pub use prepared::{PrepareError, PreparedScene, PreparedTrack, RoadKind, RoadPolyline};
+pub use sample::{
+    AGENT_FEATURES, AgentSample, DIFF_FEATURES, FeatureConfig, ROAD_FEATURES, ROAD_TYPES,
+    SampleError, extract_sample, marginal_targets,
+};
+pub use stats::FeatureStats;
+pub use window::{Window, WindowConfig, windows};

@@ -1,0 +1,18 @@
+//! One module per command group.
+
+mod bench;
+mod data;
+mod synth;
+
+use crate::cli::{BenchCommand, Command, DataCommand};
+
+pub fn run(command: Command) -> anyhow::Result<()> {
+    match command {
+        Command::Data(DataCommand::Inspect(a)) => data::inspect(&a),
+        Command::Data(DataCommand::Render(a)) => data::render(&a),
+        Command::Data(DataCommand::Prepare(a)) => data::prepare(&a).map(|_| ()),
+        Command::Synth(a) => synth::synth(&a),
+        Command::Bench(BenchCommand::Ingest(a)) => bench::ingest(&a),
+        Command::Bench(BenchCommand::Synth(a)) => bench::synth(&a),
+    }
+}

@@ -1,0 +1,39 @@
+//! `scbg`: command-line glue over the scbg crates. Parses arguments, wires the crates together,
+//! shows progress, and turns library errors into one message and exit code 2.
+
+mod cli;
+mod cmd;
+mod inputs;
+mod progress;
+
+use clap::Parser;
+
+fn main() {
+    let args = cli::Cli::parse();
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("SCBG_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .with_target(false)
+        .init();
+    if let Some(threads) = args.threads {
+        // Ignore the error: the global pool can only be built once (tests call main twice).
+        let _ = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build_global();
+    }
+    if let Err(err) = cmd::run(args.command) {
+        // A closed stdout (`scbg data inspect ... | head`) ends the command quietly.
+        let broken_pipe = err.chain().any(|e| {
+            e.downcast_ref::<std::io::Error>()
+                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+        });
+        if broken_pipe {
+            std::process::exit(0);
+        }
+        eprintln!("error: {err:#}");
+        std::process::exit(2);
+    }
+}

@@ -1,0 +1,205 @@
+//! Static map features of a scene, in the world frame (metres).
+
+/// A map point in the world frame.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MapPoint {
+    pub x_m: f64,
+    pub y_m: f64,
+    pub z_m: f64,
+}
+
+/// A closed polygon (crosswalk, speed bump, driveway) in the world frame.
+pub type Polygon = Vec<MapPoint>;
+
+macro_rules! int_enum {
+    ($(#[$m:meta])* $name:ident { $($variant:ident = $value:expr),+ $(,)? }) => {
+        $(#[$m])*
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+        pub enum $name {
+            #[default]
+            $($variant = $value),+
+        }
+        impl $name {
+            /// Every variant, in code order.
+            pub const ALL: &'static [$name] = &[$($name::$variant),+];
+            /// The variant for a protobuf enum code; unknown codes map to the zero variant.
+            pub fn from_code(code: i32) -> Self {
+                match code {
+                    $($value => $name::$variant,)+
+                    _ => Self::default(),
+                }
+            }
+            /// The protobuf enum code.
+            pub fn code(self) -> i32 {
+                self as i32
+            }
+        }
+    };
+}
+
+int_enum!(
+    /// WOMD `LaneCenter.LaneType`.
+    LaneType { Undefined = 0, Freeway = 1, SurfaceStreet = 2, BikeLane = 3 }
+);
+int_enum!(
+    /// WOMD `RoadLine.RoadLineType`.
+    RoadLineType {
+        Unknown = 0,
+        BrokenSingleWhite = 1,
+        SolidSingleWhite = 2,
+        SolidDoubleWhite = 3,
+        BrokenSingleYellow = 4,
+        BrokenDoubleYellow = 5,
+        SolidSingleYellow = 6,
+        SolidDoubleYellow = 7,
+        PassingDoubleYellow = 8,
+    }
+);
+int_enum!(
+    /// WOMD `RoadEdge.RoadEdgeType`.
+    RoadEdgeType { Unknown = 0, Boundary = 1, Median = 2 }
+);
+
+/// Part of a lane bounded by a road line or edge (`LaneCenter.left/right_boundaries`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct BoundarySegment {
+    pub lane_start_index: i32,
+    pub lane_end_index: i32,
+    pub boundary_feature_id: i64,
+    pub boundary_type: RoadLineType,
+}
+
+/// A neighbouring lane over an index range of this lane (`LaneCenter.left/right_neighbors`).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct LaneNeighbor {
+    pub feature_id: i64,
+    pub self_start_index: i32,
+    pub self_end_index: i32,
+    pub neighbor_start_index: i32,
+    pub neighbor_end_index: i32,
+    pub boundaries: Vec<BoundarySegment>,
+}
+
+/// A lane centreline.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Lane {
+    pub id: i64,
+    pub lane_type: LaneType,
+    /// Speed limit, when the map gives one.
+    pub speed_limit_mph: Option<f64>,
+    pub interpolating: bool,
+    pub polyline: Vec<MapPoint>,
+    pub entry_lanes: Vec<i64>,
+    pub exit_lanes: Vec<i64>,
+    pub left_neighbors: Vec<LaneNeighbor>,
+    pub right_neighbors: Vec<LaneNeighbor>,
+    pub left_boundaries: Vec<BoundarySegment>,
+    pub right_boundaries: Vec<BoundarySegment>,
+}
+
+/// A painted road line.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RoadLine {
+    pub id: i64,
+    pub line_type: RoadLineType,
+    pub polyline: Vec<MapPoint>,
+}
+
+/// A road edge (kerb, median).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct RoadEdge {
+    pub id: i64,
+    pub edge_type: RoadEdgeType,
+    pub polyline: Vec<MapPoint>,
+}
+
+/// A stop sign controlling the listed lanes.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct StopSign {
+    pub id: i64,
+    pub lanes: Vec<i64>,
+    pub position: MapPoint,
+}
+
+/// A crosswalk polygon.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Crosswalk {
+    pub id: i64,
+    pub polygon: Polygon,
+}
+
+/// A speed-bump polygon.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct SpeedBump {
+    pub id: i64,
+    pub polygon: Polygon,
+}
+
+/// A driveway polygon.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Driveway {
+    pub id: i64,
+    pub polygon: Polygon,
+}
+
+/// All static map features of a scene, grouped by kind (each kind keeps its file order).
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Map {
+    pub lanes: Vec<Lane>,
+    pub road_lines: Vec<RoadLine>,
+    pub road_edges: Vec<RoadEdge>,
+    pub stop_signs: Vec<StopSign>,
+    pub crosswalks: Vec<Crosswalk>,
+    pub speed_bumps: Vec<SpeedBump>,
+    pub driveways: Vec<Driveway>,
+}
+
+impl Map {
+    /// Total number of map features of every kind.
+    pub fn num_features(&self) -> usize {
+        self.lanes.len()
+            + self.road_lines.len()
+            + self.road_edges.len()
+            + self.stop_signs.len()
+            + self.crosswalks.len()
+            + self.speed_bumps.len()
+            + self.driveways.len()
+    }
+
+    /// True when the scene carries no map at all.
+    pub fn is_empty(&self) -> bool {
+        self.num_features() == 0
+    }
+
+    /// Looks a lane up by id (linear scan; maps hold a few hundred lanes).
+    pub fn lane(&self, id: i64) -> Option<&Lane> {
+        self.lanes.iter().find(|lane| lane.id == id)
+    }
+
+    /// Every point of every polyline and polygon, for bounds and sanity checks.
+    pub fn all_points(&self) -> impl Iterator<Item = &MapPoint> {
+        self.lanes
+            .iter()
+            .flat_map(|f| f.polyline.iter())
+            .chain(self.road_lines.iter().flat_map(|f| f.polyline.iter()))
+            .chain(self.road_edges.iter().flat_map(|f| f.polyline.iter()))
+            .chain(self.stop_signs.iter().map(|f| &f.position))
+            .chain(self.crosswalks.iter().flat_map(|f| f.polygon.iter()))
+            .chain(self.speed_bumps.iter().flat_map(|f| f.polygon.iter()))
+            .chain(self.driveways.iter().flat_map(|f| f.polygon.iter()))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn enum_codes_round_trip_and_unknown_maps_to_zero() {
+        for t in RoadLineType::ALL {
+            assert_eq!(RoadLineType::from_code(t.code()), *t);
+        }
+        assert_eq!(LaneType::from_code(99), LaneType::Undefined);
+        assert_eq!(RoadEdgeType::from_code(2), RoadEdgeType::Median);
+    }
+}

@@ -1,0 +1,157 @@
+//! Determinism, physics and the courtesy → A-speed relation over many scenarios.
+
+use super::*;
+use scbg_scene::Lane;
+
+fn spearman(x: &[f64], y: &[f64]) -> f64 {
+    fn ranks(v: &[f64]) -> Vec<f64> {
+        let mut idx: Vec<usize> = (0..v.len()).collect();
+        idx.sort_by(|&a, &b| v[a].total_cmp(&v[b]));
+        let mut r = vec![0.0; v.len()];
+        let mut i = 0;
+        while i < idx.len() {
+            let mut j = i;
+            while j + 1 < idx.len() && v[idx[j + 1]] == v[idx[i]] {
+                j += 1;
+            }
+            for k in i..=j {
+                r[idx[k]] = (i + j) as f64 / 2.0;
+            }
+            i = j + 1;
+        }
+        r
+    }
+    let (rx, ry) = (ranks(x), ranks(y));
+    let n = x.len() as f64;
+    let (mx, my) = (rx.iter().sum::<f64>() / n, ry.iter().sum::<f64>() / n);
+    let cov: f64 = rx.iter().zip(&ry).map(|(a, b)| (a - mx) * (b - my)).sum();
+    let vx: f64 = rx.iter().map(|a| (a - mx).powi(2)).sum();
+    let vy: f64 = ry.iter().map(|b| (b - my).powi(2)).sum();
+    cov / (vx * vy).sqrt()
+}
+
+fn distance_to_lane(lane: &Lane, x: f64, y: f64) -> f64 {
+    lane.polyline
+        .windows(2)
+        .map(|w| {
+            let (ax, ay, bx, by) = (w[0].x_m, w[0].y_m, w[1].x_m, w[1].y_m);
+            let (dx, dy) = (bx - ax, by - ay);
+            let l2 = dx * dx + dy * dy;
+            let t = if l2 > 0.0 {
+                (((x - ax) * dx + (y - ay) * dy) / l2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (ax + t * dx - x).hypot(ay + t * dy - y)
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn deterministic_for_a_seed() {
+    let a = generate(7, 3, &Family::ALL);
+    let b = generate(7, 3, &Family::ALL);
+    assert_eq!(a.scene, b.scene);
+    assert_eq!(a.truth, b.truth);
+    assert_ne!(generate(8, 3, &Family::ALL).scene, a.scene);
+    a.scene.validate().unwrap();
+}
+
+#[test]
+fn physics_and_lanes_over_many_scenarios() {
+    let mut collisions = 0;
+    let n = 1200;
+    for i in 0..n {
+        let g = generate(11, i, &Family::ALL);
+        let s = &g.scene;
+        assert_eq!(s.num_steps(), 91);
+        collisions += usize::from(g.truth.collision);
+        for track in &s.tracks {
+            for w in track.states.windows(2) {
+                let speed = w[1].speed_mps();
+                assert!(
+                    speed <= 40.0,
+                    "{} track {} speed {speed}",
+                    s.scenario_id,
+                    track.id
+                );
+                let ax = (w[1].velocity_x_mps - w[0].velocity_x_mps) / 0.1;
+                let ay = (w[1].velocity_y_mps - w[0].velocity_y_mps) / 0.1;
+                let acc = ax.hypot(ay);
+                assert!(
+                    acc <= 8.0,
+                    "{} track {} accel {acc}",
+                    s.scenario_id,
+                    track.id
+                );
+            }
+            if track.object_type == scbg_scene::ObjectType::Vehicle {
+                for st in &track.states {
+                    let d = s
+                        .map
+                        .lanes
+                        .iter()
+                        .map(|l| distance_to_lane(l, st.x_m, st.y_m))
+                        .fold(f64::INFINITY, f64::min);
+                    assert!(
+                        d < 2.5,
+                        "{} track {} is {d:.2} m off every lane",
+                        s.scenario_id,
+                        track.id
+                    );
+                }
+            }
+        }
+    }
+    assert!(
+        collisions * 100 <= n as usize * 2,
+        "{collisions} A–B collisions in {n} scenarios"
+    );
+}
+
+#[test]
+fn courtesy_raises_a_speed_in_every_family() {
+    for family in Family::ALL {
+        let (mut c, mut v) = (Vec::new(), Vec::new());
+        for i in 0..600 {
+            let g = generate(5, i, &[family]);
+            c.push(g.truth.courtesy);
+            v.push(g.truth.a_avg_speed_mps);
+        }
+        let rho = spearman(&c, &v);
+        eprintln!("{}: spearman(c, A speed) = {rho:.3}", family.name());
+        assert!(rho > 0.3, "{}: spearman {rho:.3}", family.name());
+    }
+}
+
+#[test]
+fn spearman_of_known_orders() {
+    assert!((spearman(&[1.0, 2.0, 3.0], &[10.0, 20.0, 30.0]) - 1.0).abs() < 1e-12);
+    assert!((spearman(&[1.0, 2.0, 3.0], &[3.0, 2.0, 1.0]) + 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn family_statistics_report() {
+    // Not an assertion: prints per-family numbers that the README and issue notes quote.
+    for family in Family::ALL {
+        let mut bins = [(0.0, 0.0, 0usize); 4];
+        let mut coll = 0;
+        for i in 0..400 {
+            let g = generate(9, i, &[family]);
+            let b = ((g.truth.courtesy * 4.0) as usize).min(3);
+            bins[b].0 += g.truth.a_avg_speed_mps;
+            bins[b].1 += g.truth.a_avg_speed_alone_mps;
+            bins[b].2 += 1;
+            coll += usize::from(g.truth.collision);
+        }
+        let line: Vec<String> = bins
+            .iter()
+            .map(|(v, a, n)| format!("{:.2}/{:.2}", v / *n as f64, a / *n as f64))
+            .collect();
+        eprintln!(
+            "{}: A speed with B / alone by courtesy quartile: {:?}; collisions {coll}/400",
+            family.name(),
+            line
+        );
+    }
+}
