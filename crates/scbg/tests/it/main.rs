@@ -1,0 +1,34 @@
+//! Integration tests: the `scbg` binary on the genuine Waymo/nuScenes files, on corrupt
+//! inputs, and on generated data. One test binary; helpers at the top.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use serde_json::Value;
+
+mod corrupt;
+mod pipeline;
+mod real_data;
+
+pub fn scbg(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_scbg")).args(args).env("SCBG_LOG", "error").output().expect("run scbg")
+}
+
+/// Runs scbg and asserts success; returns stdout.
+pub fn scbg_ok(args: &[&str]) -> String {
+    let out = scbg(args);
+    assert!(out.status.success(), "scbg {args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// One JSON object per line of `scbg data inspect --json`.
+pub fn inspect_json(files: &[&Path]) -> Vec<Value> {
+    let mut args = vec!["data", "inspect", "--json"];
+    let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
+    args.extend(names.iter().map(String::as_str));
+    scbg_ok(&args).lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+}
+
+pub fn real_dir() -> Option<PathBuf> {
+    scbg_womd::fixtures::real_data_dir()
+}

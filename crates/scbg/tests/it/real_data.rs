@@ -1,0 +1,99 @@
+//! Every fact of `shared/data/README.md`, asserted through `scbg data inspect --json`.
+
+use crate::{inspect_json, real_dir};
+use serde_json::json;
+
+#[test]
+fn genuine_scenario_files() {
+    let Some(dir) = real_dir() else { return };
+    let v = &inspect_json(&[&dir.join("womd/motion_data_one_scenario.tfrecord")])[0];
+    assert_eq!(v["scenario_id"], "637f20cafde22ff8");
+    assert_eq!(v["format"], "scenario");
+    assert_eq!(v["num_steps"], 91);
+    assert_eq!(v["current_time_index"], 10);
+    assert_eq!(v["num_tracks"], 83);
+    assert_eq!(v["tracks_by_type"]["vehicle"], 70);
+    assert_eq!(v["tracks_by_type"]["pedestrian"], 10);
+    assert_eq!(v["tracks_by_type"]["cyclist"], 3);
+    assert_eq!(v["sdc_track_index"], 82);
+    assert_eq!(v["num_map_features"], 301);
+    assert_eq!(v["map_features_by_type"]["lane"], 199);
+    assert_eq!(v["signal_steps"], 91);
+    assert_eq!(v["tracks_to_predict"].as_array().unwrap().len(), 3);
+    assert_eq!(v["objects_of_interest"], json!([]));
+
+    let v = &inspect_json(&[&dir.join("womd/womd_scenario_input.tfrecord")])[0];
+    assert_eq!(v["scenario_id"], "ee519cf571686d19");
+    assert_eq!(v["num_steps"], 91);
+    assert_eq!(v["num_tracks"], 257);
+    assert_eq!(v["tracks_by_type"]["vehicle"], 189);
+    assert_eq!(v["tracks_by_type"]["pedestrian"], 68);
+    assert_eq!(v["num_map_features"], 215);
+    assert_eq!(v["objects_of_interest"], json!([625, 2694]));
+    assert_eq!(v["objects_of_interest_types"], json!(["vehicle", "pedestrian"]));
+}
+
+#[test]
+fn genuine_tf_example_file() {
+    let Some(dir) = real_dir() else { return };
+    let v = &inspect_json(&[&dir.join("womd/motion_data_one_example.tfrecord")])[0];
+    assert_eq!(v["format"], "tf_example");
+    assert_eq!(v["scenario_id"], "a3bb37c25ce56418");
+    assert_eq!(v["num_steps"], 91);
+    assert_eq!(v["current_time_index"], 10);
+    assert_eq!(v["objects_of_interest"], json!([7, 333]));
+    assert_eq!(v["objects_of_interest_types"], json!(["vehicle", "cyclist"]));
+    assert_eq!(v["tracks_to_predict"].as_array().unwrap().len(), 8);
+    assert!(v["num_map_features"].as_u64().unwrap() > 0);
+    // (72 keys, 128 slots and 20000 road-graph samples are asserted in scbg-womd's unit tests.)
+}
+
+#[test]
+fn reencoded_womd_files() {
+    let Some(dir) = real_dir() else { return };
+    // scenario_id, steps, vehicles, pedestrians, cyclists, map features, objects_of_interest (+types)
+    let table: [(&str, u64, u64, u64, u64, u64, &[(i64, &str)]); 12] = [
+        ("1c365f15b70ebdbf", 91, 23, 2, 0, 118, &[(1847, "vehicle"), (1415, "vehicle")]),
+        ("2a1e44d405a6833f", 91, 184, 25, 2, 358, &[(490, "vehicle"), (333, "vehicle")]),
+        ("2a173b334be3d32c", 91, 12, 3, 0, 213, &[(2256, "vehicle"), (2540, "pedestrian")]),
+        ("db4edc9bd0c9d18c", 91, 68, 12, 1, 102, &[(18, "vehicle"), (284, "cyclist")]),
+        ("2af8a17d6cee3f8", 91, 98, 2, 0, 174, &[]),
+        ("68d5053e5693f4ca", 91, 90, 0, 1, 225, &[]),
+        ("c403d5992cab9e0", 91, 134, 3, 1, 378, &[]),
+        ("250011f460de6135", 198, 32, 1, 0, 115, &[]),
+        ("4d320edc9cb801a3", 199, 172, 1, 1, 170, &[]),
+        ("61fa872f2d274223", 199, 95, 33, 0, 70, &[]),
+        ("6f85f27e0243fc10", 197, 69, 5, 1, 446, &[]),
+        ("8799c31b5be1f312", 198, 26, 4, 6, 124, &[]),
+    ];
+    for (id, steps, veh, ped, cyc, map, ooi) in table {
+        let v = &inspect_json(&[&dir.join(format!("womd-reencoded/{id}.tfrecord"))])[0];
+        assert_eq!(v["scenario_id"], id);
+        assert_eq!(v["num_steps"], steps, "{id}");
+        assert_eq!(v["tracks_by_type"]["vehicle"], veh, "{id}");
+        assert_eq!(v["tracks_by_type"]["pedestrian"], ped, "{id}");
+        assert_eq!(v["tracks_by_type"]["cyclist"], cyc, "{id}");
+        assert_eq!(v["num_map_features"], map, "{id}");
+        let ids: Vec<i64> = ooi.iter().map(|x| x.0).collect();
+        let types: Vec<&str> = ooi.iter().map(|x| x.1).collect();
+        assert_eq!(v["objects_of_interest"], json!(ids), "{id}");
+        assert_eq!(v["objects_of_interest_types"], json!(types), "{id}");
+    }
+}
+
+#[test]
+fn reencoded_nuscenes_files() {
+    let Some(dir) = real_dir() else { return };
+    for scene in ["0061", "0103", "0553", "0655", "0757", "0796", "0916", "1077", "1094", "1100"] {
+        let path = dir.join(format!("nuscenes-reencoded/scene-{scene}.tfrecord"));
+        let v = &inspect_json(&[&path])[0];
+        let steps = v["num_steps"].as_u64().unwrap();
+        assert!((191..=201).contains(&steps), "scene-{scene}: {steps} steps");
+        let tracks = v["num_tracks"].as_u64().unwrap();
+        assert!((30..=226).contains(&tracks), "scene-{scene}: {tracks} tracks");
+        assert_eq!(v["map_features_by_type"]["road_edge"], 0, "scene-{scene}: nuScenes has no road edges");
+    }
+    // Cones and barriers are OBJECT type 4 (other).
+    let v = &inspect_json(&[&dir.join("nuscenes-reencoded/scene-0061.tfrecord")])[0];
+    assert!(v["tracks_by_type"]["other"].as_u64().unwrap() > 0);
+}
