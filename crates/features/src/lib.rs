@@ -25,7 +25,7 @@ pub use pairs::{InteractingPair, PairConfig, PairSource, select_pairs};
 pub use prepared::{PrepareError, PreparedScene, PreparedTrack, RoadKind, RoadPolyline};
 pub use sample::{
     AGENT_FEATURES, AgentSample, DIFF_FEATURES, FeatureConfig, ROAD_FEATURES, ROAD_TYPES,
-    SampleError, extract_sample, marginal_targets,
+    SampleBuilder, SampleError, extract_sample, marginal_targets,
 };
 pub use stats::FeatureStats;
 pub use window::{Window, WindowConfig, windows};

@@ -111,7 +111,7 @@ pub struct PreparedTrack {
 
 impl PreparedTrack {
     pub fn speed_mps(&self, step: usize) -> f32 {
-        self.vx_mps[step].hypot(self.vy_mps[step])
+        (self.vx_mps[step] * self.vx_mps[step] + self.vy_mps[step] * self.vy_mps[step]).sqrt()
     }
 
     /// Valid at `step`, with out-of-range steps counting as invalid.

@@ -110,6 +110,41 @@ pub fn marginal_targets(
         .collect()
 }
 
+/// The target's frame with its rotation precomputed (features transform thousands of points).
+#[derive(Debug, Clone, Copy)]
+struct AgentFrame {
+    x_m: f64,
+    y_m: f64,
+    heading_rad: f64,
+    sin: f64,
+    cos: f64,
+}
+
+impl AgentFrame {
+    fn new(x_m: f64, y_m: f64, heading_rad: f64) -> Self {
+        let (sin, cos) = heading_rad.sin_cos();
+        Self {
+            x_m,
+            y_m,
+            heading_rad,
+            sin,
+            cos,
+        }
+    }
+
+    fn point(&self, x: f32, y: f32) -> (f32, f32) {
+        let (dx, dy) = (f64::from(x) - self.x_m, f64::from(y) - self.y_m);
+        (
+            (self.cos * dx + self.sin * dy) as f32,
+            (-self.sin * dx + self.cos * dy) as f32,
+        )
+    }
+
+    fn heading(&self, heading_rad: f32) -> f32 {
+        wrap_angle_rad(f64::from(heading_rad) - self.heading_rad) as f32
+    }
+}
+
 fn type_one_hot(t: ObjectType) -> [f32; 5] {
     let mut v = [0.0; 5];
     v[t.code() as usize] = 1.0;
@@ -117,15 +152,15 @@ fn type_one_hot(t: ObjectType) -> [f32; 5] {
 }
 
 /// Writes the 13 per-step features of `track` at `step` (zeros if invalid).
-fn step_features(track: &PreparedTrack, step: Option<usize>, frame: &Pose2, out: &mut [f32]) {
+fn step_features(track: &PreparedTrack, step: Option<usize>, frame: &AgentFrame, out: &mut [f32]) {
     out.fill(0.0);
     let Some(s) = step.filter(|&s| track.valid.get(s).copied().unwrap_or(false)) else {
         return;
     };
-    let (x, y) = frame.agent_from_world(f64::from(track.x_m[s]), f64::from(track.y_m[s]));
-    out[0] = x as f32;
-    out[1] = y as f32;
-    out[2] = frame.agent_from_world_heading(f64::from(track.heading_rad[s])) as f32;
+    let (x, y) = frame.point(track.x_m[s], track.y_m[s]);
+    out[0] = x;
+    out[1] = y;
+    out[2] = frame.heading(track.heading_rad[s]);
     out[3] = track.speed_mps(s);
     out[4] = track.width_m;
     out[5] = track.length_m;
@@ -139,7 +174,7 @@ fn track_history(
     track: &PreparedTrack,
     window: &Window,
     history: usize,
-    frame: &Pose2,
+    frame: &AgentFrame,
     hist: &mut [f32],
     diffs: &mut [f32],
 ) {
@@ -165,11 +200,8 @@ fn track_history(
             d[3] = cur[3] - prev[3];
             d[4] = 1.0;
         }
-        d[5..11].copy_from_slice(&cur[7..13]);
-        if cur[6] == 0.0 {
-            d[5..10].copy_from_slice(&type_one_hot(track.object_type));
-            d[10] = f32::from(u8::from(track.is_sdc));
-        }
+        d[5..10].copy_from_slice(&type_one_hot(track.object_type));
+        d[10] = f32::from(u8::from(track.is_sdc));
     }
 }
 
@@ -183,7 +215,8 @@ pub enum SampleError {
 }
 
 /// Builds the features of `target` (a track index) in `window`, conditioned on the future of
-/// `condition` (another track index) when given.
+/// `condition` (another track index) when given. For many samples of one scene, a
+/// [`SampleBuilder`] is faster.
 pub fn extract_sample(
     scene: &PreparedScene,
     window: &Window,
@@ -191,205 +224,268 @@ pub fn extract_sample(
     condition: Option<usize>,
     config: &FeatureConfig,
 ) -> Result<AgentSample, SampleError> {
-    let now = window.current_step;
-    let track = scene
-        .tracks
-        .get(target)
-        .ok_or(SampleError::NoSuchTrack(target))?;
-    if let Some(c) = condition {
-        scene.tracks.get(c).ok_or(SampleError::NoSuchTrack(c))?;
-    }
-    if !track.valid_at(now as isize) {
-        return Err(SampleError::TargetInvalidNow {
-            track_id: track.id,
-            step: now,
-        });
-    }
-    let history = config.history_steps;
-    // The frame relative to the scene origin (for features) and in the world (for outputs).
-    let frame = Pose2::new(
-        f64::from(track.x_m[now]),
-        f64::from(track.y_m[now]),
-        f64::from(track.heading_rad[now]),
-    );
-    let world_from_agent = Pose2::new(
-        frame.x_m + scene.origin_xy_m[0],
-        frame.y_m + scene.origin_xy_m[1],
-        frame.heading_rad,
-    );
+    SampleBuilder::new(scene, config).sample(window, target, condition)
+}
 
-    let mut target_history = vec![0.0; history * AGENT_FEATURES];
-    let mut target_diffs = vec![0.0; (history - 1) * DIFF_FEATURES];
-    track_history(
-        track,
-        window,
-        history,
-        &frame,
-        &mut target_history,
-        &mut target_diffs,
-    );
+/// Builds many samples of one scene: flattens the road segments once (struct of arrays) and
+/// reuses its scratch buffers between samples.
+#[derive(Debug)]
+pub struct SampleBuilder<'a> {
+    scene: &'a PreparedScene,
+    config: &'a FeatureConfig,
+    seg_a: Vec<[f32; 2]>,
+    seg_b: Vec<[f32; 2]>,
+    seg_kind: Vec<RoadKind>,
+    /// Scratch: candidate segment indices and their distances.
+    candidates: Vec<u32>,
+    dist: Vec<f32>,
+}
 
-    // Other agents: every other track with a valid history step, closest (at its latest valid
-    // history step) first; the conditioning agent is always kept.
-    let mut others: Vec<(f32, usize)> = scene
-        .tracks
-        .iter()
-        .enumerate()
-        .filter(|&(i, _)| i != target)
-        .filter_map(|(i, t)| {
-            let last = (0..history)
-                .rev()
-                .filter_map(|h| window.history_step(h, history))
-                .find(|&s| t.valid.get(s).copied().unwrap_or(false))?;
-            let d = (t.x_m[last] - track.x_m[now]).hypot(t.y_m[last] - track.y_m[now]);
-            Some((if Some(i) == condition { -1.0 } else { d }, i))
-        })
-        .collect();
-    let max_others = config.max_other_agents;
-    if others.len() > max_others && max_others > 0 {
-        others.select_nth_unstable_by(max_others - 1, |a, b| {
-            a.0.total_cmp(&b.0).then(a.1.cmp(&b.1))
-        });
-        others.truncate(max_others);
+impl<'a> SampleBuilder<'a> {
+    pub fn new(scene: &'a PreparedScene, config: &'a FeatureConfig) -> Self {
+        let n: usize = scene
+            .road
+            .iter()
+            .map(|p| p.xy_m.len().saturating_sub(1).max(1))
+            .sum();
+        let (mut seg_a, mut seg_b, mut seg_kind) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        for poly in &scene.road {
+            let pts = &poly.xy_m;
+            if pts.len() == 1 {
+                seg_a.push(pts[0]);
+                seg_b.push(pts[0]);
+                seg_kind.push(poly.kind);
+            }
+            for w in pts.windows(2) {
+                seg_a.push(w[0]);
+                seg_b.push(w[1]);
+                seg_kind.push(poly.kind);
+            }
+        }
+        Self {
+            scene,
+            config,
+            seg_a,
+            seg_b,
+            seg_kind,
+            candidates: Vec::new(),
+            dist: vec![0.0; n],
+        }
     }
-    others.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    others.truncate(max_others);
-    let mut others_history = vec![0.0; max_others * history * AGENT_FEATURES];
-    let mut others_diffs = vec![0.0; max_others * (history - 1) * DIFF_FEATURES];
-    let mut others_valid = vec![false; max_others];
-    for (k, &(_, i)) in others.iter().enumerate() {
-        let hs = history * AGENT_FEATURES;
-        let ds = (history - 1) * DIFF_FEATURES;
+
+    /// The features of `target` in `window`, conditioned on `condition`'s future when given.
+    pub fn sample(
+        &mut self,
+        window: &Window,
+        target: usize,
+        condition: Option<usize>,
+    ) -> Result<AgentSample, SampleError> {
+        let (scene, config) = (self.scene, self.config);
+        let now = window.current_step;
+        let track = scene
+            .tracks
+            .get(target)
+            .ok_or(SampleError::NoSuchTrack(target))?;
+        if let Some(c) = condition {
+            scene.tracks.get(c).ok_or(SampleError::NoSuchTrack(c))?;
+        }
+        if !track.valid_at(now as isize) {
+            return Err(SampleError::TargetInvalidNow {
+                track_id: track.id,
+                step: now,
+            });
+        }
+        let history = config.history_steps;
+        // The frame relative to the scene origin (for features) and in the world (for outputs).
+        let frame = AgentFrame::new(
+            f64::from(track.x_m[now]),
+            f64::from(track.y_m[now]),
+            f64::from(track.heading_rad[now]),
+        );
+        let world_from_agent = Pose2::new(
+            frame.x_m + scene.origin_xy_m[0],
+            frame.y_m + scene.origin_xy_m[1],
+            frame.heading_rad,
+        );
+
+        let mut target_history = vec![0.0; history * AGENT_FEATURES];
+        let mut target_diffs = vec![0.0; (history - 1) * DIFF_FEATURES];
         track_history(
-            &scene.tracks[i],
+            track,
             window,
             history,
             &frame,
-            &mut others_history[k * hs..(k + 1) * hs],
-            &mut others_diffs[k * ds..(k + 1) * ds],
+            &mut target_history,
+            &mut target_diffs,
         );
-        others_valid[k] = true;
+
+        // Other agents: every other track with a valid history step, closest (at its latest
+        // valid history step) first; the conditioning agent is always kept.
+        let (tx, ty) = (track.x_m[now], track.y_m[now]);
+        let mut others: Vec<(f32, usize)> = scene
+            .tracks
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| i != target)
+            .filter_map(|(i, t)| {
+                let last = (0..history)
+                    .rev()
+                    .filter_map(|h| window.history_step(h, history))
+                    .find(|&s| t.valid.get(s).copied().unwrap_or(false))?;
+                let (dx, dy) = (t.x_m[last] - tx, t.y_m[last] - ty);
+                Some((
+                    if Some(i) == condition {
+                        -1.0
+                    } else {
+                        dx * dx + dy * dy
+                    },
+                    i,
+                ))
+            })
+            .collect();
+        let max_others = config.max_other_agents;
+        let by_distance =
+            |a: &(f32, usize), b: &(f32, usize)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
+        if others.len() > max_others && max_others > 0 {
+            others.select_nth_unstable_by(max_others - 1, by_distance);
+        }
+        others.truncate(max_others);
+        others.sort_unstable_by(by_distance);
+        let (hs, ds) = (history * AGENT_FEATURES, (history - 1) * DIFF_FEATURES);
+        let mut others_history = vec![0.0; max_others * hs];
+        let mut others_diffs = vec![0.0; max_others * ds];
+        let mut others_valid = vec![false; max_others];
+        for (k, &(_, i)) in others.iter().enumerate() {
+            track_history(
+                &scene.tracks[i],
+                window,
+                history,
+                &frame,
+                &mut others_history[k * hs..(k + 1) * hs],
+                &mut others_diffs[k * ds..(k + 1) * ds],
+            );
+            others_valid[k] = true;
+        }
+
+        let (road_segments, road_valid) = self.road_features(&frame);
+
+        let future = config.future_steps;
+        let future_of = |t: &PreparedTrack| {
+            let mut xy = vec![0.0f32; future * 2];
+            let mut heading = vec![0.0f32; future];
+            let mut valid = vec![false; future];
+            for f in 0..future {
+                let s = window.future_step(f);
+                if t.valid_at(s as isize) {
+                    let (x, y) = frame.point(t.x_m[s], t.y_m[s]);
+                    xy[2 * f] = x;
+                    xy[2 * f + 1] = y;
+                    heading[f] = frame.heading(t.heading_rad[s]);
+                    valid[f] = true;
+                }
+            }
+            (xy, heading, valid)
+        };
+        let (future_xy_m, future_heading_rad, future_valid) = future_of(track);
+        let (condition_future_xy_m, condition_future_valid) = match condition {
+            Some(c) => {
+                let (xy, _, v) = future_of(&scene.tracks[c]);
+                (xy, v)
+            }
+            None => (vec![0.0; future * 2], vec![false; future]),
+        };
+        let (vx, vy) = (f64::from(track.vx_mps[now]), f64::from(track.vy_mps[now]));
+        let current_velocity_mps = [
+            (frame.cos * vx + frame.sin * vy) as f32,
+            (-frame.sin * vx + frame.cos * vy) as f32,
+        ];
+        Ok(AgentSample {
+            scenario_id: scene.scenario_id.clone(),
+            window: *window,
+            target_track_id: track.id,
+            condition_track_id: condition.map(|c| scene.tracks[c].id),
+            world_from_agent,
+            target_history,
+            target_diffs,
+            others_history,
+            others_diffs,
+            others_valid,
+            road_segments,
+            road_valid,
+            condition_future_xy_m,
+            condition_future_valid,
+            future_xy_m,
+            future_heading_rad,
+            future_valid,
+            current_velocity_mps,
+        })
     }
 
-    let (road_segments, road_valid) = road_features(scene, &frame, config);
-
-    let future = config.future_steps;
-    let future_of = |t: &PreparedTrack| {
-        let mut xy = vec![0.0f32; future * 2];
-        let mut heading = vec![0.0f32; future];
-        let mut valid = vec![false; future];
-        for f in 0..future {
-            let s = window.future_step(f);
-            if t.valid_at(s as isize) {
-                let (x, y) = frame.agent_from_world(f64::from(t.x_m[s]), f64::from(t.y_m[s]));
-                xy[2 * f] = x as f32;
-                xy[2 * f + 1] = y as f32;
-                heading[f] = frame.agent_from_world_heading(f64::from(t.heading_rad[s])) as f32;
-                valid[f] = true;
-            }
-        }
-        (xy, heading, valid)
-    };
-    let (future_xy_m, future_heading_rad, future_valid) = future_of(track);
-    let (condition_future_xy_m, condition_future_valid) = match condition {
-        Some(c) => {
-            let (xy, _, v) = future_of(&scene.tracks[c]);
-            (xy, v)
-        }
-        None => (vec![0.0; future * 2], vec![false; future]),
-    };
-    let (vx, vy) =
-        frame.agent_from_world_vector(f64::from(track.vx_mps[now]), f64::from(track.vy_mps[now]));
-    Ok(AgentSample {
-        scenario_id: scene.scenario_id.clone(),
-        window: *window,
-        target_track_id: track.id,
-        condition_track_id: condition.map(|c| scene.tracks[c].id),
-        world_from_agent,
-        target_history,
-        target_diffs,
-        others_history,
-        others_diffs,
-        others_valid,
-        road_segments,
-        road_valid,
-        condition_future_xy_m,
-        condition_future_valid,
-        future_xy_m,
-        future_heading_rad,
-        future_valid,
-        current_velocity_mps: [vx as f32, vy as f32],
-    })
-}
-
-/// The P closest road segments in the target frame, with their 27 features.
-fn road_features(
-    scene: &PreparedScene,
-    frame: &Pose2,
-    config: &FeatureConfig,
-) -> (Vec<f32>, Vec<bool>) {
-    let p_max = config.max_road_segments;
-    let r2 = config.road_radius_m * config.road_radius_m;
-    let (s, c) = frame.heading_rad.sin_cos();
-    let (s, c, ox, oy) = (s as f32, c as f32, frame.x_m as f32, frame.y_m as f32);
-    let to_agent = |p: [f32; 2]| {
-        let (dx, dy) = (p[0] - ox, p[1] - oy);
-        [c * dx + s * dy, -s * dx + c * dy]
-    };
-    // (distance to the closest point, segment start in agent frame, end, kind)
-    let mut candidates: Vec<(f32, [f32; 2], [f32; 2], RoadKind)> = Vec::new();
-    for poly in &scene.road {
-        let pts = &poly.xy_m;
-        let n_seg = pts.len().saturating_sub(1).max(1);
-        let mut a = to_agent(pts[0]);
-        for k in 0..n_seg {
-            let b = if pts.len() > 1 {
-                to_agent(pts[k + 1])
-            } else {
-                a
-            };
-            let near2 = (a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]);
-            if near2 < r2 {
+    /// The P closest road segments in the target frame, with their 27 features.
+    ///
+    /// Segments whose nearest endpoint is within the radius are ranked by the distance of their
+    /// closest point in the scene frame translated to the agent (distances do not depend on
+    /// rotation); only the P selected segments are rotated into the agent frame.
+    fn road_features(&mut self, frame: &AgentFrame) -> (Vec<f32>, Vec<bool>) {
+        let p_max = self.config.max_road_segments;
+        let r2 = self.config.road_radius_m * self.config.road_radius_m;
+        let (ox, oy) = (frame.x_m as f32, frame.y_m as f32);
+        self.candidates.clear();
+        for (i, (a, b)) in self.seg_a.iter().zip(&self.seg_b).enumerate() {
+            let a = [a[0] - ox, a[1] - oy];
+            let b = [b[0] - ox, b[1] - oy];
+            if (a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]) < r2 {
                 let p = closest_point_to_origin(a, b);
-                candidates.push((p[0].hypot(p[1]), a, b, poly.kind));
+                self.dist[i] = p[0] * p[0] + p[1] * p[1];
+                self.candidates.push(i as u32);
             }
-            a = b;
         }
-    }
-    let order = |x: &(f32, [f32; 2], [f32; 2], RoadKind),
-                 y: &(f32, [f32; 2], [f32; 2], RoadKind)| {
-        x.0.total_cmp(&y.0)
-            .then(x.1[0].total_cmp(&y.1[0]))
-            .then(x.1[1].total_cmp(&y.1[1]))
-    };
-    if candidates.len() > p_max && p_max > 0 {
-        candidates.select_nth_unstable_by(p_max - 1, order);
-        candidates.truncate(p_max);
-    }
-    candidates.sort_by(order);
-    candidates.truncate(p_max);
-    let mut out = vec![0.0f32; p_max * ROAD_FEATURES];
-    let mut valid = vec![false; p_max];
-    for (k, &(dist, a, b, kind)) in candidates.iter().enumerate() {
-        let f = &mut out[k * ROAD_FEATURES..(k + 1) * ROAD_FEATURES];
-        let p = closest_point_to_origin(a, b);
-        f[0] = dist;
-        if dist > 1e-6 {
-            f[1] = p[0] / dist;
-            f[2] = p[1] / dist;
+        let dist = &self.dist;
+        let order = |x: &u32, y: &u32| {
+            dist[*x as usize]
+                .total_cmp(&dist[*y as usize])
+                .then(x.cmp(y))
+        };
+        if self.candidates.len() > p_max && p_max > 0 {
+            self.candidates.select_nth_unstable_by(p_max - 1, order);
         }
-        let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
-        let len = tx.hypot(ty);
-        if len > 1e-6 {
-            f[3] = tx / len;
-            f[4] = ty / len;
+        self.candidates.truncate(p_max);
+        self.candidates.sort_unstable_by(order);
+        let (sn, cs) = (frame.sin as f32, frame.cos as f32);
+        let to_agent = |p: [f32; 2]| {
+            let (dx, dy) = (p[0] - ox, p[1] - oy);
+            [cs * dx + sn * dy, -sn * dx + cs * dy]
+        };
+        let mut out = vec![0.0f32; p_max * ROAD_FEATURES];
+        let mut valid = vec![false; p_max];
+        for (k, &i) in self.candidates.iter().enumerate() {
+            let i = i as usize;
+            let (a, b) = (to_agent(self.seg_a[i]), to_agent(self.seg_b[i]));
+            let f = &mut out[k * ROAD_FEATURES..(k + 1) * ROAD_FEATURES];
+            let p = closest_point_to_origin(a, b);
+            let dist = self.dist[i].sqrt();
+            f[0] = dist;
+            if dist > 1e-6 {
+                f[1] = p[0] / dist;
+                f[2] = p[1] / dist;
+            }
+            let (tx, ty) = (b[0] - a[0], b[1] - a[1]);
+            let len = (tx * tx + ty * ty).sqrt();
+            if len > 1e-6 {
+                f[3] = tx / len;
+                f[4] = ty / len;
+            }
+            f[5] = len;
+            f[6] = ((b[0] - p[0]).powi(2) + (b[1] - p[1]).powi(2)).sqrt();
+            f[7 + self.seg_kind[i] as usize] = 1.0;
+            valid[k] = true;
         }
-        f[5] = len;
-        f[6] = (b[0] - p[0]).hypot(b[1] - p[1]);
-        f[7 + kind as usize] = 1.0;
-        valid[k] = true;
+        (out, valid)
     }
-    (out, valid)
 }
 
 /// The point of segment `a`–`b` closest to the origin.

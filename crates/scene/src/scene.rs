@@ -61,7 +61,8 @@ pub struct AgentState {
 impl AgentState {
     /// Speed (norm of the velocity), m/s.
     pub fn speed_mps(&self) -> f32 {
-        self.velocity_x_mps.hypot(self.velocity_y_mps)
+        (self.velocity_x_mps * self.velocity_x_mps + self.velocity_y_mps * self.velocity_y_mps)
+            .sqrt()
     }
 }
 

@@ -6,7 +6,7 @@ use std::time::Instant;
 use anyhow::Context;
 use rayon::prelude::*;
 use scbg_features::{
-    FeatureConfig, PairConfig, PreparedScene, WindowConfig, extract_sample, marginal_targets,
+    FeatureConfig, PairConfig, PreparedScene, SampleBuilder, WindowConfig, marginal_targets,
 };
 use scbg_womd::WomdFile;
 
@@ -50,14 +50,15 @@ fn featurize_file(path: &PathBuf) -> anyhow::Result<(usize, usize, u64)> {
             continue;
         };
         bytes += prepared.encode().len() as u64;
+        let mut builder = SampleBuilder::new(&prepared, &features);
         for (w, pairs) in prepared.windows.iter().zip(&prepared.pairs) {
             for target in marginal_targets(&prepared, w, window.future_steps, 1) {
-                std::hint::black_box(extract_sample(&prepared, w, target, None, &features)?);
+                std::hint::black_box(builder.sample(w, target, None)?);
                 samples += 1;
             }
             for p in pairs {
                 for (a, b) in [(p.first, p.second), (p.second, p.first)] {
-                    std::hint::black_box(extract_sample(&prepared, w, a, Some(b), &features)?);
+                    std::hint::black_box(builder.sample(w, a, Some(b))?);
                     samples += 1;
                 }
             }

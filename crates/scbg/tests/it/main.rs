@@ -11,13 +11,21 @@ mod pipeline;
 mod real_data;
 
 pub fn scbg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_scbg")).args(args).env("SCBG_LOG", "error").output().expect("run scbg")
+    Command::new(env!("CARGO_BIN_EXE_scbg"))
+        .args(args)
+        .env("SCBG_LOG", "error")
+        .output()
+        .expect("run scbg")
 }
 
 /// Runs scbg and asserts success; returns stdout.
 pub fn scbg_ok(args: &[&str]) -> String {
     let out = scbg(args);
-    assert!(out.status.success(), "scbg {args:?} failed: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(
+        out.status.success(),
+        "scbg {args:?} failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
     String::from_utf8(out.stdout).unwrap()
 }
 
@@ -26,7 +34,10 @@ pub fn inspect_json(files: &[&Path]) -> Vec<Value> {
     let mut args = vec!["data", "inspect", "--json"];
     let names: Vec<String> = files.iter().map(|f| f.display().to_string()).collect();
     args.extend(names.iter().map(String::as_str));
-    scbg_ok(&args).lines().map(|l| serde_json::from_str(l).unwrap()).collect()
+    scbg_ok(&args)
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect()
 }
 
 pub fn real_dir() -> Option<PathBuf> {

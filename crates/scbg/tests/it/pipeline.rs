@@ -6,29 +6,68 @@ use crate::{inspect_json, real_dir, scbg_ok};
 fn synth_files_read_back_with_labelled_vehicle_pairs() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("synth");
-    scbg_ok(&["synth", "--scenarios", "60", "--seed", "3", "--out", out.to_str().unwrap(), "--scenarios-per-file", "25"]);
-    let files: Vec<_> = (0..3).map(|i| out.join(format!("synth-{i:05}.tfrecord"))).collect();
+    scbg_ok(&[
+        "synth",
+        "--scenarios",
+        "60",
+        "--seed",
+        "3",
+        "--out",
+        out.to_str().unwrap(),
+        "--scenarios-per-file",
+        "25",
+    ]);
+    let files: Vec<_> = (0..3)
+        .map(|i| out.join(format!("synth-{i:05}.tfrecord")))
+        .collect();
     let refs: Vec<&std::path::Path> = files.iter().map(|p| p.as_path()).collect();
     let rows = inspect_json(&refs);
     assert_eq!(rows.len(), 60);
     for v in &rows {
         assert_eq!(v["objects_of_interest"].as_array().unwrap().len(), 2);
-        assert_eq!(v["objects_of_interest_types"], serde_json::json!(["vehicle", "vehicle"]));
+        assert_eq!(
+            v["objects_of_interest_types"],
+            serde_json::json!(["vehicle", "vehicle"])
+        );
         assert_eq!(v["num_steps"], 91);
         assert_eq!(v["tracks_to_predict"].as_array().unwrap().len(), 2);
     }
     let truth = std::fs::read_to_string(out.join("ground_truth.jsonl")).unwrap();
-    let lines: Vec<serde_json::Value> = truth.lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    let lines: Vec<serde_json::Value> = truth
+        .lines()
+        .map(|l| serde_json::from_str(l).unwrap())
+        .collect();
     assert_eq!(lines.len(), 60);
-    for key in ["scenario_id", "family", "a_id", "b_id", "courtesy", "a_avg_speed_mps", "a_avg_speed_alone_mps"] {
+    for key in [
+        "scenario_id",
+        "family",
+        "a_id",
+        "b_id",
+        "courtesy",
+        "a_avg_speed_mps",
+        "a_avg_speed_alone_mps",
+    ] {
         assert!(lines[0].get(key).is_some(), "missing {key}");
     }
     // Deterministic for a seed.
     let again = dir.path().join("again");
-    scbg_ok(&["synth", "--scenarios", "60", "--seed", "3", "--out", again.to_str().unwrap(), "--scenarios-per-file", "25"]);
+    scbg_ok(&[
+        "synth",
+        "--scenarios",
+        "60",
+        "--seed",
+        "3",
+        "--out",
+        again.to_str().unwrap(),
+        "--scenarios-per-file",
+        "25",
+    ]);
     for i in 0..3 {
         let name = format!("synth-{i:05}.tfrecord");
-        assert_eq!(std::fs::read(out.join(&name)).unwrap(), std::fs::read(again.join(&name)).unwrap());
+        assert_eq!(
+            std::fs::read(out.join(&name)).unwrap(),
+            std::fs::read(again.join(&name)).unwrap()
+        );
     }
 }
 
@@ -37,13 +76,36 @@ fn prepare_is_deterministic_resumable_and_mines_pairs() {
     let Some(real) = real_dir() else { return };
     let dir = tempfile::tempdir().unwrap();
     let synth = dir.path().join("synth");
-    scbg_ok(&["synth", "--scenarios", "40", "--seed", "1", "--out", synth.to_str().unwrap()]);
-    let inputs = [synth.display().to_string(), real.join("womd-reencoded").display().to_string(), real.join("nuscenes-reencoded").display().to_string()];
+    scbg_ok(&[
+        "synth",
+        "--scenarios",
+        "40",
+        "--seed",
+        "1",
+        "--out",
+        synth.to_str().unwrap(),
+    ]);
+    let inputs = [
+        synth.display().to_string(),
+        real.join("womd-reencoded").display().to_string(),
+        real.join("nuscenes-reencoded").display().to_string(),
+    ];
     let prepare = |out: &std::path::Path| {
-        let mut args = vec!["data", "prepare", "--out", out.to_str().unwrap(), "--files-per-shard", "4", "--input"];
+        let mut args = vec![
+            "data",
+            "prepare",
+            "--out",
+            out.to_str().unwrap(),
+            "--files-per-shard",
+            "4",
+            "--input",
+        ];
         args.extend(inputs.iter().map(String::as_str));
         scbg_ok(&args);
-        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap()
+        serde_json::from_str::<serde_json::Value>(
+            &std::fs::read_to_string(out.join("manifest.json")).unwrap(),
+        )
+        .unwrap()
     };
     let a = dir.path().join("a");
     let m1 = prepare(&a);
@@ -57,14 +119,21 @@ fn prepare_is_deterministic_resumable_and_mines_pairs() {
     let shard = a.join("shard-00000.bin");
     let mtime = std::fs::metadata(&shard).unwrap().modified().unwrap();
     assert_eq!(prepare(&a), m1);
-    assert_eq!(std::fs::metadata(&shard).unwrap().modified().unwrap(), mtime);
+    assert_eq!(
+        std::fs::metadata(&shard).unwrap().modified().unwrap(),
+        mtime
+    );
     // Deterministic: a fresh run writes identical shards.
     let b = dir.path().join("b");
     prepare(&b);
     for entry in std::fs::read_dir(&a).unwrap() {
         let name = entry.unwrap().file_name();
         if name.to_string_lossy().ends_with(".bin") {
-            assert_eq!(std::fs::read(a.join(&name)).unwrap(), std::fs::read(b.join(&name)).unwrap(), "{name:?}");
+            assert_eq!(
+                std::fs::read(a.join(&name)).unwrap(),
+                std::fs::read(b.join(&name)).unwrap(),
+                "{name:?}"
+            );
         }
     }
     // Every scene decodes from the cache, and samples can be built for its targets.
@@ -74,12 +143,29 @@ fn prepare_is_deterministic_resumable_and_mines_pairs() {
     for i in 0..ds.len() {
         let scene = ds.scene(i).unwrap();
         for (w, pairs) in scene.windows.iter().zip(&scene.pairs) {
-            for t in scbg_features::marginal_targets(&scene, w, 80, 1).into_iter().take(2) {
-                scbg_features::extract_sample(&scene, w, t, None, &scbg_features::FeatureConfig::default()).unwrap();
+            for t in scbg_features::marginal_targets(&scene, w, 80, 1)
+                .into_iter()
+                .take(2)
+            {
+                scbg_features::extract_sample(
+                    &scene,
+                    w,
+                    t,
+                    None,
+                    &scbg_features::FeatureConfig::default(),
+                )
+                .unwrap();
                 samples += 1;
             }
             for p in pairs {
-                let s = scbg_features::extract_sample(&scene, w, p.first, Some(p.second), &scbg_features::FeatureConfig::default()).unwrap();
+                let s = scbg_features::extract_sample(
+                    &scene,
+                    w,
+                    p.first,
+                    Some(p.second),
+                    &scbg_features::FeatureConfig::default(),
+                )
+                .unwrap();
                 assert!(s.condition_future_valid.iter().any(|&v| v));
             }
         }
@@ -91,9 +177,25 @@ fn prepare_is_deterministic_resumable_and_mines_pairs() {
 fn render_writes_a_png() {
     let dir = tempfile::tempdir().unwrap();
     let synth = dir.path().join("synth");
-    scbg_ok(&["synth", "--scenarios", "3", "--seed", "2", "--out", synth.to_str().unwrap()]);
+    scbg_ok(&[
+        "synth",
+        "--scenarios",
+        "3",
+        "--seed",
+        "2",
+        "--out",
+        synth.to_str().unwrap(),
+    ]);
     let png = dir.path().join("scene.png");
-    scbg_ok(&["data", "render", synth.join("synth-00000.tfrecord").to_str().unwrap(), "--out", png.to_str().unwrap(), "--size-px", "400"]);
+    scbg_ok(&[
+        "data",
+        "render",
+        synth.join("synth-00000.tfrecord").to_str().unwrap(),
+        "--out",
+        png.to_str().unwrap(),
+        "--size-px",
+        "400",
+    ]);
     let bytes = std::fs::read(&png).unwrap();
     assert_eq!(&bytes[1..4], b"PNG");
 }

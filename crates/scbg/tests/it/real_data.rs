@@ -30,7 +30,10 @@ fn genuine_scenario_files() {
     assert_eq!(v["tracks_by_type"]["pedestrian"], 68);
     assert_eq!(v["num_map_features"], 215);
     assert_eq!(v["objects_of_interest"], json!([625, 2694]));
-    assert_eq!(v["objects_of_interest_types"], json!(["vehicle", "pedestrian"]));
+    assert_eq!(
+        v["objects_of_interest_types"],
+        json!(["vehicle", "pedestrian"])
+    );
 }
 
 #[test]
@@ -42,7 +45,10 @@ fn genuine_tf_example_file() {
     assert_eq!(v["num_steps"], 91);
     assert_eq!(v["current_time_index"], 10);
     assert_eq!(v["objects_of_interest"], json!([7, 333]));
-    assert_eq!(v["objects_of_interest_types"], json!(["vehicle", "cyclist"]));
+    assert_eq!(
+        v["objects_of_interest_types"],
+        json!(["vehicle", "cyclist"])
+    );
     assert_eq!(v["tracks_to_predict"].as_array().unwrap().len(), 8);
     assert!(v["num_map_features"].as_u64().unwrap() > 0);
     // (72 keys, 128 slots and 20000 road-graph samples are asserted in scbg-womd's unit tests.)
@@ -53,10 +59,42 @@ fn reencoded_womd_files() {
     let Some(dir) = real_dir() else { return };
     // scenario_id, steps, vehicles, pedestrians, cyclists, map features, objects_of_interest (+types)
     let table: [(&str, u64, u64, u64, u64, u64, &[(i64, &str)]); 12] = [
-        ("1c365f15b70ebdbf", 91, 23, 2, 0, 118, &[(1847, "vehicle"), (1415, "vehicle")]),
-        ("2a1e44d405a6833f", 91, 184, 25, 2, 358, &[(490, "vehicle"), (333, "vehicle")]),
-        ("2a173b334be3d32c", 91, 12, 3, 0, 213, &[(2256, "vehicle"), (2540, "pedestrian")]),
-        ("db4edc9bd0c9d18c", 91, 68, 12, 1, 102, &[(18, "vehicle"), (284, "cyclist")]),
+        (
+            "1c365f15b70ebdbf",
+            91,
+            23,
+            2,
+            0,
+            118,
+            &[(1847, "vehicle"), (1415, "vehicle")],
+        ),
+        (
+            "2a1e44d405a6833f",
+            91,
+            184,
+            25,
+            2,
+            358,
+            &[(490, "vehicle"), (333, "vehicle")],
+        ),
+        (
+            "2a173b334be3d32c",
+            91,
+            12,
+            3,
+            0,
+            213,
+            &[(2256, "vehicle"), (2540, "pedestrian")],
+        ),
+        (
+            "db4edc9bd0c9d18c",
+            91,
+            68,
+            12,
+            1,
+            102,
+            &[(18, "vehicle"), (284, "cyclist")],
+        ),
         ("2af8a17d6cee3f8", 91, 98, 2, 0, 174, &[]),
         ("68d5053e5693f4ca", 91, 90, 0, 1, 225, &[]),
         ("c403d5992cab9e0", 91, 134, 3, 1, 378, &[]),
@@ -84,14 +122,22 @@ fn reencoded_womd_files() {
 #[test]
 fn reencoded_nuscenes_files() {
     let Some(dir) = real_dir() else { return };
-    for scene in ["0061", "0103", "0553", "0655", "0757", "0796", "0916", "1077", "1094", "1100"] {
+    for scene in [
+        "0061", "0103", "0553", "0655", "0757", "0796", "0916", "1077", "1094", "1100",
+    ] {
         let path = dir.join(format!("nuscenes-reencoded/scene-{scene}.tfrecord"));
         let v = &inspect_json(&[&path])[0];
         let steps = v["num_steps"].as_u64().unwrap();
         assert!((191..=201).contains(&steps), "scene-{scene}: {steps} steps");
         let tracks = v["num_tracks"].as_u64().unwrap();
-        assert!((30..=226).contains(&tracks), "scene-{scene}: {tracks} tracks");
-        assert_eq!(v["map_features_by_type"]["road_edge"], 0, "scene-{scene}: nuScenes has no road edges");
+        assert!(
+            (30..=226).contains(&tracks),
+            "scene-{scene}: {tracks} tracks"
+        );
+        assert_eq!(
+            v["map_features_by_type"]["road_edge"], 0,
+            "scene-{scene}: nuScenes has no road edges"
+        );
     }
     // Cones and barriers are OBJECT type 4 (other).
     let v = &inspect_json(&[&dir.join("nuscenes-reencoded/scene-0061.tfrecord")])[0];
