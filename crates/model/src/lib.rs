@@ -1,1 +1,27 @@
-//! placeholder
+//! Multipath++ with a conditional (CBP-style) mode, in burn.
+//!
+//! Main types: [`MultipathConfig`] (`paper` / `cpu-small` presets) → [`MultipathConfig::init`]
+//! → [`Multipath::forward`] returning a [`GmmOutput`]; [`gmm_nll`]; [`Batch`] built from
+//! `AgentSample`s. The conditional mode adds a future encoder of the other agent's future
+//! (target frame) to the scene embedding; `condition_flag = 0` turns it off (marginal mode), so
+//! one set of weights serves both `p(y_A | x)` and `p(y_A | x, y_B)`.
+//!
+//! **Architecture invariant:** models know tensors and `AgentSample`s, never file formats or
+//! the CLI; the backend is chosen in [`device`] only.
+
+pub mod batch;
+pub mod blocks;
+pub mod config;
+pub mod device;
+pub mod loss;
+pub mod model;
+
+pub use batch::{Batch, BatchAugment};
+pub use config::MultipathConfig;
+pub use loss::gmm_nll;
+pub use model::{GmmOutput, Multipath};
+
+/// Tests that seed burn's process-global RNG hold this lock, so concurrent tests do not draw
+/// from the stream between `seed` and `init`.
+#[cfg(test)]
+pub(crate) static SEED_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());

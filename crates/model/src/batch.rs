@@ -1,0 +1,131 @@
+//! Turning [`AgentSample`]s into batch tensors.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use rand::Rng;
+use scbg_features::{AGENT_FEATURES, AgentSample, DIFF_FEATURES, ROAD_FEATURES};
+
+/// A batch of samples as tensors (inputs already standardised by `FeatureStats`).
+#[derive(Debug, Clone)]
+pub struct Batch {
+    /// `[batch, steps, 13]`
+    pub target_history: Tensor<3>,
+    /// `[batch, steps - 1, 11]`
+    pub target_diffs: Tensor<3>,
+    /// `[batch, agents, steps, 13]`
+    pub others_history: Tensor<4>,
+    /// `[batch, agents, steps - 1, 11]`
+    pub others_diffs: Tensor<4>,
+    /// `[batch, agents]`, 1 for a real agent.
+    pub others_mask: Tensor<2>,
+    /// `[batch, segments, 27]`
+    pub road: Tensor<3>,
+    /// `[batch, segments]`
+    pub road_mask: Tensor<2>,
+    /// `[batch, future_steps, 3]`: the other agent's future (x, y, valid) in the target frame.
+    pub condition: Tensor<3>,
+    /// `[batch, 1]`: 1 = conditional mode, 0 = marginal.
+    pub condition_flag: Tensor<2>,
+    /// `[batch, future_steps, 2]`
+    pub future_xy: Tensor<3>,
+    /// `[batch, future_steps]`
+    pub future_valid: Tensor<2>,
+}
+
+/// Training-time randomisation applied while batching.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct BatchAugment {
+    /// Probability of dropping a sample's condition (training both modes with one model).
+    pub condition_dropout: f64,
+    /// Probability of masking each history step of the target (Multipath++ uses 0.15).
+    pub history_mask_prob: f64,
+}
+
+fn bools(v: &[bool]) -> impl Iterator<Item = f32> + '_ {
+    v.iter().map(|&b| f32::from(u8::from(b)))
+}
+
+impl Batch {
+    /// Stacks samples. Condition dropout and history masking draw from `rng`, so a seeded
+    /// generator gives reproducible batches. The current step (last history row) is never
+    /// masked.
+    pub fn from_samples(
+        samples: &[&AgentSample],
+        augment: &BatchAugment,
+        rng: &mut impl Rng,
+        device: &Device,
+    ) -> Self {
+        let b = samples.len();
+        assert!(b > 0, "empty batch");
+        let s0 = samples[0];
+        let steps = s0.target_history.len() / AGENT_FEATURES;
+        let agents = s0.others_valid.len();
+        let segments = s0.road_valid.len();
+        let future = s0.future_valid.len();
+        let mut th = Vec::with_capacity(b * steps * AGENT_FEATURES);
+        let mut td = Vec::with_capacity(b * (steps - 1) * DIFF_FEATURES);
+        let (mut oh, mut od, mut om) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut road, mut rm) = (Vec::new(), Vec::new());
+        let (mut cond, mut flag) = (Vec::with_capacity(b * future * 3), Vec::with_capacity(b));
+        let (mut fxy, mut fv) = (
+            Vec::with_capacity(b * future * 2),
+            Vec::with_capacity(b * future),
+        );
+        for s in samples {
+            let mut hist = s.target_history.clone();
+            let mut diffs = s.target_diffs.clone();
+            if augment.history_mask_prob > 0.0 {
+                for h in 0..steps - 1 {
+                    if rng.random_bool(augment.history_mask_prob) {
+                        hist[h * AGENT_FEATURES..(h + 1) * AGENT_FEATURES].fill(0.0);
+                        diffs[h * DIFF_FEATURES..(h + 1) * DIFF_FEATURES].fill(0.0);
+                        if h > 0 {
+                            diffs[(h - 1) * DIFF_FEATURES..h * DIFF_FEATURES].fill(0.0);
+                        }
+                    }
+                }
+            }
+            th.extend(hist);
+            td.extend(diffs);
+            oh.extend_from_slice(&s.others_history);
+            od.extend_from_slice(&s.others_diffs);
+            om.extend(bools(&s.others_valid));
+            road.extend_from_slice(&s.road_segments);
+            rm.extend(bools(&s.road_valid));
+            let keep = s.has_condition()
+                && !(augment.condition_dropout > 0.0 && rng.random_bool(augment.condition_dropout));
+            for f in 0..future {
+                let v = keep && s.condition_future_valid[f];
+                cond.push(if v {
+                    s.condition_future_xy_m[2 * f]
+                } else {
+                    0.0
+                });
+                cond.push(if v {
+                    s.condition_future_xy_m[2 * f + 1]
+                } else {
+                    0.0
+                });
+                cond.push(f32::from(u8::from(v)));
+            }
+            flag.push(f32::from(u8::from(keep)));
+            fxy.extend_from_slice(&s.future_xy_m);
+            fv.extend(bools(&s.future_valid));
+        }
+        let t3 = |v: Vec<f32>, s: [usize; 3]| Tensor::<3>::from_data(TensorData::new(v, s), device);
+        let t2 = |v: Vec<f32>, s: [usize; 2]| Tensor::<2>::from_data(TensorData::new(v, s), device);
+        let t4 = |v: Vec<f32>, s: [usize; 4]| Tensor::<4>::from_data(TensorData::new(v, s), device);
+        Self {
+            target_history: t3(th, [b, steps, AGENT_FEATURES]),
+            target_diffs: t3(td, [b, steps - 1, DIFF_FEATURES]),
+            others_history: t4(oh, [b, agents, steps, AGENT_FEATURES]),
+            others_diffs: t4(od, [b, agents, steps - 1, DIFF_FEATURES]),
+            others_mask: t2(om, [b, agents]),
+            road: t3(road, [b, segments, ROAD_FEATURES]),
+            road_mask: t2(rm, [b, segments]),
+            condition: t3(cond, [b, future, 3]),
+            condition_flag: t2(flag, [b, 1]),
+            future_xy: t3(fxy, [b, future, 2]),
+            future_valid: t2(fv, [b, future]),
+        }
+    }
+}

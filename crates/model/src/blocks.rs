@@ -1,0 +1,180 @@
+//! Multipath++ building blocks: MLPs, context gating (CG) and multi-context gating (MCG).
+
+use burn::module::Module;
+use burn::nn::{Linear, LinearConfig};
+use burn::tensor::activation::relu;
+use burn::tensor::{Device, Tensor};
+
+/// A stack of linear layers with ReLU between them (not after the last).
+#[derive(Module, Debug)]
+pub struct Mlp {
+    pub layers: Vec<Linear>,
+}
+
+impl Mlp {
+    /// `dims = [d_in, d_hidden..., d_out]`.
+    pub fn init(dims: &[usize], device: &Device) -> Self {
+        assert!(dims.len() >= 2, "an MLP needs input and output widths");
+        Self {
+            layers: dims
+                .windows(2)
+                .map(|w| LinearConfig::new(w[0], w[1]).init(device))
+                .collect(),
+        }
+    }
+
+    /// # Shapes
+    /// `[..., d_in] -> [..., d_out]`
+    pub fn forward<const D: usize>(&self, mut x: Tensor<D>) -> Tensor<D> {
+        let n = self.layers.len();
+        for (i, layer) in self.layers.iter().enumerate() {
+            x = layer.forward(x);
+            if i + 1 < n {
+                x = relu(x);
+            }
+        }
+        x
+    }
+}
+
+/// Masked max over the set dimension; sets with no valid element give zeros.
+///
+/// # Shapes
+/// `x: [batch, n, d]`, `mask: [batch, n]` (1 valid, 0 not) `-> [batch, d]`
+pub fn masked_max(x: Tensor<3>, mask: Tensor<2>) -> Tensor<2> {
+    let [b, n, d] = x.dims();
+    let m = mask.clone().reshape([b, n, 1]);
+    let filled = x * m.clone() + (m - 1.0) * 1e9;
+    let any = mask.max_dim(1); // [b, 1]
+    filled.max_dim(1).reshape([b, d]) * any
+}
+
+/// One context-gating block: `s' = MLP_s(s) ⊙ MLP_c(c)`, `c' = max over the set of s'`.
+#[derive(Module, Debug)]
+pub struct ContextGating {
+    pub mlp_s: Mlp,
+    pub mlp_c: Mlp,
+}
+
+impl ContextGating {
+    pub fn init(d_in: usize, d_context: usize, d_out: usize, device: &Device) -> Self {
+        Self {
+            mlp_s: Mlp::init(&[d_in, d_out, d_out, d_out], device),
+            mlp_c: Mlp::init(&[d_context, d_out, d_out, d_out], device),
+        }
+    }
+
+    /// # Shapes
+    /// `s: [batch, n, d_in]`, `c: [batch, d_context]`, `mask: [batch, n]`
+    /// `-> (s': [batch, n, d_out], c': [batch, d_out])`
+    pub fn forward(&self, s: Tensor<3>, c: Tensor<2>, mask: Tensor<2>) -> (Tensor<3>, Tensor<2>) {
+        let [b, n, _] = s.dims();
+        let gate = self.mlp_c.forward(c);
+        let d = gate.dims()[1];
+        let s_out = self.mlp_s.forward(s) * gate.reshape([b, 1, d]);
+        let s_out = s_out * mask.clone().reshape([b, n, 1]);
+        let c_out = masked_max(s_out.clone(), mask);
+        (s_out, c_out)
+    }
+}
+
+/// Multi-context gating: a stack of CG blocks with skip connections.
+///
+/// Skip connections: the input of block k+1 is the *running mean* of the stack's input and
+/// every block output so far (the public Multipath++ code accumulates a running sum while its
+/// comments say mean; the mean keeps activations on one scale however deep the stack is).
+#[derive(Module, Debug)]
+pub struct Mcg {
+    pub blocks: Vec<ContextGating>,
+    /// Projects the input elements and context to the block width when they differ.
+    pub input_s: Linear,
+    pub input_c: Linear,
+}
+
+impl Mcg {
+    pub fn init(
+        d_in: usize,
+        d_context: usize,
+        width: usize,
+        num_blocks: usize,
+        device: &Device,
+    ) -> Self {
+        Self {
+            blocks: (0..num_blocks.max(1))
+                .map(|_| ContextGating::init(width, width, width, device))
+                .collect(),
+            input_s: LinearConfig::new(d_in, width).init(device),
+            input_c: LinearConfig::new(d_context, width).init(device),
+        }
+    }
+
+    /// # Shapes
+    /// `s: [batch, n, d_in]`, `c: [batch, d_context]`, `mask: [batch, n]`
+    /// `-> (s: [batch, n, width], c: [batch, width])`
+    pub fn forward(&self, s: Tensor<3>, c: Tensor<2>, mask: Tensor<2>) -> (Tensor<3>, Tensor<2>) {
+        let mut s_acc = self.input_s.forward(s);
+        let mut c_acc = self.input_c.forward(c);
+        let (mut s_in, mut c_in) = (s_acc.clone(), c_acc.clone());
+        for (k, block) in self.blocks.iter().enumerate() {
+            let (s_out, c_out) = block.forward(s_in, c_in, mask.clone());
+            s_acc = s_acc + s_out;
+            c_acc = c_acc + c_out;
+            let count = (k + 2) as f64;
+            s_in = s_acc.clone() / count;
+            c_in = c_acc.clone() / count;
+        }
+        (s_in, c_in)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::TensorData;
+
+    #[test]
+    fn masked_max_ignores_invalid_elements() {
+        let device = Device::flex();
+        let x = Tensor::<3>::from_data(
+            TensorData::new(vec![1.0f32, 5.0, 3.0, -2.0, 7.0, 9.0], [2, 3, 1]),
+            &device,
+        );
+        let mask = Tensor::<2>::from_data(
+            TensorData::new(vec![1.0f32, 0.0, 1.0, 0.0, 0.0, 0.0], [2, 3]),
+            &device,
+        );
+        let out: Vec<f32> = masked_max(x, mask).into_data().try_to_vec::<f32>().unwrap();
+        assert_eq!(out, vec![3.0, 0.0]);
+    }
+
+    #[test]
+    fn mcg_shapes_and_seeded_init() {
+        let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+        let device = Device::flex();
+        device.seed(7);
+        let mcg = Mcg::init(5, 3, 8, 3, &device);
+        let s = Tensor::<3>::ones([2, 4, 5], &device);
+        let c = Tensor::<2>::ones([2, 3], &device);
+        let mask = Tensor::<2>::ones([2, 4], &device);
+        let (s_out, c_out) = mcg.forward(s, c, mask);
+        assert_eq!(s_out.dims(), [2, 4, 8]);
+        assert_eq!(c_out.dims(), [2, 8]);
+        device.seed(7);
+        let again = Mcg::init(5, 3, 8, 3, &device);
+        let a: Vec<f32> = mcg
+            .input_s
+            .weight
+            .val()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+        let b: Vec<f32> = again
+            .input_s
+            .weight
+            .val()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
+        assert_eq!(a, b);
+    }
+}

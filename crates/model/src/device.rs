@@ -1,0 +1,41 @@
+//! Backend selection: the only place that names a backend.
+
+use burn::tensor::Device;
+
+/// Error for an unknown or not-compiled-in backend name.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("backend {0:?} is not available in this build (available: {1})")]
+pub struct UnknownBackend(pub String, pub String);
+
+/// Backends compiled into this build.
+pub fn available_backends() -> Vec<&'static str> {
+    let mut v = vec!["flex"];
+    if cfg!(feature = "tch") {
+        v.push("tch");
+    }
+    if cfg!(feature = "cuda") {
+        v.push("cuda");
+    }
+    v
+}
+
+/// The inference device for a backend name: `flex` (pure Rust CPU, default), `tch`
+/// (LibTorch CPU, `--features tch`), `cuda` (`--features cuda`, untested here).
+pub fn device(name: &str) -> Result<Device, UnknownBackend> {
+    match name {
+        "flex" => Ok(Device::flex()),
+        #[cfg(feature = "tch")]
+        "tch" => Ok(Device::libtorch()),
+        #[cfg(feature = "cuda")]
+        "cuda" => Ok(Device::cuda(burn::tensor::DeviceIndex::Default)),
+        other => Err(UnknownBackend(
+            other.to_string(),
+            available_backends().join(", "),
+        )),
+    }
+}
+
+/// The training device (with autodiff) for a backend name.
+pub fn training_device(name: &str) -> Result<Device, UnknownBackend> {
+    Ok(device(name)?.autodiff())
+}
