@@ -1,0 +1,112 @@
+//! Training configuration (TOML).
+
+use scbg_features::FeatureConfig;
+use scbg_model::MultipathConfig;
+use serde::{Deserialize, Serialize};
+
+/// Everything a training run depends on; saved into every checkpoint.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrainConfig {
+    /// Model preset (`cpu-small` or `paper`), used when `model` is absent.
+    pub preset: String,
+    /// Explicit model widths (overrides `preset`).
+    pub model: Option<MultipathConfig>,
+    pub seed: u64,
+    pub epochs: usize,
+    pub batch_size: usize,
+    pub learning_rate: f64,
+    /// Multiply the learning rate by this after `plateau_patience` epochs without a better
+    /// validation loss.
+    pub plateau_factor: f64,
+    pub plateau_patience: usize,
+    /// Gradient-norm clipping (Multipath++: 0.4).
+    pub grad_clip_norm: f32,
+    /// Probability of dropping the condition of a pair sample (trains both modes at once).
+    pub condition_dropout: f64,
+    pub history_mask_prob: f64,
+    /// Fraction of scenarios (by id hash) held out for validation.
+    pub validation_fraction: f64,
+    /// Targets need at least this many valid future steps.
+    pub min_future_valid_steps: usize,
+    pub max_other_agents: usize,
+    pub max_road_segments: usize,
+    /// Cap on marginal samples per window (all vehicles when 0).
+    pub max_targets_per_window: usize,
+    /// `flex`, `tch` or `cuda`.
+    pub backend: String,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            preset: "cpu-small".into(),
+            model: None,
+            seed: 0,
+            epochs: 8,
+            batch_size: 32,
+            learning_rate: 1e-3,
+            plateau_factor: 0.5,
+            plateau_patience: 2,
+            grad_clip_norm: 0.4,
+            condition_dropout: 0.3,
+            history_mask_prob: 0.15,
+            validation_fraction: 0.2,
+            min_future_valid_steps: 10,
+            max_other_agents: 16,
+            max_road_segments: 64,
+            max_targets_per_window: 4,
+            backend: "flex".into(),
+        }
+    }
+}
+
+/// A configuration that cannot be used.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum ConfigError {
+    #[error("unknown model preset {0:?} (expected cpu-small or paper)")]
+    UnknownPreset(String),
+    #[error("{0}")]
+    Invalid(String),
+    #[error("config: {0}")]
+    Parse(String),
+}
+
+impl TrainConfig {
+    pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
+        let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
+        config.validate()?;
+        Ok(config)
+    }
+
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        self.model_config()?;
+        if self.batch_size == 0 || self.epochs == 0 {
+            return Err(ConfigError::Invalid(
+                "batch_size and epochs must be positive".into(),
+            ));
+        }
+        if !(0.0..1.0).contains(&self.validation_fraction) {
+            return Err(ConfigError::Invalid(
+                "validation_fraction must be in [0, 1)".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn model_config(&self) -> Result<MultipathConfig, ConfigError> {
+        match &self.model {
+            Some(m) => Ok(m.clone()),
+            None => MultipathConfig::preset(&self.preset)
+                .ok_or_else(|| ConfigError::UnknownPreset(self.preset.clone())),
+        }
+    }
+
+    pub fn feature_config(&self) -> FeatureConfig {
+        FeatureConfig {
+            max_other_agents: self.max_other_agents,
+            max_road_segments: self.max_road_segments,
+            ..Default::default()
+        }
+    }
+}

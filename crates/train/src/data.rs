@@ -1,0 +1,131 @@
+//! Training samples from a prepared cache: every valid vehicle of every window (marginal) and
+//! both directions of every interacting pair (conditional), split by scenario.
+
+use rayon::prelude::*;
+use scbg_features::cache::{CacheError, PreparedDataset};
+use scbg_features::{AgentSample, FeatureStats, SampleBuilder, marginal_targets};
+
+use crate::config::TrainConfig;
+
+/// Which part of the data a scenario belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Split {
+    Train,
+    Validation,
+}
+
+/// FNV-1a (then SplitMix-mixed) of the scenario id: a stable split that does not depend on file order.
+pub fn split_of(scenario_id: &str, validation_fraction: f64) -> Split {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in scenario_id.bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    // FNV's high bits are poorly mixed for short, similar ids: finish with SplitMix64's mixer.
+    let h = crate::trainer::mix(h, 0);
+    if ((h >> 11) as f64 / (1u64 << 53) as f64) < validation_fraction {
+        Split::Validation
+    } else {
+        Split::Train
+    }
+}
+
+/// Samples of one split, standardised, plus the ids of the pair samples.
+#[derive(Debug, Default)]
+pub struct SampleSet {
+    pub samples: Vec<AgentSample>,
+}
+
+impl SampleSet {
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// Samples that carry a condition (pair samples).
+    pub fn conditional(&self) -> impl Iterator<Item = &AgentSample> {
+        self.samples.iter().filter(|s| s.has_condition())
+    }
+}
+
+/// Builds the train and validation sample sets (raw, not yet standardised), in cache order.
+pub fn load_samples(
+    dataset: &PreparedDataset,
+    config: &TrainConfig,
+) -> Result<(SampleSet, SampleSet), CacheError> {
+    let features = config.feature_config();
+    let per_scene: Vec<(Split, Vec<AgentSample>)> = (0..dataset.len())
+        .into_par_iter()
+        .map(|i| {
+            let scene = dataset.scene(i)?;
+            let split = split_of(&scene.scenario_id, config.validation_fraction);
+            let mut builder = SampleBuilder::new(&scene, &features);
+            let mut out = Vec::new();
+            for (w, pairs) in scene.windows.iter().zip(&scene.pairs) {
+                let mut targets = marginal_targets(
+                    &scene,
+                    w,
+                    features.future_steps,
+                    config.min_future_valid_steps,
+                );
+                // Keep the pair members first, then the closest others, up to the cap.
+                let in_pair = |t: usize| pairs.iter().any(|p| p.first == t || p.second == t);
+                targets.sort_by_key(|&t| (!in_pair(t), t));
+                if config.max_targets_per_window > 0 {
+                    targets.truncate(config.max_targets_per_window);
+                }
+                for t in targets {
+                    out.push(builder.sample(w, t, None).expect("targets are valid now"));
+                }
+                for p in pairs {
+                    for (a, b) in [(p.first, p.second), (p.second, p.first)] {
+                        if let Ok(s) = builder.sample(w, a, Some(b)) {
+                            if s.future_valid.iter().filter(|&&v| v).count()
+                                >= config.min_future_valid_steps
+                            {
+                                out.push(s);
+                            }
+                        }
+                    }
+                }
+            }
+            Ok((split, out))
+        })
+        .collect::<Result<_, CacheError>>()?;
+    let (mut train, mut val) = (SampleSet::default(), SampleSet::default());
+    for (split, samples) in per_scene {
+        match split {
+            Split::Train => train.samples.extend(samples),
+            Split::Validation => val.samples.extend(samples),
+        }
+    }
+    Ok((train, val))
+}
+
+/// Fits standardisation statistics on (up to 4,000 of) the training samples and applies them.
+pub fn standardise(train: &mut SampleSet, val: &mut SampleSet) -> FeatureStats {
+    let step = (train.len() / 4000).max(1);
+    let stats = FeatureStats::fit(train.samples.iter().step_by(step));
+    for s in train.samples.iter_mut().chain(val.samples.iter_mut()) {
+        stats.normalize(s);
+    }
+    stats
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn split_is_stable_and_roughly_proportional() {
+        assert_eq!(split_of("abc", 0.2), split_of("abc", 0.2));
+        let val = (0..10_000)
+            .filter(|i| split_of(&format!("s{i}"), 0.2) == Split::Validation)
+            .count();
+        assert!((1700..2300).contains(&val), "{val}");
+        assert!((0..100).all(|i| split_of(&format!("s{i}"), 0.0) == Split::Train));
+    }
+}

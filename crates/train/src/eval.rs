@@ -1,0 +1,173 @@
+//! Predictions of the model and of the baselines, scored with the Waymo metrics.
+//!
+//! Everything is in the target's frame at the current step (the metrics are invariant to the
+//! frame as long as predictions and ground truth share it).
+
+use burn::tensor::{Device, activation::softmax};
+use rand::SeedableRng;
+use scbg_features::{AGENT_FEATURES, AgentSample};
+use scbg_metrics::{ClassifierThresholds, GroundTruth, MetricTable, Prediction};
+use scbg_model::{Batch, BatchAugment, Multipath};
+
+/// Inference mode of the predictor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Mode {
+    /// `p(y_A | x)`: the condition is switched off.
+    Marginal,
+    /// `p(y_A | x, y_B)`: the other agent's logged future is given.
+    Conditional,
+}
+
+/// K trajectories with probabilities, target frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Modes {
+    /// `[K][T]` positions.
+    pub xy: Vec<Vec<[f32; 2]>>,
+    /// `[K]`, summing to 1.
+    pub probs: Vec<f32>,
+}
+
+/// Runs the model on samples (already standardised) in batches of `batch_size`.
+pub fn predict(
+    model: &Multipath,
+    samples: &[&AgentSample],
+    mode: Mode,
+    batch_size: usize,
+    device: &Device,
+) -> Vec<Modes> {
+    let mut out = Vec::with_capacity(samples.len());
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
+    let augment = match mode {
+        Mode::Marginal => BatchAugment {
+            condition_dropout: 1.0,
+            history_mask_prob: 0.0,
+        },
+        Mode::Conditional => BatchAugment::default(),
+    };
+    for chunk in samples.chunks(batch_size.max(1)) {
+        let batch = Batch::from_samples(chunk, &augment, &mut rng, device);
+        let gmm = model.forward(&batch);
+        let [b, k, t, _] = gmm.xy.dims();
+        let xy: Vec<f32> = gmm.xy.into_data().try_to_vec::<f32>().expect("f32");
+        let probs: Vec<f32> = softmax(gmm.logits, 1)
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("f32");
+        for i in 0..b {
+            out.push(Modes {
+                xy: (0..k)
+                    .map(|m| {
+                        (0..t)
+                            .map(|s| {
+                                let o = ((i * k + m) * t + s) * 2;
+                                [xy[o], xy[o + 1]]
+                            })
+                            .collect()
+                    })
+                    .collect(),
+                probs: probs[i * k..(i + 1) * k].to_vec(),
+            });
+        }
+    }
+    out
+}
+
+/// Ground truth of a (raw, unstandardised) sample for the metrics; future velocities are
+/// finite differences of the positions.
+pub fn ground_truth(sample: &AgentSample) -> GroundTruth {
+    let t = sample.future_valid.len();
+    let xy: Vec<[f32; 2]> = (0..t)
+        .map(|i| [sample.future_xy_m[2 * i], sample.future_xy_m[2 * i + 1]])
+        .collect();
+    let velocity = (0..t)
+        .map(|i| {
+            let prev = if i == 0 {
+                Some([0.0, 0.0])
+            } else {
+                sample.future_valid[i - 1].then(|| xy[i - 1])
+            };
+            match (sample.future_valid[i], prev) {
+                (true, Some(p)) => [(xy[i][0] - p[0]) / 0.1, (xy[i][1] - p[1]) / 0.1],
+                _ => [0.0, 0.0],
+            }
+        })
+        .collect();
+    GroundTruth {
+        current_xy_m: [0.0, 0.0],
+        current_heading_rad: 0.0,
+        current_velocity_mps: sample.current_velocity_mps,
+        future_xy_m: xy,
+        future_heading_rad: sample.future_heading_rad.clone(),
+        future_velocity_mps: velocity,
+        future_valid: sample.future_valid.clone(),
+    }
+}
+
+/// Constant velocity from the current velocity (one trajectory).
+pub fn constant_velocity(sample: &AgentSample, future_steps: usize) -> Modes {
+    let [vx, vy] = sample.current_velocity_mps;
+    Modes {
+        xy: vec![
+            (1..=future_steps)
+                .map(|i| [vx * 0.1 * i as f32, vy * 0.1 * i as f32])
+                .collect(),
+        ],
+        probs: vec![1.0],
+    }
+}
+
+/// Constant yaw rate and acceleration, estimated from the last second of (raw) history.
+pub fn constant_yaw_rate_accel(sample: &AgentSample, future_steps: usize) -> Modes {
+    let h = sample.target_history.len() / AGENT_FEATURES;
+    let row = |s: usize| &sample.target_history[s * AGENT_FEATURES..(s + 1) * AGENT_FEATURES];
+    let now = row(h - 1);
+    let first = (0..h - 1).find(|&s| row(s)[6] > 0.0);
+    let (mut yaw_rate, mut accel) = (0.0f32, 0.0f32);
+    if let Some(f) = first {
+        let dt = (h - 1 - f) as f32 * 0.1;
+        yaw_rate = scbg_scene_wrap(now[2] - row(f)[2]) / dt;
+        accel = (now[3] - row(f)[3]) / dt;
+    }
+    let (mut x, mut y, mut yaw, mut v) = (0.0f32, 0.0f32, 0.0f32, now[3]);
+    let traj = (0..future_steps)
+        .map(|_| {
+            v = (v + accel * 0.1).max(0.0);
+            yaw += yaw_rate * 0.1;
+            x += v * yaw.cos() * 0.1;
+            y += v * yaw.sin() * 0.1;
+            [x, y]
+        })
+        .collect();
+    Modes {
+        xy: vec![traj],
+        probs: vec![1.0],
+    }
+}
+
+fn scbg_scene_wrap(a: f32) -> f32 {
+    let mut a = a % (2.0 * std::f32::consts::PI);
+    if a > std::f32::consts::PI {
+        a -= 2.0 * std::f32::consts::PI;
+    } else if a <= -std::f32::consts::PI {
+        a += 2.0 * std::f32::consts::PI;
+    }
+    a
+}
+
+/// Scores predictions against raw samples' ground truth.
+pub fn score(
+    modes: &[Modes],
+    raw: &[&AgentSample],
+    thresholds: &ClassifierThresholds,
+) -> MetricTable {
+    let preds: Vec<Prediction> = modes
+        .iter()
+        .map(|m| Prediction {
+            step_indices: Prediction::steps_10hz(),
+            trajectories: m.xy.clone(),
+            scores: m.probs.clone(),
+        })
+        .collect();
+    let gts: Vec<GroundTruth> = raw.iter().map(|s| ground_truth(s)).collect();
+    scbg_metrics::evaluate(&preds, &gts, thresholds)
+}

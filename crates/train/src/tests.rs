@@ -1,0 +1,139 @@
+//! Training end to end on a tiny synthetic cache.
+
+use std::path::Path;
+
+use burn::module::Module;
+use scbg_features::cache::{Manifest, ShardSummary, ShardWriter};
+use scbg_features::{PairConfig, PreparedScene, WindowConfig};
+
+use crate::config::TrainConfig;
+use crate::{Checkpoint, NoProgress, train};
+
+/// Writes a prepared cache of `n` synthetic scenarios.
+pub(crate) fn tiny_cache(dir: &Path, n: u64) {
+    std::fs::create_dir_all(dir).unwrap();
+    let mut w = ShardWriter::create(&dir.join("shard-00000.bin")).unwrap();
+    for i in 0..n {
+        let g = scbg_synth::generate(42, i, &scbg_synth::Family::ALL);
+        let p = PreparedScene::from_scene(
+            &g.scene,
+            &WindowConfig::default(),
+            &PairConfig::default(),
+            4,
+        )
+        .unwrap();
+        w.append(&p).unwrap();
+    }
+    let bytes = w.finish().unwrap();
+    let shard = ShardSummary {
+        file: "shard-00000.bin".into(),
+        scenarios: n as usize,
+        bytes,
+        ..Default::default()
+    };
+    Manifest {
+        format_version: 1,
+        settings: Default::default(),
+        shards: vec![shard.clone()],
+        total: shard,
+    }
+    .write(dir)
+    .unwrap();
+}
+
+fn tiny_config(epochs: usize) -> TrainConfig {
+    let mut model = scbg_model::MultipathConfig::cpu_small();
+    model.lstm_hidden = 8;
+    model.step_mlp = vec![8, 16];
+    model.target_width = 16;
+    model.interaction_width = 16;
+    model.road_mlp = vec![8, 16];
+    model.road_context_hidden = 16;
+    model.decoder_width = 32;
+    model.decoder_hidden = 32;
+    model.mcg_blocks = 1;
+    model.future_hidden = 16;
+    TrainConfig {
+        model: Some(model),
+        epochs,
+        batch_size: 8,
+        max_other_agents: 4,
+        max_road_segments: 16,
+        validation_fraction: 0.25,
+        seed: 3,
+        ..Default::default()
+    }
+}
+
+fn weights(dir: &Path) -> Vec<f32> {
+    let ckpt = Checkpoint::read(dir).unwrap();
+    let model = ckpt.load_model(dir, &burn::tensor::Device::flex()).unwrap();
+    let mut out = Vec::new();
+    struct Collect<'a>(&'a mut Vec<f32>);
+    impl burn::module::ModuleVisitor for Collect<'_> {
+        fn visit_float<const D: usize>(
+            &mut self,
+            p: &burn::module::Param<burn::tensor::Tensor<D>>,
+        ) {
+            self.0
+                .extend(p.val().into_data().try_to_vec::<f32>().unwrap());
+        }
+    }
+    model.visit(&mut Collect(&mut out));
+    out
+}
+
+#[test]
+fn resume_gives_the_same_weights_as_an_uninterrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    tiny_cache(&data, 24);
+    let straight = dir.path().join("straight");
+    let ckpt = train(&data, &straight, &tiny_config(2), false, &NoProgress).unwrap();
+    assert_eq!(ckpt.state.epoch, 2);
+    assert!(
+        ckpt.history.iter().all(|r| r.train_loss.is_finite()),
+        "{:?}",
+        ckpt.history
+    );
+    let resumed = dir.path().join("resumed");
+    train(&data, &resumed, &tiny_config(1), false, &NoProgress).unwrap();
+    // Continue to 2 epochs: the checkpoint's config says 1, so rewrite it as a 2-epoch run
+    // would have been started (the epoch count is the only difference).
+    let mut c = Checkpoint::read(&resumed).unwrap();
+    c.train_config.epochs = 2;
+    std::fs::write(
+        resumed.join(crate::checkpoint::CHECKPOINT_FILE),
+        serde_json::to_string(&c).unwrap(),
+    )
+    .unwrap();
+    train(&data, &resumed, &tiny_config(2), true, &NoProgress).unwrap();
+    let (a, b) = (weights(&straight), weights(&resumed));
+    assert_eq!(a.len(), b.len());
+    assert!(a == b, "weights differ after resume");
+    // Only the latest model and optimizer files remain.
+    let files: Vec<String> = std::fs::read_dir(&resumed)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    assert_eq!(
+        files.iter().filter(|f| f.ends_with(".bpk")).count(),
+        2,
+        "{files:?}"
+    );
+}
+
+#[test]
+fn resume_refuses_a_different_config() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    tiny_cache(&data, 8);
+    let out = dir.path().join("out");
+    train(&data, &out, &tiny_config(1), false, &NoProgress).unwrap();
+    let mut other = tiny_config(1);
+    other.learning_rate = 0.5;
+    assert!(matches!(
+        train(&data, &out, &other, true, &NoProgress),
+        Err(crate::TrainError::ConfigMismatch(_))
+    ));
+}

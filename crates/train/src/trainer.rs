@@ -1,0 +1,255 @@
+//! The training loop.
+
+use std::path::Path;
+use std::time::Instant;
+
+use burn::grad_clipping::GradientClippingConfig;
+use burn::module::Module;
+use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use scbg_features::AgentSample;
+use scbg_features::cache::{CacheError, PreparedDataset};
+use scbg_model::{Batch, BatchAugment, Multipath, gmm_nll};
+
+use crate::checkpoint::{Checkpoint, CheckpointError, EpochReport, TrainState};
+use crate::config::{ConfigError, TrainConfig};
+use crate::data::{load_samples, standardise};
+use crate::eval::{Mode, predict, score};
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrainError {
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Cache(#[from] CacheError),
+    #[error(transparent)]
+    Checkpoint(#[from] CheckpointError),
+    #[error(transparent)]
+    Backend(#[from] scbg_model::device::UnknownBackend),
+    #[error("no training samples in the prepared data")]
+    NoSamples,
+    #[error("--resume: the checkpoint in {0} was made with a different configuration")]
+    ConfigMismatch(String),
+}
+
+/// Progress callbacks (the CLI draws a bar; tests pass [`NoProgress`]).
+pub trait Progress {
+    fn epoch_start(&self, _epoch: usize, _batches: usize) {}
+    fn batch_done(&self, _loss: f64) {}
+    fn epoch_end(&self, _report: &EpochReport) {}
+}
+
+#[derive(Debug)]
+pub struct NoProgress;
+impl Progress for NoProgress {}
+
+/// SplitMix64 of a pair: independent, reproducible streams per (seed, counter).
+pub fn mix(seed: u64, counter: u64) -> u64 {
+    let mut z = seed
+        ^ counter
+            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
+            .wrapping_add(0x632B_E59B_D9B4_E019);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+fn optimizer(config: &TrainConfig) -> ModuleOptimizer {
+    AdamConfig::new()
+        .with_grad_clipping(Some(GradientClippingConfig::Norm(config.grad_clip_norm)))
+        .init()
+}
+
+/// Mean NLL of samples in their own mode (pairs conditional, others marginal), no augmentation.
+fn mean_loss(
+    model: &Multipath,
+    samples: &[&AgentSample],
+    batch_size: usize,
+    device: &burn::tensor::Device,
+) -> Option<f64> {
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for chunk in samples.chunks(batch_size.max(1)) {
+        let batch = Batch::from_samples(chunk, &BatchAugment::default(), &mut rng, device);
+        let loss: f32 = gmm_nll(
+            &model.forward(&batch),
+            batch.future_xy.clone(),
+            batch.future_valid.clone(),
+        )
+        .into_scalar();
+        if loss.is_finite() {
+            sum += f64::from(loss) * chunk.len() as f64;
+            n += chunk.len();
+        }
+    }
+    (n > 0).then(|| sum / n as f64)
+}
+
+/// Trains on the prepared cache in `data_dir`, writing checkpoints to `out_dir` after every
+/// epoch. With `resume`, continues from the checkpoint in `out_dir`; the result is the same
+/// as an uninterrupted run (data order and augmentation are derived from (seed, epoch/step)).
+pub fn train(
+    data_dir: &Path,
+    out_dir: &Path,
+    config: &TrainConfig,
+    resume: bool,
+    progress: &dyn Progress,
+) -> Result<Checkpoint, TrainError> {
+    config.validate()?;
+    let model_config = config.model_config()?;
+    let dataset = PreparedDataset::open(data_dir)?;
+    let (mut train_set, mut val_set) = load_samples(&dataset, config)?;
+    if train_set.is_empty() {
+        return Err(TrainError::NoSamples);
+    }
+    let raw_val: Vec<AgentSample> = val_set.samples.iter().take(512).cloned().collect();
+    let stats = standardise(&mut train_set, &mut val_set);
+    tracing::info!(
+        "training samples: {} ({} conditional); validation: {}",
+        train_set.len(),
+        train_set.conditional().count(),
+        val_set.len()
+    );
+
+    let device = scbg_model::device::training_device(&config.backend)?;
+    let infer_device = scbg_model::device::device(&config.backend)?;
+    device.seed(config.seed);
+    let mut model = model_config.init(&device);
+    let mut optim = optimizer(config);
+    let mut state = TrainState {
+        epoch: 0,
+        step: 0,
+        learning_rate: config.learning_rate,
+        best_val_loss: None,
+        epochs_without_improvement: 0,
+    };
+    let mut history = Vec::new();
+    if resume {
+        let ckpt = Checkpoint::read(out_dir)?;
+        if &ckpt.train_config != config {
+            return Err(TrainError::ConfigMismatch(out_dir.display().to_string()));
+        }
+        model = ckpt.load_model(out_dir, &device)?;
+        optim = ckpt.load_optimizer(out_dir, optim)?;
+        state = ckpt.state.clone();
+        history = ckpt.history.clone();
+    }
+    let augment = BatchAugment {
+        condition_dropout: config.condition_dropout,
+        history_mask_prob: config.history_mask_prob,
+    };
+    let val_refs: Vec<&AgentSample> = val_set.samples.iter().collect();
+    let raw_refs: Vec<&AgentSample> = raw_val.iter().collect();
+    let mut last = None;
+    for epoch in state.epoch..config.epochs {
+        let started = Instant::now();
+        let mut order: Vec<usize> = (0..train_set.len()).collect();
+        order.shuffle(&mut rand_pcg::Pcg64Mcg::seed_from_u64(mix(
+            config.seed,
+            epoch as u64,
+        )));
+        let batches = order.len().div_ceil(config.batch_size);
+        progress.epoch_start(epoch, batches);
+        let epoch_start_model = model.clone();
+        let (mut loss_sum, mut loss_n, mut skipped) = (0.0f64, 0usize, 0usize);
+        for chunk in order.chunks(config.batch_size) {
+            let refs: Vec<&AgentSample> = chunk.iter().map(|&i| &train_set.samples[i]).collect();
+            let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(mix(config.seed ^ 0x5CB6, state.step));
+            let batch = Batch::from_samples(&refs, &augment, &mut rng, &device);
+            let loss = gmm_nll(
+                &model.forward(&batch),
+                batch.future_xy.clone(),
+                batch.future_valid.clone(),
+            );
+            let value: f32 = loss.clone().into_scalar();
+            state.step += 1;
+            if !value.is_finite() {
+                tracing::warn!(
+                    "epoch {epoch} step {}: non-finite loss {value}; batch skipped",
+                    state.step
+                );
+                skipped += 1;
+                continue;
+            }
+            let grads = GradientsParams::from_grads(loss.backward(), &model);
+            model = optim.step(state.learning_rate, model, grads);
+            loss_sum += f64::from(value);
+            loss_n += 1;
+            progress.batch_done(f64::from(value));
+        }
+        if !crate::checkpoint::weights_finite(&model) {
+            tracing::warn!(
+                "epoch {epoch}: weights became non-finite; reverting the epoch and halving the learning rate"
+            );
+            model = epoch_start_model;
+            state.learning_rate *= 0.5;
+        }
+        let valid_model = model.valid();
+        let val_loss = mean_loss(&valid_model, &val_refs, config.batch_size, &infer_device);
+        let val_min_ade_8s = (!raw_refs.is_empty())
+            .then(|| {
+                let modes = predict(
+                    &valid_model,
+                    &val_refs[..raw_refs.len()],
+                    Mode::Marginal,
+                    config.batch_size,
+                    &infer_device,
+                );
+                score(
+                    &modes,
+                    &raw_refs,
+                    &scbg_metrics::ClassifierThresholds::default(),
+                )
+                .by_time[2]
+                    .1
+                    .min_ade
+            })
+            .flatten();
+        match (val_loss, state.best_val_loss) {
+            (Some(v), Some(best)) if v >= best => {
+                state.epochs_without_improvement += 1;
+                if state.epochs_without_improvement >= config.plateau_patience {
+                    state.learning_rate *= config.plateau_factor;
+                    state.epochs_without_improvement = 0;
+                }
+            }
+            (Some(v), _) => {
+                state.best_val_loss = Some(v);
+                state.epochs_without_improvement = 0;
+            }
+            (None, _) => {}
+        }
+        state.epoch = epoch + 1;
+        let report = EpochReport {
+            epoch,
+            train_loss: if loss_n > 0 {
+                loss_sum / loss_n as f64
+            } else {
+                f64::NAN
+            },
+            val_loss,
+            val_min_ade_8s,
+            learning_rate: state.learning_rate,
+            skipped_batches: skipped,
+            seconds: started.elapsed().as_secs_f64(),
+        };
+        progress.epoch_end(&report);
+        history.push(report);
+        let ckpt = Checkpoint {
+            train_config: config.clone(),
+            model_config: model_config.clone(),
+            stats: stats.clone(),
+            state: state.clone(),
+            history: history.clone(),
+            model_file: String::new(),
+            optimizer_file: String::new(),
+        };
+        ckpt.clone().save(out_dir, &model, &optim)?;
+        last = Some(Checkpoint::read(out_dir)?);
+    }
+    match last {
+        Some(c) => Ok(c),
+        None => Ok(Checkpoint::read(out_dir)?),
+    }
+}
