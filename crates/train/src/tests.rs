@@ -41,6 +41,9 @@ pub(crate) fn tiny_cache(dir: &Path, n: u64) {
     .unwrap();
 }
 
+/// burn's seeded RNG is process-global: training tests must not interleave their model inits.
+static SEED_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
 fn tiny_config(epochs: usize) -> TrainConfig {
     let mut model = scbg_model::MultipathConfig::cpu_small();
     model.lstm_hidden = 8;
@@ -85,6 +88,7 @@ fn weights(dir: &Path) -> Vec<f32> {
 
 #[test]
 fn resume_gives_the_same_weights_as_an_uninterrupted_run() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     tiny_cache(&data, 24);
@@ -125,6 +129,7 @@ fn resume_gives_the_same_weights_as_an_uninterrupted_run() {
 
 #[test]
 fn resume_refuses_a_different_config() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("data");
     tiny_cache(&data, 8);
