@@ -1,7 +1,7 @@
 //! The Multipath++ model: encoders, the conditional future encoder and the anchor decoder.
 
 use burn::module::{Module, Param};
-use burn::nn::{Initializer, Lstm, LstmConfig};
+use burn::nn::{Initializer, Linear, LinearConfig, Lstm, LstmConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use scbg_features::{AGENT_FEATURES, DIFF_FEATURES, ROAD_FEATURES};
@@ -9,6 +9,9 @@ use scbg_features::{AGENT_FEATURES, DIFF_FEATURES, ROAD_FEATURES};
 use crate::batch::Batch;
 use crate::blocks::{Mcg, Mlp};
 use crate::config::MultipathConfig;
+
+/// Scale (metres) dividing the conditioning future's coordinates before the future encoder.
+pub const CONDITION_SCALE_M: f32 = 50.0;
 
 /// Encodes agent histories: LSTM over step features ‖ LSTM over step differences ‖ MCG over
 /// per-step MLP embeddings (features + one-hot time step).
@@ -60,10 +63,64 @@ impl HistoryEncoder {
     }
 }
 
+/// Points of the conditioning future kept by the future encoder: every 5th step (2 Hz).
+pub const CONDITION_STRIDE: usize = 5;
+
+/// Encodes the other agent's future (CBP-style): its points at 2 Hz — x, y (scaled), validity
+/// and time — through a per-point MLP and an MCG whose context is the target embedding, so the
+/// encoding is about the future *relative to this target*; max-pooled over valid points.
+#[derive(Module, Debug)]
+pub struct FutureEncoder {
+    pub point_mlp: Mlp,
+    pub mcg: Mcg,
+}
+
+impl FutureEncoder {
+    pub fn init(config: &MultipathConfig, device: &Device) -> Self {
+        let h = config.future_hidden;
+        Self {
+            point_mlp: Mlp::init(&[4, h, h], device),
+            mcg: Mcg::init(h, config.target_width, h, config.mcg_blocks, device),
+        }
+    }
+
+    /// # Shapes
+    /// `condition: [batch, T, 3]` (x m, y m, valid), `target: [batch, target_width]`
+    /// `-> [batch, future_hidden]` (zeros when no point is valid)
+    pub fn forward(&self, condition: &Tensor<3>, target: Tensor<2>, b: usize) -> Tensor<2> {
+        let device = condition.device();
+        let [_, t, _] = condition.dims();
+        let n = t / CONDITION_STRIDE;
+        let idx: Vec<i64> = (0..n)
+            .map(|i| ((i + 1) * CONDITION_STRIDE - 1) as i64)
+            .collect();
+        let pts = condition.clone().select(
+            1,
+            Tensor::<1, burn::tensor::Int>::from_data(TensorData::new(idx, [n]), &device),
+        );
+        let scale = Tensor::<1>::from_data(
+            TensorData::new(
+                vec![1.0 / CONDITION_SCALE_M, 1.0 / CONDITION_SCALE_M, 1.0],
+                [3],
+            ),
+            &device,
+        );
+        let pts = pts * scale.reshape([1, 1, 3]);
+        let time: Vec<f32> = (0..n).map(|i| (i + 1) as f32 / n as f32).collect();
+        let time = Tensor::<1>::from_data(TensorData::new(time, [n]), &device)
+            .reshape([1, n, 1])
+            .expand([b, n, 1]);
+        let valid = pts.clone().narrow(2, 2, 1).reshape([b, n]);
+        let feats = self.point_mlp.forward(Tensor::cat(vec![pts, time], 2));
+        let (_, pooled) = self.mcg.forward(feats, target, valid);
+        pooled
+    }
+}
+
 /// Output of the model: a Gaussian mixture over future trajectories in the target frame.
 #[derive(Debug, Clone)]
 pub struct GmmOutput {
-    /// `[batch, modes, future_steps, 2]`
+    /// `[batch, modes, future_steps, 2]` positions in the target frame (metres).
     pub xy: Tensor<4>,
     /// `[batch, modes, future_steps, 3]`: (a, b, c) of Σ = e^c·[[e^a·cosh b, sinh b], [sinh b, e^−a·cosh b]].
     pub cov_abc: Tensor<4>,
@@ -80,7 +137,9 @@ pub struct Multipath {
     pub road_mlp: Mlp,
     pub road_context: Mlp,
     pub road_mcg: Mcg,
-    pub future_encoder: Mlp,
+    pub future_encoder: FutureEncoder,
+    /// Fuses `[scene ‖ condition·flag ‖ flag]` back to the embedding width (added to the scene).
+    pub fuse: Linear,
     pub anchors: Param<Tensor<2>>,
     pub decoder_mcg: Mcg,
     pub decoder_mlp: Mlp,
@@ -120,7 +179,8 @@ impl MultipathConfig {
                 self.mcg_blocks,
                 device,
             ),
-            future_encoder: Mlp::init(&[self.future_steps * 3, self.future_hidden, e], device),
+            future_encoder: FutureEncoder::init(self, device),
+            fuse: LinearConfig::new(e + self.future_hidden + 1, e).init(device),
             anchors: Initializer::Normal {
                 mean: 0.0,
                 std: 1.0,
@@ -174,12 +234,14 @@ impl Multipath {
         let (_, road) = self
             .road_mcg
             .forward(road, road_ctx, batch.road_mask.clone());
+        let target_for_condition = target.clone();
         let scene = Tensor::cat(vec![target, interaction, road], 1);
-        let [_, fs, c] = batch.condition.dims();
-        let future = self
+        let condition = self
             .future_encoder
-            .forward(batch.condition.clone().reshape([b, fs * c]));
-        scene + future * batch.condition_flag.clone()
+            .forward(&batch.condition, target_for_condition, b);
+        let flag = batch.condition_flag.clone();
+        let fused = Tensor::cat(vec![scene.clone(), condition * flag.clone(), flag], 1);
+        scene + self.fuse.forward(fused)
     }
 
     /// Decodes K trajectories from an embedding.
@@ -196,7 +258,14 @@ impl Multipath {
                 .forward(anchors, embedding, Tensor::ones([b, k], &device));
         let out = self.decoder_mlp.forward(relu(modes)); // [b, k, 5T + 1]
         let t = self.future_steps;
-        let xy = out.clone().narrow(2, 0, 2 * t).reshape([b, k, t, 2]);
+        // Per-step displacements, integrated: positions are their cumulative sum (paper-era
+        // Multipath++ re-implementations predict positions directly; integrating makes smooth,
+        // constant-speed futures the easy solution and keeps early training errors small).
+        let xy = out
+            .clone()
+            .narrow(2, 0, 2 * t)
+            .reshape([b, k, t, 2])
+            .cumsum(2);
         let cov_abc = out.clone().narrow(2, 2 * t, 3 * t).reshape([b, k, t, 3]);
         let logits = out.narrow(2, 5 * t, 1).reshape([b, k]);
         GmmOutput {

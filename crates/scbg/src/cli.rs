@@ -22,9 +22,80 @@ pub enum Command {
     Data(DataCommand),
     /// Generate synthetic interactive two-vehicle scenarios as WOMD Scenario TFRecords.
     Synth(SynthArgs),
+    /// Train models.
+    #[command(subcommand)]
+    Train(TrainCommand),
+    /// Evaluate models and predictions.
+    #[command(subcommand)]
+    Eval(EvalCommand),
     /// Measure throughput of the pipeline stages.
     #[command(subcommand)]
     Bench(BenchCommand),
+}
+
+#[derive(Debug, Subcommand)]
+pub enum TrainCommand {
+    /// Train the Multipath++ predictor (marginal + conditional) on a prepared cache.
+    Predictor(TrainPredictorArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct TrainPredictorArgs {
+    /// TOML training config (defaults are used for missing keys; no file = all defaults).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Prepared cache folder (`scbg data prepare`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Checkpoint folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from the checkpoint in --out.
+    #[arg(long)]
+    pub resume: bool,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum EvalCommand {
+    /// Evaluate a trained predictor (and baselines) on a prepared cache: the paper's Table I.
+    Predictor(EvalPredictorArgs),
+    /// Waymo motion metrics of external predictions (JSON) against WOMD scenario files.
+    Metrics(EvalMetricsArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct EvalPredictorArgs {
+    /// Checkpoint folder.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Prepared cache folder.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Which mode to report (both by default).
+    #[arg(long, value_parser = ["marginal", "conditional", "both"], default_value = "both")]
+    pub mode: String,
+    /// Evaluate on the validation split (by scenario id, as in training) or on everything.
+    #[arg(long, value_parser = ["validation", "all"], default_value = "validation")]
+    pub split: String,
+    /// Use the current Waymo trajectory-classifier thresholds instead of the pre-2024 ones.
+    #[arg(long)]
+    pub current_thresholds: bool,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct EvalMetricsArgs {
+    /// Scenario files (globs or paths).
+    #[arg(long, required = true, num_args = 1..)]
+    pub scenarios: Vec<String>,
+    /// Predictions JSON (schema in README).
+    #[arg(long)]
+    pub predictions: PathBuf,
+    #[arg(long)]
+    pub current_thresholds: bool,
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Subcommand)]
@@ -114,6 +185,20 @@ pub enum BenchCommand {
     Ingest(BenchIngestArgs),
     /// Synthetic generator throughput.
     Synth(BenchSynthArgs),
+    /// Predictor training step time and inference throughput.
+    Train(BenchTrainArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct BenchTrainArgs {
+    /// Model presets to measure.
+    #[arg(long, value_delimiter = ',', default_value = "cpu-small,paper")]
+    pub presets: Vec<String>,
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    /// Timed training steps per preset (after one warm-up step).
+    #[arg(long, default_value_t = 5)]
+    pub steps: usize,
 }
 
 #[derive(Debug, Args)]

@@ -171,3 +171,36 @@ pub fn score(
     let gts: Vec<GroundTruth> = raw.iter().map(|s| ground_truth(s)).collect();
     scbg_metrics::evaluate(&preds, &gts, thresholds)
 }
+
+/// Mean GMM NLL of standardised samples in `mode` (nats per sample, summed over steps).
+pub fn mean_nll(
+    model: &Multipath,
+    samples: &[&AgentSample],
+    mode: Mode,
+    batch_size: usize,
+    device: &Device,
+) -> Option<f64> {
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
+    let augment = match mode {
+        Mode::Marginal => BatchAugment {
+            condition_dropout: 1.0,
+            history_mask_prob: 0.0,
+        },
+        Mode::Conditional => BatchAugment::default(),
+    };
+    let (mut sum, mut n) = (0.0f64, 0usize);
+    for chunk in samples.chunks(batch_size.max(1)) {
+        let batch = Batch::from_samples(chunk, &augment, &mut rng, device);
+        let loss: f32 = scbg_model::gmm_nll(
+            &model.forward(&batch),
+            batch.future_xy.clone(),
+            batch.future_valid.clone(),
+        )
+        .into_scalar();
+        if loss.is_finite() {
+            sum += f64::from(loss) * chunk.len() as f64;
+            n += chunk.len();
+        }
+    }
+    (n > 0).then(|| sum / n as f64)
+}

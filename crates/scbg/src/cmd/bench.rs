@@ -179,3 +179,93 @@ pub fn synth(args: &BenchSynthArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// Training step time and inference throughput on synthetic samples of the default feature
+/// sizes, at the current rayon/backend thread count.
+pub fn train(args: &crate::cli::BenchTrainArgs) -> anyhow::Result<()> {
+    use burn::optim::{AdamConfig, GradientsParams};
+    use rand::SeedableRng;
+    use scbg_model::{Batch, BatchAugment, MultipathConfig, gmm_nll};
+    let features = FeatureConfig {
+        max_other_agents: 16,
+        max_road_segments: 64,
+        ..Default::default()
+    };
+    // Samples from real geometry: synthetic scenes through the feature pipeline.
+    let mut samples = Vec::new();
+    for i in 0..args.batch as u64 {
+        let g = scbg_synth::generate(9, i, &scbg_synth::Family::ALL);
+        let p = PreparedScene::from_scene(
+            &g.scene,
+            &WindowConfig::default(),
+            &PairConfig::default(),
+            ROAD_SUBSAMPLE,
+        )?;
+        let w = p.windows[0];
+        samples.push(SampleBuilder::new(&p, &features).sample(&w, 0, Some(1))?);
+    }
+    let refs: Vec<&scbg_features::AgentSample> = samples.iter().collect();
+    println!(
+        "bench train: batch {}, {} other agents, {} road segments, {} rayon threads",
+        args.batch,
+        features.max_other_agents,
+        features.max_road_segments,
+        rayon::current_num_threads()
+    );
+    for preset in &args.presets {
+        let config =
+            MultipathConfig::preset(preset).with_context(|| format!("unknown preset {preset}"))?;
+        let device = burn::tensor::Device::flex().autodiff();
+        device.seed(0);
+        let mut model = config.init(&device);
+        let params = {
+            use burn::module::Module;
+            model.num_params()
+        };
+        let mut optim = AdamConfig::new().init();
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
+        let mut step = |model: scbg_model::Multipath| {
+            let batch = Batch::from_samples(
+                &refs,
+                &BatchAugment {
+                    condition_dropout: 0.3,
+                    history_mask_prob: 0.15,
+                },
+                &mut rng,
+                &device,
+            );
+            let loss = gmm_nll(
+                &model.forward(&batch),
+                batch.future_xy.clone(),
+                batch.future_valid.clone(),
+            );
+            let grads = GradientsParams::from_grads(loss.backward(), &model);
+            optim.step(1e-4, model, grads)
+        };
+        model = step(model); // warm-up
+        let t = Instant::now();
+        for _ in 0..args.steps {
+            model = step(model);
+        }
+        let ms = t.elapsed().as_secs_f64() * 1e3 / args.steps as f64;
+        let infer = burn::tensor::Device::flex();
+        let valid = {
+            use burn::module::Module;
+            model.valid()
+        };
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(1);
+        let batch = Batch::from_samples(&refs, &BatchAugment::default(), &mut rng, &infer);
+        let _ = valid.forward(&batch).xy.into_data();
+        let t = Instant::now();
+        let reps = args.steps.max(3);
+        for _ in 0..reps {
+            let batch = Batch::from_samples(&refs, &BatchAugment::default(), &mut rng, &infer);
+            let _ = valid.forward(&batch).xy.into_data();
+        }
+        let per_s = (reps * args.batch) as f64 / t.elapsed().as_secs_f64();
+        println!(
+            "{preset:<10} {params:>10} params   train step {ms:>9.1} ms   inference {per_s:>8.1} samples/s"
+        );
+    }
+    Ok(())
+}

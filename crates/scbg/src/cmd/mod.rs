@@ -2,9 +2,11 @@
 
 mod bench;
 mod data;
+mod eval;
 mod synth;
+mod train;
 
-use crate::cli::{BenchCommand, Command, DataCommand};
+use crate::cli::{BenchCommand, Command, DataCommand, EvalCommand, TrainCommand};
 
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
@@ -14,5 +16,9 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Synth(a) => synth::synth(&a),
         Command::Bench(BenchCommand::Ingest(a)) => bench::ingest(&a),
         Command::Bench(BenchCommand::Synth(a)) => bench::synth(&a),
+        Command::Bench(BenchCommand::Train(a)) => bench::train(&a),
+        Command::Train(TrainCommand::Predictor(a)) => train::predictor(&a),
+        Command::Eval(EvalCommand::Predictor(a)) => eval::predictor(&a),
+        Command::Eval(EvalCommand::Metrics(a)) => eval::metrics(&a),
     }
 }

@@ -8,6 +8,7 @@ use serde_json::Value;
 
 mod corrupt;
 mod pipeline;
+mod predictor;
 mod real_data;
 
 pub fn scbg(args: &[&str]) -> Output {
