@@ -9,6 +9,7 @@
 //! **Architecture invariant:** no I/O, no tensors, no dataset formats; plain numbers in,
 //! plain numbers out.
 
+use std::collections::BTreeMap;
 use std::f32::consts::PI;
 
 use serde::Serialize;
@@ -215,6 +216,9 @@ pub fn average_precision(samples: &[(f32, bool)], num_objects: usize) -> f32 {
         .sum()
 }
 
+/// One bucket's (confidence, TP) samples for mAP and for soft mAP, and its object count.
+type BucketSamples = (Vec<(f32, bool)>, Vec<(f32, bool)>, usize);
+
 /// Metrics at one measurement time (or their average); `None` where no object contributed.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Metrics {
@@ -284,10 +288,7 @@ pub fn evaluate(
     let mut by_time = Vec::new();
     for &(secs, last, lat_thr, lon_thr) in &MEASUREMENTS {
         let (mut ade, mut min_ade, mut min_fde, mut miss) = (vec![], vec![], vec![], vec![]);
-        let mut ap_samples: std::collections::BTreeMap<
-            TrajectoryType,
-            (Vec<(f32, bool)>, Vec<(f32, bool)>, usize),
-        > = Default::default();
+        let mut ap_samples: BTreeMap<TrajectoryType, BucketSamples> = Default::default();
         for (pred, gt) in preds.iter().zip(gts) {
             let k_max = pred
                 .trajectories

@@ -82,12 +82,11 @@ pub fn load_samples(
                 }
                 for p in pairs {
                     for (a, b) in [(p.first, p.second), (p.second, p.first)] {
-                        if let Ok(s) = builder.sample(w, a, Some(b)) {
-                            if s.future_valid.iter().filter(|&&v| v).count()
+                        if let Ok(s) = builder.sample(w, a, Some(b))
+                            && s.future_valid.iter().filter(|&&v| v).count()
                                 >= config.min_future_valid_steps
-                            {
-                                out.push(s);
-                            }
+                        {
+                            out.push(s);
                         }
                     }
                 }

@@ -58,7 +58,8 @@ fn genuine_tf_example_file() {
 fn reencoded_womd_files() {
     let Some(dir) = real_dir() else { return };
     // scenario_id, steps, vehicles, pedestrians, cyclists, map features, objects_of_interest (+types)
-    let table: [(&str, u64, u64, u64, u64, u64, &[(i64, &str)]); 12] = [
+    type Row<'a> = (&'a str, u64, u64, u64, u64, u64, &'a [(i64, &'a str)]);
+    let table: [Row<'_>; 12] = [
         (
             "1c365f15b70ebdbf",
             91,
