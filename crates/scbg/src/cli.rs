@@ -17,6 +17,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Run the whole pipeline on synthetic data (default) or your WOMD files and write a report.
+    Demo(DemoArgs),
     /// Read, inspect, render and prepare WOMD data.
     #[command(subcommand)]
     Data(DataCommand),
@@ -31,6 +33,24 @@ pub enum Command {
     /// Measure throughput of the pipeline stages.
     #[command(subcommand)]
     Bench(BenchCommand),
+}
+
+#[derive(Debug, Args)]
+pub struct DemoArgs {
+    /// Output folder (data, cache, checkpoints, figures, report.md, report.json).
+    #[arg(long, default_value = "out/demo")]
+    pub out: PathBuf,
+    /// Your WOMD files (globs or paths) instead of generated data.
+    #[arg(long, num_args = 1..)]
+    pub data: Vec<String>,
+    /// Synthetic scenarios to generate when --data is not given.
+    #[arg(long, default_value_t = 1500)]
+    pub scenarios: usize,
+    /// Predictor training epochs.
+    #[arg(long, default_value_t = 12)]
+    pub epochs: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }
 
 #[derive(Debug, Subcommand)]

@@ -72,33 +72,93 @@ fn print_table(rows: &[(String, MetricTable)]) {
     }
 }
 
-pub fn predictor(args: &EvalPredictorArgs) -> anyhow::Result<()> {
-    let ckpt = Checkpoint::read(&args.model)?;
+/// The predictor evaluation: metric rows (model modes and baselines) and the NLL of the
+/// interacting agents' futures in each mode.
+#[derive(Debug)]
+pub struct PredictorEval {
+    pub rows: Vec<(String, MetricTable)>,
+    pub nll_interacting: Vec<(String, Option<f64>)>,
+}
+
+impl PredictorEval {
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut obj: serde_json::Map<String, serde_json::Value> = self
+            .rows
+            .iter()
+            .map(|(n, t)| (n.clone(), table_json(t)))
+            .collect();
+        obj.insert(
+            "nll_interacting".into(),
+            json!(
+                self.nll_interacting
+                    .iter()
+                    .cloned()
+                    .collect::<BTreeMap<String, Option<f64>>>()
+            ),
+        );
+        serde_json::Value::Object(obj)
+    }
+
+    /// Markdown table in the layout of the paper's Table I (8 s values).
+    pub fn to_markdown(&self) -> String {
+        let mut out = String::from(
+            "| mode (8 s) | ADE (m) | minADE (m) | minFDE (m) | MR (%) | mAP | objects |\n|---|---|---|---|---|---|---|\n",
+        );
+        for (name, t) in &self.rows {
+            let m = &t.by_time[2].1;
+            out += &format!(
+                "| {name} | {} | {} | {} | {} | {} | {} |\n",
+                fmt(m.ade, false),
+                fmt(m.min_ade, false),
+                fmt(m.min_fde, false),
+                fmt(m.miss_rate, true),
+                fmt(m.map, false),
+                t.num_objects
+            );
+        }
+        for (mode, v) in &self.nll_interacting {
+            out += &format!(
+                "\nNLL of the interacting agents' futures, {mode} mode: {}\n",
+                v.map_or("-".into(), |v| format!("{v:.2}"))
+            );
+        }
+        out
+    }
+}
+
+/// Evaluates a checkpoint on a prepared cache (see `scbg eval predictor --help`).
+pub fn evaluate_predictor(
+    model_dir: &std::path::Path,
+    data_dir: &std::path::Path,
+    mode: &str,
+    split: &str,
+    current_thresholds: bool,
+) -> anyhow::Result<PredictorEval> {
+    let ckpt = Checkpoint::read(model_dir)?;
     let device = scbg_model::device::device(&ckpt.train_config.backend)?;
-    let model = ckpt.load_model(&args.model, &device)?;
-    let dataset = PreparedDataset::open(&args.data)?;
+    let model = ckpt.load_model(model_dir, &device)?;
+    let dataset = PreparedDataset::open(data_dir)?;
     let mut config = ckpt.train_config.clone();
-    if args.split == "all" {
+    if split == "all" {
         config.validation_fraction = 0.0;
     }
     let (train, val) = scbg_train::data::load_samples(&dataset, &config)?;
-    let raw: Vec<AgentSample> = if args.split == "all" {
+    let raw: Vec<AgentSample> = if split == "all" {
         train.samples
     } else {
         val.samples
     };
     if raw.is_empty() {
         bail!(
-            "no samples to evaluate in {} ({} split)",
-            args.data.display(),
-            args.split
+            "no samples to evaluate in {} ({split} split)",
+            data_dir.display()
         );
     }
     let mut norm = raw.clone();
     for s in &mut norm {
         ckpt.stats.normalize(s);
     }
-    let thresholds = if args.current_thresholds {
+    let thresholds = if current_thresholds {
         ClassifierThresholds::CURRENT
     } else {
         ClassifierThresholds::PRE_2024
@@ -112,7 +172,7 @@ pub fn predictor(args: &EvalPredictorArgs) -> anyhow::Result<()> {
     let bs = ckpt.train_config.batch_size;
     let mut rows: Vec<(String, MetricTable)> = Vec::new();
     if !pr.is_empty() {
-        if args.mode != "conditional" {
+        if mode != "conditional" {
             rows.push((
                 "Marginal (interacting agents)".into(),
                 score(
@@ -122,7 +182,7 @@ pub fn predictor(args: &EvalPredictorArgs) -> anyhow::Result<()> {
                 ),
             ));
         }
-        if args.mode != "marginal" {
+        if mode != "marginal" {
             rows.push((
                 "Conditional (interacting agents)".into(),
                 score(
@@ -145,7 +205,7 @@ pub fn predictor(args: &EvalPredictorArgs) -> anyhow::Result<()> {
     }
     let all_raw: Vec<&AgentSample> = raw.iter().filter(|s| !s.has_condition()).collect();
     let all_norm: Vec<&AgentSample> = norm.iter().filter(|s| !s.has_condition()).collect();
-    if !all_raw.is_empty() && args.mode != "conditional" {
+    if !all_raw.is_empty() && mode != "conditional" {
         rows.push((
             "Marginal (all vehicle targets)".into(),
             score(
@@ -160,7 +220,7 @@ pub fn predictor(args: &EvalPredictorArgs) -> anyhow::Result<()> {
             score(&cv, &all_raw, &thresholds),
         ));
     }
-    let nll: Vec<(String, Option<f64>)> = if pn.is_empty() {
+    let nll_interacting = if pn.is_empty() {
         Vec::new()
     } else {
         vec![
@@ -174,23 +234,25 @@ pub fn predictor(args: &EvalPredictorArgs) -> anyhow::Result<()> {
             ),
         ]
     };
+    Ok(PredictorEval {
+        rows,
+        nll_interacting,
+    })
+}
+
+pub fn predictor(args: &EvalPredictorArgs) -> anyhow::Result<()> {
+    let eval = evaluate_predictor(
+        &args.model,
+        &args.data,
+        &args.mode,
+        &args.split,
+        args.current_thresholds,
+    )?;
     if args.json {
-        let mut obj: serde_json::Map<String, serde_json::Value> = rows
-            .iter()
-            .map(|(n, t)| (n.clone(), table_json(t)))
-            .collect();
-        obj.insert(
-            "nll_interacting".into(),
-            json!(
-                nll.iter()
-                    .cloned()
-                    .collect::<BTreeMap<String, Option<f64>>>()
-            ),
-        );
-        println!("{}", serde_json::Value::Object(obj));
+        println!("{}", eval.to_json());
     } else {
-        print_table(&rows);
-        for (mode, v) in &nll {
+        print_table(&eval.rows);
+        for (mode, v) in &eval.nll_interacting {
             println!(
                 "NLL of the interacting agents' futures, {mode} mode: {}",
                 v.map_or("-".into(), |v| format!("{v:.2}"))

@@ -2,6 +2,7 @@
 
 mod bench;
 mod data;
+mod demo;
 mod eval;
 mod synth;
 mod train;
@@ -10,6 +11,7 @@ use crate::cli::{BenchCommand, Command, DataCommand, EvalCommand, TrainCommand};
 
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
+        Command::Demo(a) => demo::demo(&a),
         Command::Data(DataCommand::Inspect(a)) => data::inspect(&a),
         Command::Data(DataCommand::Render(a)) => data::render(&a),
         Command::Data(DataCommand::Prepare(a)) => data::prepare(&a).map(|_| ()),

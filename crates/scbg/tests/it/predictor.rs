@@ -171,3 +171,28 @@ fn metrics_of_external_predictions_on_a_genuine_scenario() {
     assert_eq!(out.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&out.stderr).contains("object -5"));
 }
+
+#[test]
+fn demo_writes_a_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    scbg_ok(&[
+        "demo",
+        "--out",
+        out.to_str().unwrap(),
+        "--scenarios",
+        "40",
+        "--epochs",
+        "1",
+    ]);
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["data"]["scenarios"], 40);
+    assert!(
+        report["predictor"]["Marginal (interacting agents)"]["min_ade"].is_number(),
+        "{report}"
+    );
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("| Conditional (interacting agents) |"), "{md}");
+    assert!(out.join("figures/scene.png").is_file());
+}
