@@ -1,0 +1,53 @@
+//! Rewards r(y_A) of a trajectory in A's frame at the current step (A at the origin, heading +x).
+
+use burn::tensor::Tensor;
+
+/// The reward registry.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reward {
+    /// Average speed over the horizon, m/s: mean of |y_t − y_{t−1}| / Δt with y_0 = origin
+    /// (the paper's default).
+    AverageSpeed,
+    /// Average progress along A's initial heading, m/s: x_T / (T·Δt).
+    Progress,
+}
+
+impl Reward {
+    pub const ALL: [Reward; 2] = [Reward::AverageSpeed, Reward::Progress];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::AverageSpeed => "average_speed",
+            Self::Progress => "progress",
+        }
+    }
+
+    pub fn parse(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|r| r.name() == name)
+    }
+
+    /// # Shapes
+    /// `xy: [n, T, 2]` `-> [n]`
+    pub fn evaluate(self, xy: Tensor<3>, step_secs: f32) -> Tensor<1> {
+        let [n, t, _] = xy.dims();
+        match self {
+            Self::AverageSpeed => {
+                let device = xy.device();
+                let prev = Tensor::cat(
+                    vec![
+                        Tensor::zeros([n, 1, 2], &device),
+                        xy.clone().narrow(1, 0, t - 1),
+                    ],
+                    1,
+                );
+                let d = xy - prev;
+                // sqrt(|d|² + ε): differentiable at standstill.
+                let speed = (d.powf_scalar(2.0).sum_dim(2) + 1e-6).sqrt() / step_secs;
+                speed.mean_dim(1).reshape([n])
+            }
+            Self::Progress => {
+                xy.narrow(1, t - 1, 1).narrow(2, 0, 1).reshape([n]) / (t as f32 * step_secs)
+            }
+        }
+    }
+}
