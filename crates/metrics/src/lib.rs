@@ -14,6 +14,9 @@ use std::f32::consts::PI;
 
 use serde::Serialize;
 
+mod stats;
+pub use stats::{pearson, ranks, spearman};
+
 /// Future steps at 10 Hz (8 s).
 pub const FUTURE_STEPS: usize = 80;
 /// Measurement times in seconds, their last future step index (0-based) and the

@@ -298,6 +298,104 @@ pub fn render_scene(scene: &Scene, path: &Path, options: &RenderOptions) -> Resu
     })
 }
 
+/// A histogram of `values` with `bins` equal-width bins (paper Fig. 3 style).
+pub fn histogram(values: &[f64], bins: usize, x_label: &str, path: &Path) -> Result<(), PlotError> {
+    let finite: Vec<f64> = values.iter().copied().filter(|v| v.is_finite()).collect();
+    let (lo, hi) = finite
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    let (lo, hi) = if finite.is_empty() {
+        (-1.0, 1.0)
+    } else if hi - lo < 1e-9 {
+        (lo - 0.5, hi + 0.5)
+    } else {
+        (lo, hi)
+    };
+    let bins = bins.max(1);
+    let width = (hi - lo) / bins as f64;
+    let mut counts = vec![0usize; bins];
+    for v in &finite {
+        counts[(((v - lo) / width) as usize).min(bins - 1)] += 1;
+    }
+    let top = counts.iter().copied().max().unwrap_or(1).max(1);
+    draw_png(path, (800, 500), |root| {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(format!("{} values", finite.len()), ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(50)
+            .build_cartesian_2d(lo..hi, 0usize..top + top / 10 + 1)?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc("count")
+            .label_style(("sans-serif", 12))
+            .draw()?;
+        chart.draw_series(counts.iter().enumerate().map(|(i, &c)| {
+            let x0 = lo + i as f64 * width;
+            Rectangle::new([(x0, 0), (x0 + width, c)], RGBColor(40, 90, 200).filled())
+        }))?;
+        root.present()?;
+        Ok(())
+    })
+}
+
+/// A scatter of (x, y) points with a fitted line label, e.g. quantile → courtesy (paper Fig. 4).
+pub fn scatter(
+    points: &[(f64, f64)],
+    x_label: &str,
+    y_label: &str,
+    title: &str,
+    path: &Path,
+) -> Result<(), PlotError> {
+    let fin: Vec<(f64, f64)> = points
+        .iter()
+        .copied()
+        .filter(|(x, y)| x.is_finite() && y.is_finite())
+        .collect();
+    let (x0, x1, y0, y1) = fin.iter().fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
+    );
+    let pad = |a: f64, b: f64| {
+        if fin.is_empty() || b - a < 1e-9 {
+            (a.min(0.0) - 1.0, b.max(0.0) + 1.0)
+        } else {
+            (a - 0.05 * (b - a), b + 0.05 * (b - a))
+        }
+    };
+    let ((x0, x1), (y0, y1)) = (pad(x0, x1), pad(y0, y1));
+    draw_png(path, (800, 600), |root| {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(60)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .label_style(("sans-serif", 12))
+            .draw()?;
+        chart.draw_series(
+            fin.iter()
+                .map(|&(x, y)| Circle::new((x, y), 2, RGBColor(40, 90, 200).mix(0.5).filled())),
+        )?;
+        root.present()?;
+        Ok(())
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -360,5 +458,25 @@ mod tests {
         assert_eq!((img.width(), img.height()), (300, 300));
         // Something besides the white background was drawn.
         assert!(img.to_rgb8().pixels().any(|p| p.0 == [220, 20, 30]));
+    }
+
+    #[test]
+    fn histogram_and_scatter_png() {
+        let dir = tempfile::tempdir().unwrap();
+        let values: Vec<f64> = (0..200)
+            .map(|i| ((i * 37) % 100) as f64 / 10.0 - 5.0)
+            .collect();
+        histogram(&values, 20, "ψ (m/s)", &dir.path().join("h.png")).unwrap();
+        let img = image::open(dir.path().join("h.png")).unwrap().to_rgb8();
+        assert!(img.pixels().any(|p| p.0 == [40, 90, 200]));
+        histogram(&[], 10, "empty", &dir.path().join("e.png")).unwrap();
+        scatter(
+            &[(0.1, 1.0), (0.9, 2.0)],
+            "q",
+            "ψ",
+            "t",
+            &dir.path().join("s.png"),
+        )
+        .unwrap();
     }
 }

@@ -24,6 +24,8 @@ pub enum Command {
     Data(DataCommand),
     /// Generate synthetic interactive two-vehicle scenarios as WOMD Scenario TFRecords.
     Synth(SynthArgs),
+    /// Auto-label the courtesy ψ of interacting pairs with a trained predictor (Parquet).
+    Label(LabelArgs),
     /// Train models.
     #[command(subcommand)]
     Train(TrainCommand),
@@ -51,6 +53,30 @@ pub struct DemoArgs {
     pub epochs: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+}
+
+#[derive(Debug, Args)]
+pub struct LabelArgs {
+    /// Predictor checkpoint folder.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Prepared cache folder.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder: labels-NNNNN.parquet per cache shard, psi_histogram.png, summary.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Trajectories sampled from B's marginal prediction per pair and role (augmentation).
+    #[arg(long, default_value_t = 8)]
+    pub samples: usize,
+    /// Reward r(y_A): average_speed or progress.
+    #[arg(long, default_value = "average_speed")]
+    pub reward: String,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Synthetic ground truth (ground_truth.jsonl) for the Spearman check against the latent courtesy.
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
 }
 
 #[derive(Debug, Subcommand)]

@@ -34,7 +34,7 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let out = &args.out;
     std::fs::create_dir_all(out.join("figures"))
         .with_context(|| format!("creating {}", out.display()))?;
-    let total = 5;
+    let total = 6;
     let inputs: Vec<String> = if args.data.is_empty() {
         stage(
             1,
@@ -104,7 +104,31 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let eval =
         super::eval::evaluate_predictor(&predictor_dir, &cache, "both", "validation", false)?;
 
-    stage(5, total, "writing figures and the report");
+    stage(
+        5,
+        total,
+        "auto-labelling the courtesy ψ of every interacting pair (logged + 8 sampled futures of B)",
+    );
+    let labels_dir = out.join("labels");
+    let ground_truth = inputs
+        .iter()
+        .map(|i| Path::new(i).join(super::synth::GROUND_TRUTH_FILE))
+        .find(|p| p.is_file());
+    let labels = super::label::label(&crate::cli::LabelArgs {
+        model: predictor_dir.clone(),
+        data: cache.clone(),
+        out: labels_dir.clone(),
+        samples: 8,
+        reward: "average_speed".into(),
+        seed: args.seed,
+        ground_truth,
+    })?;
+    std::fs::copy(
+        labels_dir.join("psi_histogram.png"),
+        out.join("figures/psi_histogram.png"),
+    )?;
+
+    stage(6, total, "writing figures and the report");
     let first_file = crate::inputs::expand(&inputs)?
         .into_iter()
         .next()
@@ -126,9 +150,22 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     )?;
 
     let predictor_json = eval.to_json();
+    let spearman: serde_json::Map<String, serde_json::Value> = labels
+        .spearman_latent
+        .iter()
+        .map(|(f, (rho, _))| (f.clone(), json!(rho)))
+        .collect();
+    let logged: Vec<f64> = labels
+        .rows
+        .iter()
+        .filter(|r| r.sample == 0)
+        .map(|r| f64::from(r.psi))
+        .collect();
     let report_json = json!({
         "data": {"inputs": inputs, "scenarios": manifest.total.scenarios, "windows": manifest.total.windows, "pairs": manifest.total.pairs, "skipped": manifest.total.skipped},
         "predictor": predictor_json,
+        "labels": {"futures": labels.rows.len(), "logged": logged.len()},
+        "spearman_latent": spearman,
         "seconds": started.elapsed().as_secs_f64(),
     });
     write_atomic(
@@ -138,12 +175,31 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let md = format!(
         "# scbg demo report\n\nData: {} scenarios, {} windows, {} interacting pairs (skipped: {:?}).\n\n\
          ## Predictor (paper Table I layout, held-out scenarios)\n\n{}\n\
+         ## Courtesy labels (paper Fig. 3)\n\n{} labelled futures ({} logged).\n\n![psi](figures/psi_histogram.png)\n\n\
+         Ground-truth check — Spearman(ψ of the logged future, latent courtesy of the generator):\n\n{}\n\
          ![scene](figures/scene.png)\n\nRun time: {:.0} s.\n",
         manifest.total.scenarios,
         manifest.total.windows,
         manifest.total.pairs,
         manifest.total.skipped,
         eval.to_markdown(),
+        labels.rows.len(),
+        logged.len(),
+        if labels.spearman_latent.is_empty() {
+            "(no synthetic ground truth for this data)".to_string()
+        } else {
+            labels
+                .spearman_latent
+                .iter()
+                .map(|(f, (rho, n))| {
+                    format!(
+                        "- {f}: {} (n = {n})",
+                        rho.map_or("-".into(), |r| format!("{r:.3}"))
+                    )
+                })
+                .collect::<Vec<_>>()
+                .join("\n")
+        },
         started.elapsed().as_secs_f64()
     );
     write_atomic(&out.join("report.md"), &md)?;
@@ -163,6 +219,12 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             m.min_ade.map_or("-".into(), |v| format!("{v:.2}")),
             m.miss_rate
                 .map_or("-".into(), |v| format!("{:.1}%", 100.0 * v))
+        );
+    }
+    for (f, (rho, n)) in &labels.spearman_latent {
+        eprintln!(
+            "Spearman(ψ, latent courtesy) {f:<9} {} (n = {n})",
+            rho.map_or("-".into(), |r| format!("{r:.3}"))
         );
     }
     eprintln!("report: {}", out.join("report.md").display());

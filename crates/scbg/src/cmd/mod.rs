@@ -4,6 +4,7 @@ mod bench;
 mod data;
 mod demo;
 mod eval;
+mod label;
 mod synth;
 mod train;
 
@@ -12,6 +13,7 @@ use crate::cli::{BenchCommand, Command, DataCommand, EvalCommand, TrainCommand};
 pub fn run(command: Command) -> anyhow::Result<()> {
     match command {
         Command::Demo(a) => demo::demo(&a),
+        Command::Label(a) => label::label(&a).map(|_| ()),
         Command::Data(DataCommand::Inspect(a)) => data::inspect(&a),
         Command::Data(DataCommand::Render(a)) => data::render(&a),
         Command::Data(DataCommand::Prepare(a)) => data::prepare(&a).map(|_| ()),

@@ -196,3 +196,79 @@ fn demo_writes_a_report() {
     assert!(md.contains("| Conditional (interacting agents) |"), "{md}");
     assert!(out.join("figures/scene.png").is_file());
 }
+
+#[test]
+fn label_writes_parquet_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).display().to_string();
+    scbg_ok(&[
+        "synth",
+        "--scenarios",
+        "20",
+        "--seed",
+        "8",
+        "--out",
+        &p("synth"),
+    ]);
+    scbg_ok(&[
+        "data",
+        "prepare",
+        "--input",
+        &p("synth"),
+        "--out",
+        &p("cache"),
+    ]);
+    std::fs::write(p("train.toml"), TINY_CONFIG).unwrap();
+    scbg_ok(&[
+        "train",
+        "predictor",
+        "--config",
+        &p("train.toml"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("model"),
+    ]);
+    let gt = format!("{}/ground_truth.jsonl", p("synth"));
+    scbg_ok(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels"),
+        "--samples",
+        "3",
+        "--ground-truth",
+        &gt,
+    ]);
+    let summary: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("labels/summary.json")).unwrap(),
+    )
+    .unwrap();
+    // 20 scenarios × 1 labelled pair × 2 roles × (1 logged + 3 sampled).
+    assert_eq!(summary["rows"], 20 * 2 * 4);
+    assert_eq!(summary["pairs_roles"], 40);
+    assert!(dir.path().join("labels/psi_histogram.png").is_file());
+    let parquet = dir.path().join("labels/labels-00000.parquet");
+    let bytes = std::fs::read(&parquet).unwrap();
+    assert_eq!(&bytes[..4], b"PAR1");
+    // A second run reads the finished shard instead of relabelling it.
+    let before = std::fs::metadata(&parquet).unwrap().modified().unwrap();
+    scbg_ok(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels"),
+        "--samples",
+        "3",
+    ]);
+    assert_eq!(
+        std::fs::metadata(&parquet).unwrap().modified().unwrap(),
+        before
+    );
+}
