@@ -13,6 +13,7 @@
 //! **Architecture invariant:** tensors, samples and the model only; no files, no CLI.
 
 pub mod label;
+pub mod losses;
 mod reward;
 
 pub use reward::Reward;

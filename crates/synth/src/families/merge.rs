@@ -1,0 +1,299 @@
+//! On-ramp merge into A's highway lane.
+
+use rand::Rng;
+use rand_pcg::Pcg64Mcg;
+use scbg_scene::{Lane, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
+
+use super::{A_ID, B_ID, NUM_STEPS, Run, arc_path, idm, noise_track, pts, vehicle_size};
+use crate::sim::{Agent, Idm, STEP_SECS, closer};
+
+/// Length over which the on-ramp's approach angle eases into the parallel lane.
+const RAMP_BLEND_M: f64 = 90.0;
+
+// ------------------------------------------------------------------------------------ merge
+
+#[derive(Debug, Clone)]
+pub struct MergeParams {
+    curvature: f64,
+    lane_width_m: f64,
+    /// Main-path arclength where the taper ends (B fully in A's lane).
+    merge_end_s: f64,
+    taper_m: f64,
+    accel_lane_m: f64,
+    ramp_angle_rad: f64,
+    a_size: (f64, f64),
+    b_size: (f64, f64),
+    a_idm: Idm,
+    b_idm: Idm,
+    a_s0: f64,
+    a_v0: f64,
+    b_s0: f64,
+    b_v0: f64,
+    reaction_steps: usize,
+    background: Vec<(f64, f64, (f64, f64), Idm)>,
+    noise: Vec<Vec<f64>>,
+}
+
+pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
+    let lane_width_m = rng.random_range(3.4..3.9);
+    let merge_end_s = rng.random_range(260.0..300.0);
+    let a_v_des = rng.random_range(23.5..25.5);
+    let a_v0 = a_v_des * rng.random_range(0.95..1.0);
+    let a_s0 = rng.random_range(20.0..40.0);
+    let b_v_des = rng.random_range(20.0..26.0);
+    let b_v0 = b_v_des * rng.random_range(0.85..1.0);
+    let taper_m = rng.random_range(100.0..140.0);
+    // B's lead time at the merge (positive: B arrives first), spread around zero.
+    let lead_s: f64 = rng.random_range(-1.5..2.5);
+    let merge_mid = merge_end_s - taper_m * 0.5;
+    let tau_a = (merge_mid - a_s0) / a_v0;
+    let b_s0 = (merge_mid - (tau_a - lead_s) * b_v0).max(5.0);
+    let mut background = Vec::new();
+    if rng.random_bool(0.6) {
+        let size = vehicle_size(rng);
+        let v = rng.random_range(25.0..28.0);
+        background.push((a_s0 + rng.random_range(60.0..110.0), v, size, idm(rng, v)));
+    }
+    if rng.random_bool(0.5) {
+        let size = vehicle_size(rng);
+        let v = rng.random_range(21.0..26.0);
+        background.push((
+            (a_s0 - rng.random_range(25.0..45.0)).max(-30.0),
+            v * 0.95,
+            size,
+            idm(rng, v),
+        ));
+    }
+    let n_agents = 2 + background.len();
+    MergeParams {
+        curvature: rng.random_range(-1.0 / 900.0..1.0 / 900.0),
+        lane_width_m,
+        merge_end_s,
+        taper_m,
+        accel_lane_m: rng.random_range(20.0..60.0),
+        ramp_angle_rad: rng.random_range(5f64..15.0).to_radians(),
+        a_size: vehicle_size(rng),
+        b_size: vehicle_size(rng),
+        a_idm: idm(rng, a_v_des),
+        b_idm: idm(rng, b_v_des),
+        a_s0,
+        a_v0,
+        b_s0,
+        b_v0,
+        reaction_steps: rng.random_range(3..8),
+        background,
+        noise: (0..n_agents).map(|_| noise_track(rng, NUM_STEPS)).collect(),
+    }
+}
+
+impl MergeParams {
+    /// B's lateral offset along the ramp: approach at an angle, parallel acceleration lane,
+    /// cosine taper into A's lane ending at `merge_end_s`.
+    fn ramp_d(&self, s: f64) -> f64 {
+        let w = self.lane_width_m;
+        let taper_start = self.merge_end_s - self.taper_m;
+        let parallel_start = taper_start - self.accel_lane_m;
+        if s >= self.merge_end_s {
+            0.0
+        } else if s >= taper_start {
+            let u = (s - taper_start) / self.taper_m;
+            -w * 0.5 * (1.0 + (std::f64::consts::PI * u).cos())
+        } else if s >= parallel_start {
+            -w
+        } else {
+            // Smooth entry into the parallel lane: the slope eases from tan(angle) to 0 over
+            // RAMP_BLEND_M, so lateral acceleration stays small at highway speed.
+            let x = parallel_start - s;
+            let eased = if x < RAMP_BLEND_M {
+                x * x / (2.0 * RAMP_BLEND_M)
+            } else {
+                x - RAMP_BLEND_M / 2.0
+            };
+            -w - eased * self.ramp_angle_rad.tan()
+        }
+    }
+}
+
+pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
+    let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);
+    let mut agents = vec![Agent::new(
+        A_ID,
+        ObjectType::Vehicle,
+        0,
+        p.a_size,
+        p.a_idm,
+        p.a_s0,
+        0.0,
+        p.a_v0,
+    )];
+    let mut b_idm = p.b_idm;
+    if with_b {
+        agents.push(Agent::new(
+            B_ID,
+            ObjectType::Vehicle,
+            0,
+            p.b_size,
+            b_idm,
+            p.b_s0,
+            p.ramp_d(p.b_s0),
+            p.b_v0,
+        ));
+    }
+    let bg0 = agents.len();
+    for (k, &(s, v, size, m)) in p.background.iter().enumerate() {
+        agents.push(Agent::new(
+            300 + k as i64,
+            ObjectType::Vehicle,
+            0,
+            size,
+            m,
+            s,
+            0.0,
+            v,
+        ));
+    }
+    let w = p.lane_width_m;
+    let taper_start = p.merge_end_s - p.taper_m;
+    let mut decision: Option<bool> = None; // Some(true) = B goes first
+    for t in 0..NUM_STEPS - 1 {
+        let mut cmds = vec![0.0; agents.len()];
+        // B's decision, latched at the commit point.
+        if with_b && decision.is_none() && agents[1].s >= taper_start - 40.0 {
+            let (a, b) = (&agents[0], &agents[1]);
+            let mid = p.merge_end_s - p.taper_m * 0.5;
+            let lead = (mid - a.s) / a.v.max(1.0) - (mid - b.s) / b.v.max(1.0);
+            let go = lead > -0.5 + 3.5 * c;
+            decision = Some(go);
+            if go {
+                b_idm.desired_speed_mps *= 1.0 + 0.15 * c;
+                agents[1].idm = b_idm;
+            } else {
+                agents[1].idm.time_headway_s *= 1.0 + c;
+            }
+        }
+        // Even a B that goes first does not enter the taper with A alongside: it waits.
+        if with_b && decision == Some(true) && agents[1].s < taper_start {
+            let (a, b) = (&agents[0], &agents[1]);
+            if (b.s - a.s).abs() < 0.5 * (a.length_m + b.length_m) + 3.0 && a.s < b.s + 8.0 {
+                decision = Some(false);
+            }
+        }
+        for i in 0..agents.len() {
+            let me = &agents[i];
+            let in_lane = |j: usize| agents[j].d.abs() < 0.75 * w;
+            // Leaders on the main lane: any agent ahead that is (nearly) in the lane.
+            let mut leader = None;
+            for (j, other) in agents.iter().enumerate() {
+                if j == i {
+                    continue;
+                }
+                let (s_j, d_j, v_j) = if i == 0 && with_b && j == 1 {
+                    other.delayed(p.reaction_steps)
+                } else {
+                    (other.s, other.d, other.v)
+                };
+                let relevant = if with_b && j == 1 && i != 1 {
+                    // B matters to main-lane traffic once it is merging (or committed to go).
+                    d_j.abs() < 0.75 * w || (decision == Some(true) && s_j > taper_start - 10.0)
+                } else if with_b && i == 1 {
+                    // B on the ramp: main-lane agents matter once B is in the taper.
+                    in_lane(j) && (me.s > taper_start || me.d.abs() < 0.75 * w)
+                } else {
+                    in_lane(j) && in_lane(i)
+                };
+                if relevant && s_j > me.s {
+                    leader = closer(leader, Some((me.gap_to(s_j, other.length_m), v_j)));
+                }
+            }
+            if with_b && i == 1 && me.s < taper_start {
+                // A yielding B waits in the acceleration lane, before the taper, until A has passed.
+                let a_passed = agents[0].s - agents[0].length_m > me.s + 2.0;
+                if decision == Some(false) && !a_passed {
+                    leader = closer(leader, Some((taper_start - me.s - me.length_m * 0.5, 0.0)));
+                }
+            }
+            cmds[i] = me.idm.accel(me.v, leader) + p.noise[i][t];
+        }
+        for (i, a) in agents.iter_mut().enumerate() {
+            let d_next = if with_b && i == 1 {
+                p.ramp_d(a.s + a.v * STEP_SECS)
+            } else {
+                0.0
+            };
+            a.step(cmds[i], d_next);
+        }
+        let _ = bg0;
+    }
+    // Map: main lane before/after the merge, ramp lane, road lines and edges.
+    let ramp_start = (p.b_s0 - 30.0)
+        .min(taper_start - p.accel_lane_m - 20.0)
+        .max(-50.0);
+    let main_lane = |s0: f64, s1: f64| pts(path.offset_points(s0, s1, 1.0, |_| 0.0));
+    let end = 650.0;
+    let speed = Some(65.0);
+    let lane = |id, polyline, entry: Vec<i64>, exit: Vec<i64>| Lane {
+        id,
+        lane_type: LaneType::Freeway,
+        speed_limit_mph: speed,
+        polyline,
+        entry_lanes: entry,
+        exit_lanes: exit,
+        ..Default::default()
+    };
+    let map = Map {
+        lanes: vec![
+            lane(1, main_lane(-50.0, p.merge_end_s), vec![], vec![2]),
+            lane(2, main_lane(p.merge_end_s, end), vec![1, 3], vec![]),
+            lane(
+                3,
+                pts(path.offset_points(ramp_start, p.merge_end_s, 1.0, |s| p.ramp_d(s))),
+                vec![],
+                vec![2],
+            ),
+        ],
+        road_lines: vec![RoadLine {
+            id: 10,
+            line_type: RoadLineType::BrokenSingleWhite,
+            polyline: pts(path.offset_points(
+                taper_start - p.accel_lane_m,
+                taper_start,
+                1.0,
+                |_| -w / 2.0,
+            )),
+        }],
+        road_edges: vec![
+            RoadEdge {
+                id: 20,
+                edge_type: RoadEdgeType::Boundary,
+                polyline: pts(path.offset_points(-50.0, end, 2.0, |_| w / 2.0 + 0.5)),
+            },
+            RoadEdge {
+                id: 21,
+                edge_type: RoadEdgeType::Boundary,
+                polyline: pts(path.offset_points(ramp_start, end, 2.0, |s| {
+                    if s < p.merge_end_s {
+                        p.ramp_d(s) - w / 2.0 - 0.5
+                    } else {
+                        -w / 2.0 - 0.5
+                    }
+                })),
+            },
+            RoadEdge {
+                id: 22,
+                edge_type: RoadEdgeType::Boundary,
+                polyline: pts(path.offset_points(
+                    ramp_start,
+                    taper_start - p.accel_lane_m,
+                    2.0,
+                    |s| p.ramp_d(s) + w / 2.0 + 0.2,
+                )),
+            },
+        ],
+        ..Default::default()
+    };
+    Run {
+        paths: vec![path],
+        agents,
+        map,
+    }
+}

@@ -1,0 +1,91 @@
+//! The scene families. Each draws its parameters once (`*Params`), then `simulate` runs them
+//! with or without vehicle B, so the "A alone" counterfactual shares every random draw.
+//!
+//! Courtesy `c ∈ [0, 1]` of B acts through a different manoeuvre per family:
+//! - **merge**: B on an on-ramp goes ahead of A only when its lead time exceeds an accepted gap
+//!   `−0.5 + 3.5c` s; a courteous B that goes first speeds up (`+15 % c` desired speed), one
+//!   that yields waits at the end of the acceleration lane until A has passed;
+//! - **crossing**: B at a stop-controlled approach crosses before A only when A's time to the
+//!   conflict point exceeds B's clearing time by `−2.5 + 5c` s, otherwise waits at the stop line;
+//! - **cutin**: either B, blocked by a slow vehicle in the next lane, changes into A's lane
+//!   with MOBIL politeness `2c`, accepting that A must brake at up to `7 − 6c` m/s²
+//!   (a courteous B drops back to let A pass first), or B, slower
+//!   and ahead of A in A's lane, moves out of A's way to the right once A approaches within
+//!   `200c` m.
+
+use rand::Rng;
+use rand_pcg::Pcg64Mcg;
+use scbg_scene::{Map, MapPoint};
+
+use crate::path::RefPath;
+use crate::sim::{Agent, Idm};
+
+pub const NUM_STEPS: usize = 91;
+pub const A_ID: i64 = 101;
+pub const B_ID: i64 = 202;
+
+/// The output of one simulation run.
+#[derive(Debug)]
+pub struct Run {
+    pub paths: Vec<RefPath>,
+    pub agents: Vec<Agent>,
+    pub map: Map,
+}
+
+pub(super) fn mp((x, y): (f64, f64)) -> MapPoint {
+    MapPoint {
+        x_m: x,
+        y_m: y,
+        z_m: 0.0,
+    }
+}
+
+pub(super) fn pts(v: Vec<(f64, f64)>) -> Vec<MapPoint> {
+    v.into_iter().map(mp).collect()
+}
+
+/// A circular arc of curvature `k` (straight when 0) starting at `(x0, y0)` heading `h0`.
+pub(super) fn arc_path(x0: f64, y0: f64, h0: f64, k: f64, length_m: f64) -> RefPath {
+    RefPath::from_fn(length_m, 1.0, move |s| {
+        let (dx, dy) = if k.abs() < 1e-9 {
+            (s, 0.0)
+        } else {
+            ((k * s).sin() / k, (1.0 - (k * s).cos()) / k)
+        };
+        let (sn, cs) = h0.sin_cos();
+        (x0 + cs * dx - sn * dy, y0 + sn * dx + cs * dy)
+    })
+}
+
+pub(super) fn vehicle_size(rng: &mut Pcg64Mcg) -> (f64, f64) {
+    (rng.random_range(4.2..5.2), rng.random_range(1.8..2.1))
+}
+
+pub(super) fn idm(rng: &mut Pcg64Mcg, desired_speed_mps: f64) -> Idm {
+    Idm {
+        desired_speed_mps,
+        max_accel_mps2: rng.random_range(1.2..2.0),
+        comfort_brake_mps2: rng.random_range(1.8..2.6),
+        time_headway_s: rng.random_range(1.0..1.6),
+        min_gap_m: rng.random_range(1.5..2.5),
+    }
+}
+
+/// Small, smooth acceleration noise (an AR(1) process) for every agent and step.
+pub(super) fn noise_track(rng: &mut Pcg64Mcg, n: usize) -> Vec<f64> {
+    let mut e = 0.0;
+    (0..n)
+        .map(|_| {
+            e = 0.9 * e + 0.08 * (rng.random::<f64>() - 0.5);
+            e
+        })
+        .collect()
+}
+
+mod crossing;
+mod cutin;
+mod merge;
+
+pub use crossing::{CrossingParams, crossing_params, simulate_crossing};
+pub use cutin::{CutinParams, cutin_params, simulate_cutin};
+pub use merge::{MergeParams, merge_params, simulate_merge};
