@@ -1,27 +1,14 @@
 //! Auto-labelling (paper Sec. III-C): ψ of the logged future of B and of M futures sampled from
 //! B's marginal prediction (the data augmentation of Sec. III-D).
 
-use burn::tensor::activation::softmax;
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use scbg_features::AgentSample;
-use scbg_model::loss::{COV_A_RANGE, COV_B_RANGE, COV_C_RANGE};
-use scbg_model::{Batch, BatchAugment, Multipath};
+use scbg_model::{Batch, BatchAugment, Mixture, Multipath};
 use scbg_scene::Pose2;
 
 use crate::{Reward, expected_reward};
-
-/// One agent's predicted mixture as plain arrays.
-#[derive(Debug, Clone)]
-pub struct Mixture {
-    /// `[K][T]` mean positions.
-    pub xy: Vec<Vec<[f32; 2]>>,
-    /// `[K][T]` covariance parameters (a, b, c), clamped as in the loss.
-    pub abc: Vec<Vec<[f32; 3]>>,
-    /// `[K]`
-    pub probs: Vec<f32>,
-}
 
 /// The marginal mixture of each (standardised) sample.
 pub fn marginal_mixtures(
@@ -39,50 +26,19 @@ pub fn marginal_mixtures(
         &mut rng,
         device,
     );
-    let out = model.forward(&batch);
-    let [b, k, t, _] = out.xy.dims();
-    let xy: Vec<f32> = out.xy.into_data().try_to_vec::<f32>().expect("f32");
-    let abc: Vec<f32> = out.cov_abc.into_data().try_to_vec::<f32>().expect("f32");
-    let probs: Vec<f32> = softmax(out.logits, 1)
-        .into_data()
-        .try_to_vec::<f32>()
-        .expect("f32");
-    (0..b)
-        .map(|i| Mixture {
-            xy: (0..k)
-                .map(|m| {
-                    (0..t)
-                        .map(|s| {
-                            let o = ((i * k + m) * t + s) * 2;
-                            [xy[o], xy[o + 1]]
-                        })
-                        .collect()
-                })
-                .collect(),
-            abc: (0..k)
-                .map(|m| {
-                    (0..t)
-                        .map(|s| {
-                            let o = ((i * k + m) * t + s) * 3;
-                            [
-                                abc[o].clamp(COV_A_RANGE.0, COV_A_RANGE.1),
-                                abc[o + 1].clamp(COV_B_RANGE.0, COV_B_RANGE.1),
-                                abc[o + 2].clamp(COV_C_RANGE.0, COV_C_RANGE.1),
-                            ]
-                        })
-                        .collect()
-                })
-                .collect(),
-            probs: probs[i * k..(i + 1) * k].to_vec(),
-        })
-        .collect()
+    model.forward(&batch).into_mixtures()
 }
 
-impl Mixture {
+/// Drawing futures from a predicted mixture.
+pub trait SampleMixture {
     /// Draws `m` trajectories: a mode from π, then one standard-normal 2-vector z shared by
     /// every step, `y_t = μ_t + L_t z` with `L_t` the Cholesky factor of Σ_t. Sharing z keeps
     /// samples smooth (independent per-step noise would make them jitter).
-    pub fn sample(&self, m: usize, rng: &mut impl Rng) -> Vec<Vec<[f32; 2]>> {
+    fn sample(&self, m: usize, rng: &mut impl Rng) -> Vec<Vec<[f32; 2]>>;
+}
+
+impl SampleMixture for Mixture {
+    fn sample(&self, m: usize, rng: &mut impl Rng) -> Vec<Vec<[f32; 2]>> {
         (0..m)
             .map(|_| {
                 let u: f32 = rng.random();

@@ -10,7 +10,8 @@ use super::*;
 
 /// burn's seeded RNG is process-global: tests that seed it must not interleave.
 static SEED_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
-use crate::label::{Mixture, change_frame};
+use crate::label::{SampleMixture, change_frame};
+use scbg_model::Mixture;
 
 #[test]
 fn rewards_by_hand() {

@@ -19,7 +19,7 @@ pub mod model;
 pub use batch::{Batch, BatchAugment};
 pub use config::MultipathConfig;
 pub use loss::gmm_nll;
-pub use model::{GmmOutput, Multipath};
+pub use model::{GmmOutput, Mixture, Multipath};
 
 /// Tests that seed burn's process-global RNG hold this lock, so concurrent tests do not draw
 /// from the stream between `seed` and `init`.

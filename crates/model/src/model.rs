@@ -128,6 +128,64 @@ pub struct GmmOutput {
     pub logits: Tensor<2>,
 }
 
+/// One agent's predicted mixture as plain arrays (for evaluation, labelling, serving).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Mixture {
+    /// `[K][T]` mean positions (target frame, metres).
+    pub xy: Vec<Vec<[f32; 2]>>,
+    /// `[K][T]` covariance parameters (a, b, c), clamped to the ranges the loss uses.
+    pub abc: Vec<Vec<[f32; 3]>>,
+    /// `[K]` mode probabilities (softmax of the logits).
+    pub probs: Vec<f32>,
+}
+
+impl GmmOutput {
+    /// Reads the batch back into one [`Mixture`] per target.
+    pub fn into_mixtures(self) -> Vec<Mixture> {
+        use crate::loss::{COV_A_RANGE, COV_B_RANGE, COV_C_RANGE};
+        let [b, k, t, _] = self.xy.dims();
+        let xy: Vec<f32> = self.xy.into_data().try_to_vec::<f32>().expect("f32 tensor");
+        let abc: Vec<f32> = self
+            .cov_abc
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("f32 tensor");
+        let probs: Vec<f32> = burn::tensor::activation::softmax(self.logits, 1)
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("f32 tensor");
+        (0..b)
+            .map(|i| Mixture {
+                xy: (0..k)
+                    .map(|m| {
+                        (0..t)
+                            .map(|s| {
+                                let o = ((i * k + m) * t + s) * 2;
+                                [xy[o], xy[o + 1]]
+                            })
+                            .collect()
+                    })
+                    .collect(),
+                abc: (0..k)
+                    .map(|m| {
+                        (0..t)
+                            .map(|s| {
+                                let o = ((i * k + m) * t + s) * 3;
+                                [
+                                    abc[o].clamp(COV_A_RANGE.0, COV_A_RANGE.1),
+                                    abc[o + 1].clamp(COV_B_RANGE.0, COV_B_RANGE.1),
+                                    abc[o + 2].clamp(COV_C_RANGE.0, COV_C_RANGE.1),
+                                ]
+                            })
+                            .collect()
+                    })
+                    .collect(),
+                probs: probs[i * k..(i + 1) * k].to_vec(),
+            })
+            .collect()
+    }
+}
+
 /// Multipath++ with a conditional future encoder (marginal when the condition flag is 0).
 #[derive(Module, Debug)]
 pub struct Multipath {

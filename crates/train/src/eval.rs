@@ -3,7 +3,7 @@
 //! Everything is in the target's frame at the current step (the metrics are invariant to the
 //! frame as long as predictions and ground truth share it).
 
-use burn::tensor::{Device, activation::softmax};
+use burn::tensor::Device;
 use rand::SeedableRng;
 use scbg_features::{AGENT_FEATURES, AgentSample};
 use scbg_metrics::{ClassifierThresholds, GroundTruth, MetricTable, Prediction};
@@ -14,8 +14,22 @@ use scbg_model::{Batch, BatchAugment, Multipath};
 pub enum Mode {
     /// `p(y_A | x)`: the condition is switched off.
     Marginal,
-    /// `p(y_A | x, y_B)`: the other agent's logged future is given.
+    /// `p(y_A | x, y_B)`: the other agent's logged future is given (samples without one are
+    /// necessarily marginal).
     Conditional,
+}
+
+impl Mode {
+    /// The batching that realises this mode (no training-time randomisation).
+    pub fn augment(self) -> BatchAugment {
+        match self {
+            Mode::Marginal => BatchAugment {
+                condition_dropout: 1.0,
+                history_mask_prob: 0.0,
+            },
+            Mode::Conditional => BatchAugment::default(),
+        }
+    }
 }
 
 /// K trajectories with probabilities, target frame.
@@ -37,37 +51,19 @@ pub fn predict(
 ) -> Vec<Modes> {
     let mut out = Vec::with_capacity(samples.len());
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
-    let augment = match mode {
-        Mode::Marginal => BatchAugment {
-            condition_dropout: 1.0,
-            history_mask_prob: 0.0,
-        },
-        Mode::Conditional => BatchAugment::default(),
-    };
+    let augment = mode.augment();
     for chunk in samples.chunks(batch_size.max(1)) {
         let batch = Batch::from_samples(chunk, &augment, &mut rng, device);
-        let gmm = model.forward(&batch);
-        let [b, k, t, _] = gmm.xy.dims();
-        let xy: Vec<f32> = gmm.xy.into_data().try_to_vec::<f32>().expect("f32");
-        let probs: Vec<f32> = softmax(gmm.logits, 1)
-            .into_data()
-            .try_to_vec::<f32>()
-            .expect("f32");
-        for i in 0..b {
-            out.push(Modes {
-                xy: (0..k)
-                    .map(|m| {
-                        (0..t)
-                            .map(|s| {
-                                let o = ((i * k + m) * t + s) * 2;
-                                [xy[o], xy[o + 1]]
-                            })
-                            .collect()
-                    })
-                    .collect(),
-                probs: probs[i * k..(i + 1) * k].to_vec(),
-            });
-        }
+        out.extend(
+            model
+                .forward(&batch)
+                .into_mixtures()
+                .into_iter()
+                .map(|m| Modes {
+                    xy: m.xy,
+                    probs: m.probs,
+                }),
+        );
     }
     out
 }
@@ -181,13 +177,7 @@ pub fn mean_nll(
     device: &Device,
 ) -> Option<f64> {
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
-    let augment = match mode {
-        Mode::Marginal => BatchAugment {
-            condition_dropout: 1.0,
-            history_mask_prob: 0.0,
-        },
-        Mode::Conditional => BatchAugment::default(),
-    };
+    let augment = mode.augment();
     let (mut sum, mut n) = (0.0f64, 0usize);
     for chunk in samples.chunks(batch_size.max(1)) {
         let batch = Batch::from_samples(chunk, &augment, &mut rng, device);

@@ -10,12 +10,12 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use scbg_features::AgentSample;
 use scbg_features::cache::{CacheError, PreparedDataset};
-use scbg_model::{Batch, BatchAugment, Multipath, gmm_nll};
+use scbg_model::{Batch, BatchAugment, gmm_nll};
 
 use crate::checkpoint::{Checkpoint, CheckpointError, EpochReport, TrainState};
 use crate::config::{ConfigError, TrainConfig};
 use crate::data::{load_samples, standardise};
-use crate::eval::{Mode, predict, score};
+use crate::eval::{Mode, mean_nll, predict, score};
 
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
@@ -59,31 +59,6 @@ fn optimizer(config: &TrainConfig) -> ModuleOptimizer {
     AdamConfig::new()
         .with_grad_clipping(Some(GradientClippingConfig::Norm(config.grad_clip_norm)))
         .init()
-}
-
-/// Mean NLL of samples in their own mode (pairs conditional, others marginal), no augmentation.
-fn mean_loss(
-    model: &Multipath,
-    samples: &[&AgentSample],
-    batch_size: usize,
-    device: &burn::tensor::Device,
-) -> Option<f64> {
-    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
-    let (mut sum, mut n) = (0.0f64, 0usize);
-    for chunk in samples.chunks(batch_size.max(1)) {
-        let batch = Batch::from_samples(chunk, &BatchAugment::default(), &mut rng, device);
-        let loss: f32 = gmm_nll(
-            &model.forward(&batch),
-            batch.future_xy.clone(),
-            batch.future_valid.clone(),
-        )
-        .into_scalar();
-        if loss.is_finite() {
-            sum += f64::from(loss) * chunk.len() as f64;
-            n += chunk.len();
-        }
-    }
-    (n > 0).then(|| sum / n as f64)
 }
 
 /// Trains on the prepared cache in `data_dir`, writing checkpoints to `out_dir` after every
@@ -186,7 +161,13 @@ pub fn train(
             state.learning_rate *= 0.5;
         }
         let valid_model = model.valid();
-        let val_loss = mean_loss(&valid_model, &val_refs, config.batch_size, &infer_device);
+        let val_loss = mean_nll(
+            &valid_model,
+            &val_refs,
+            Mode::Conditional,
+            config.batch_size,
+            &infer_device,
+        );
         let val_min_ade_8s = (!raw_refs.is_empty())
             .then(|| {
                 let modes = predict(
