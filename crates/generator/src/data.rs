@@ -1,0 +1,80 @@
+//! Training examples of the generator: one ordered pair (A, B) in one window, with B's logged
+//! and sampled futures and their courtesy labels.
+
+use burn::tensor::Device;
+use rand::SeedableRng;
+use scbg_courtesy::label::{LabelOptions, change_frame, label_pair, marginal_mixtures};
+use scbg_features::{AgentSample, FeatureConfig, FeatureStats, PreparedScene, SampleBuilder};
+use scbg_model::Multipath;
+
+/// One pair role with its labelled futures.
+#[derive(Debug, Clone)]
+pub struct Example {
+    /// A (the agent whose reward counts), standardised, conditioned on B's logged future.
+    pub a: AgentSample,
+    /// B (the generated agent), standardised, marginal.
+    pub b: AgentSample,
+    /// B's frame in A's frame: heading difference and B's origin in A's frame.
+    pub a_from_b: [f32; 3],
+    /// `[1 + M][T]` futures of B in B's frame: 0 = logged, then the sampled ones.
+    pub futures_b: Vec<Vec<[f32; 2]>>,
+    /// `[T]` validity of the logged future (sampled ones are complete).
+    pub logged_valid: Vec<bool>,
+    /// `[1 + M]` ψ labels.
+    pub psi: Vec<f32>,
+}
+
+/// Labels every pair role of `scenes` (see `scbg label`) and keeps what training needs.
+pub fn build_examples(
+    predictor: &Multipath,
+    scenes: &[PreparedScene],
+    stats: &FeatureStats,
+    features: &FeatureConfig,
+    options: LabelOptions,
+    seed: u64,
+    device: &Device,
+) -> Vec<Example> {
+    let mut out = Vec::new();
+    for (i, scene) in scenes.iter().enumerate() {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(
+            seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
+        );
+        let mut builder = SampleBuilder::new(scene, features);
+        for (w, pairs) in scene.windows.iter().zip(&scene.pairs) {
+            for p in pairs {
+                for (ia, ib) in [(p.first, p.second), (p.second, p.first)] {
+                    let (Ok(mut a), Ok(mut b)) =
+                        (builder.sample(w, ia, Some(ib)), builder.sample(w, ib, None))
+                    else {
+                        continue;
+                    };
+                    stats.normalize(&mut a);
+                    stats.normalize(&mut b);
+                    let mixture = marginal_mixtures(predictor, &[&b], device).remove(0);
+                    let labels = label_pair(predictor, &a, &b, &mixture, options, &mut rng, device);
+                    let futures_b = labels
+                        .futures_in_a
+                        .iter()
+                        .map(|f| change_frame(f, &a.world_from_agent, &b.world_from_agent))
+                        .collect();
+                    let (pa, pb) = (a.world_from_agent, b.world_from_agent);
+                    let (tx, ty) = pa.agent_from_world(pb.x_m, pb.y_m);
+                    let a_from_b = [
+                        scbg_scene::wrap_angle_rad(pb.heading_rad - pa.heading_rad) as f32,
+                        tx as f32,
+                        ty as f32,
+                    ];
+                    out.push(Example {
+                        logged_valid: a.condition_future_valid.clone(),
+                        a,
+                        b,
+                        a_from_b,
+                        futures_b,
+                        psi: labels.psi,
+                    });
+                }
+            }
+        }
+    }
+    out
+}

@@ -1,0 +1,25 @@
+//! The socially-controllable behaviour generator `y_B = g(x, ψ)` (paper eq. (1), Sec. III-D).
+//!
+//! Main types: [`GeneratorConfig`] → [`GeneratorConfig::init`] → [`Generator::forward`];
+//! [`Example`] (one pair role with its labelled futures); [`train_step`] with the paper's three
+//! variants ([`Variant`]).
+//!
+//! The scene encoder is the predictor's, frozen: the embedding of B (marginal mode) is computed
+//! with the predictor and detached, so only the decoder learns. The decoder has no anchors: an
+//! MLP of `[embedding ‖ MLP(ψ)]` gives 80 per-step displacements, integrated into positions in
+//! B's frame.
+//!
+//! **Architecture invariant:** no files or CLI; the predictor is passed in and never updated.
+
+mod data;
+mod model;
+mod train;
+
+pub use data::{Example, build_examples};
+pub use model::{Generator, GeneratorConfig};
+pub use train::{
+    StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss, train_step,
+};
+
+#[cfg(test)]
+mod tests;
