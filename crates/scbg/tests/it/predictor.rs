@@ -27,16 +27,16 @@ mcg_blocks = 1
 future_hidden = 16
 "#;
 
-#[test]
-fn train_then_evaluate_on_synthetic_data() {
-    let dir = tempfile::tempdir().unwrap();
-    let p = |s: &str| dir.path().join(s).display().to_string();
+/// synth → prepare → train (tiny config) in `dir`: `synth/`, `cache/`, `train.toml`, `model/`.
+fn tiny_trained_model(dir: &std::path::Path, scenarios: usize, seed: u64) {
+    let p = |s: &str| dir.join(s).display().to_string();
+    let (n, seed) = (scenarios.to_string(), seed.to_string());
     scbg_ok(&[
         "synth",
         "--scenarios",
-        "30",
+        &n,
         "--seed",
-        "4",
+        &seed,
         "--out",
         &p("synth"),
     ]);
@@ -59,6 +59,13 @@ fn train_then_evaluate_on_synthetic_data() {
         "--out",
         &p("model"),
     ]);
+}
+
+#[test]
+fn train_then_evaluate_on_synthetic_data() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).display().to_string();
+    tiny_trained_model(dir.path(), 30, 4);
     let ckpt: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("model/checkpoint.json")).unwrap(),
     )
@@ -201,34 +208,7 @@ fn demo_writes_a_report() {
 fn label_writes_parquet_and_resumes() {
     let dir = tempfile::tempdir().unwrap();
     let p = |s: &str| dir.path().join(s).display().to_string();
-    scbg_ok(&[
-        "synth",
-        "--scenarios",
-        "20",
-        "--seed",
-        "8",
-        "--out",
-        &p("synth"),
-    ]);
-    scbg_ok(&[
-        "data",
-        "prepare",
-        "--input",
-        &p("synth"),
-        "--out",
-        &p("cache"),
-    ]);
-    std::fs::write(p("train.toml"), TINY_CONFIG).unwrap();
-    scbg_ok(&[
-        "train",
-        "predictor",
-        "--config",
-        &p("train.toml"),
-        "--data",
-        &p("cache"),
-        "--out",
-        &p("model"),
-    ]);
+    tiny_trained_model(dir.path(), 20, 8);
     let gt = format!("{}/ground_truth.jsonl", p("synth"));
     scbg_ok(&[
         "label",
