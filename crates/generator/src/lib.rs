@@ -13,10 +13,14 @@
 
 mod data;
 mod model;
+mod range;
 mod train;
 
 pub use data::{Example, build_examples};
 pub use model::{Generator, GeneratorConfig};
+pub use range::{
+    HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, frozen_embeddings, psi_for_quantile, range_step,
+};
 pub use train::{
     StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss, train_step,
 };

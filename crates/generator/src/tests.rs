@@ -195,3 +195,59 @@ fn balanced_batches_mix_high_and_low() {
         assert!(b[..2].iter().all(|&i| ex[i].psi[0].abs() > 2.5), "{b:?}");
     }
 }
+
+#[test]
+fn quantile_mapping() {
+    assert!((psi_for_quantile(0.1, -1.0, 3.0) + 1.0).abs() < 1e-6);
+    assert!((psi_for_quantile(0.9, -1.0, 3.0) - 3.0).abs() < 1e-6);
+    assert!((psi_for_quantile(0.5, -1.0, 3.0) - 1.0).abs() < 1e-6);
+    assert!((psi_for_quantile(0.0, -1.0, 3.0) + 1.5).abs() < 1e-6);
+    assert!(psi_for_quantile(0.3, 0.0, 2.0) < psi_for_quantile(0.7, 0.0, 2.0));
+}
+
+#[test]
+fn range_predictor_learns_the_quantiles_and_stays_ordered() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex().autodiff();
+    device.seed(5);
+    let config = MultipathConfig::cpu_small();
+    let predictor = config.init(&device);
+    let scenes = scenes(2);
+    let mut examples = build_examples(
+        &predictor,
+        &scenes,
+        &stats(&scenes),
+        &features(),
+        LabelOptions {
+            samples: 1,
+            reward: Reward::Progress,
+        },
+        1,
+        &device,
+    );
+    // Replace the labels by a known distribution: ψ uniform on 0..10 in every example, so the
+    // 0.1 and 0.9 quantiles are 1 and 9 whatever the scene.
+    for e in &mut examples {
+        e.psi = (0..=10).map(|v| v as f32).collect();
+    }
+    let refs: Vec<&Example> = examples.iter().collect();
+    let embedding = frozen_embeddings(&predictor, &refs, &device);
+    let labels: Vec<&[f32]> = examples.iter().map(|e| e.psi.as_slice()).collect();
+    let mut range = RangePredictor::init(config.embedding_width(), 32, &device);
+    let mut optim = AdamConfig::new().init();
+    for _ in 0..400 {
+        let (r, loss) = range_step(range, &mut optim, embedding.clone(), &labels, 2e-2);
+        range = r;
+        assert!(loss.is_finite());
+    }
+    let (low, high) = range.forward(embedding);
+    let low: Vec<f32> = low.into_data().try_to_vec::<f32>().unwrap();
+    let high: Vec<f32> = high.into_data().try_to_vec::<f32>().unwrap();
+    for (l, h) in low.iter().zip(&high) {
+        assert!(h >= l, "q0.9 {h} < q0.1 {l}");
+        assert!(
+            (l - 1.0).abs() < 0.6 && (h - 9.0).abs() < 0.6,
+            "quantiles ({l}, {h}), expected (1, 9)"
+        );
+    }
+}
