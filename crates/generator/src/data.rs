@@ -22,9 +22,15 @@ pub struct Example {
     pub logged_valid: Vec<bool>,
     /// `[1 + M]` ψ labels.
     pub psi: Vec<f32>,
+    /// B's scene embedding from the frozen predictor encoder (marginal mode).
+    pub b_embedding: Vec<f32>,
 }
 
-/// Labels every pair role of `scenes` (see `scbg label`) and keeps what training needs.
+/// Labels every pair role of `scenes` (see `scbg label`) and keeps what training needs,
+/// including B's frozen embedding.
+///
+/// Pass a predictor on a plain (non-autodiff) device: nothing here needs gradients, and burn's
+/// autodiff graph keeps the nodes of every forward that is never back-propagated.
 pub fn build_examples(
     predictor: &Multipath,
     scenes: &[PreparedScene],
@@ -64,6 +70,19 @@ pub fn build_examples(
                         tx as f32,
                         ty as f32,
                     ];
+                    // B's frozen embedding (marginal mode), computed once.
+                    let mut batch_rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
+                    let marginal = scbg_model::BatchAugment {
+                        condition_dropout: 1.0,
+                        history_mask_prob: 0.0,
+                    };
+                    let batch_b =
+                        scbg_model::Batch::from_samples(&[&b], &marginal, &mut batch_rng, device);
+                    let b_embedding = predictor
+                        .encode(&batch_b)
+                        .into_data()
+                        .try_to_vec::<f32>()
+                        .expect("f32 tensor");
                     out.push(Example {
                         logged_valid: a.condition_future_valid.clone(),
                         a,
@@ -71,6 +90,7 @@ pub fn build_examples(
                         a_from_b,
                         futures_b,
                         psi: labels.psi,
+                        b_embedding,
                     });
                 }
             }

@@ -5,7 +5,7 @@
 //! variants ([`Variant`]).
 //!
 //! The scene encoder is the predictor's, frozen: the embedding of B (marginal mode) is computed
-//! with the predictor and detached, so only the decoder learns. The decoder has no anchors: an
+//! once per example on a plain device and stored, so only the decoder learns. The decoder has no anchors: an
 //! MLP of `[embedding ‖ MLP(ψ)]` gives 80 per-step displacements, integrated into positions in
 //! B's frame.
 //!
@@ -19,7 +19,7 @@ mod train;
 pub use data::{Example, build_examples};
 pub use model::{Generator, GeneratorConfig};
 pub use range::{
-    HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, frozen_embeddings, psi_for_quantile, range_step,
+    HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, range_step, stored_embeddings,
 };
 pub use train::{
     StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss, train_step,

@@ -6,7 +6,6 @@ use burn::tensor::activation::softplus;
 use burn::tensor::{Device, Tensor, TensorData};
 use scbg_courtesy::losses::pinball;
 use scbg_model::blocks::Mlp;
-use scbg_model::{Batch, BatchAugment, Multipath};
 
 use crate::data::Example;
 
@@ -47,35 +46,25 @@ pub fn psi_for_quantile(q: f32, q_low: f32, q_high: f32) -> f32 {
     q_low + (q - LOW_QUANTILE) / (HIGH_QUANTILE - LOW_QUANTILE) * (q_high - q_low)
 }
 
-/// B's frozen scene embeddings (marginal mode, detached) for a set of examples. The encoder is
-/// frozen, so callers compute these once and reuse them across steps.
+/// The examples' stored frozen embeddings of B as one tensor on `device`.
 ///
 /// # Shapes
 /// `-> [examples, e]`
-pub fn frozen_embeddings(
-    predictor: &Multipath,
-    examples: &[&Example],
-    device: &Device,
-) -> Tensor<2> {
-    let mut rng = rand_pcg::Pcg64Mcg::new(0x7a9e);
-    let bs: Vec<_> = examples.iter().map(|e| &e.b).collect();
-    let batch = Batch::from_samples(
-        &bs,
-        &BatchAugment {
-            condition_dropout: 1.0,
-            history_mask_prob: 0.0,
-        },
-        &mut rng,
-        device,
-    );
-    predictor.encode(&batch).detach()
+pub fn stored_embeddings(examples: &[&Example], device: &Device) -> Tensor<2> {
+    let n = examples.len();
+    let e = examples.first().map_or(0, |x| x.b_embedding.len());
+    let flat: Vec<f32> = examples
+        .iter()
+        .flat_map(|x| x.b_embedding.iter().copied())
+        .collect();
+    Tensor::from_data(TensorData::new(flat, [n, e]), device)
 }
 
 /// One pinball-loss step on every ψ (logged and sampled) of the examples: each example's
 /// scene gets the losses of all its labels. Only the range predictor is updated.
 ///
 /// # Shapes
-/// `embedding: [examples, e]` (see [`frozen_embeddings`]), `psi: [examples][labels]`
+/// `embedding: [examples, e]` (see [`stored_embeddings`]), `psi: [examples][labels]`
 pub fn range_step(
     range: RangePredictor,
     optimizer: &mut ModuleOptimizer,

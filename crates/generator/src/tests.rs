@@ -231,7 +231,7 @@ fn range_predictor_learns_the_quantiles_and_stays_ordered() {
         e.psi = (0..=10).map(|v| v as f32).collect();
     }
     let refs: Vec<&Example> = examples.iter().collect();
-    let embedding = frozen_embeddings(&predictor, &refs, &device);
+    let embedding = stored_embeddings(&refs, &device);
     let labels: Vec<&[f32]> = examples.iter().map(|e| e.psi.as_slice()).collect();
     let mut range = RangePredictor::init(config.embedding_width(), 32, &device);
     let mut optim = AdamConfig::new().init();

@@ -83,6 +83,48 @@ pub struct LabelArgs {
 pub enum TrainCommand {
     /// Train the Multipath++ predictor (marginal + conditional) on a prepared cache.
     Predictor(TrainPredictorArgs),
+    /// Train the SCBG generator g(x, ψ) and the courtesy range predictor.
+    Generator(TrainGeneratorArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct TrainGeneratorArgs {
+    /// Trained predictor checkpoint (its encoder is frozen; it also provides J_φ).
+    #[arg(long)]
+    pub predictor: PathBuf,
+    /// Prepared cache folder (its training split by scenario id, as for the predictor).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder: generator.bpk, range.bpk, generator.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// baseline (①), aug (① + ②) or full (① + ② + ③ courtesy loss).
+    #[arg(long, value_parser = ["baseline", "aug", "full"], default_value = "full")]
+    pub variant: String,
+    #[arg(long, default_value_t = 10)]
+    pub epochs: usize,
+    /// Futures sampled from B's marginal prediction per pair role.
+    #[arg(long, default_value_t = 8)]
+    pub samples: usize,
+    #[arg(long, default_value_t = 32)]
+    pub batch_size: usize,
+    /// Weight α of the sampled futures' trajectory loss.
+    #[arg(long, default_value_t = 0.5)]
+    pub alpha: f32,
+    /// Weight β of the courtesy loss.
+    #[arg(long, default_value_t = 1.0)]
+    pub beta: f32,
+    /// High-courtesy threshold for 50/50 batches: a number (m/s, the paper uses 2) or `qX`
+    /// for a quantile of the logged |ψ| (default q0.8, since ψ's scale depends on the data).
+    #[arg(long, default_value = "q0.8")]
+    pub threshold: String,
+    #[arg(long, default_value_t = 1e-3)]
+    pub learning_rate: f64,
+    /// Range-predictor optimisation steps (full batch).
+    #[arg(long, default_value_t = 300)]
+    pub range_steps: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
 }
 
 #[derive(Debug, Args)]

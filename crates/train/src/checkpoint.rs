@@ -88,7 +88,9 @@ pub fn weights_finite(model: &Multipath) -> bool {
     c.0
 }
 
-fn save_record(
+/// Saves one record file atomically: `save` writes to a temporary name in `dir`, which is
+/// renamed to `name` when complete.
+pub fn save_record(
     dir: &Path,
     name: &str,
     save: impl FnOnce(&Path) -> Result<(), String>,

@@ -22,6 +22,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Synth(a)) => bench::synth(&a),
         Command::Bench(BenchCommand::Train(a)) => bench::train(&a),
         Command::Train(TrainCommand::Predictor(a)) => train::predictor(&a),
+        Command::Train(TrainCommand::Generator(a)) => train::generator(&a).map(|_| ()),
         Command::Eval(EvalCommand::Predictor(a)) => eval::predictor(&a),
         Command::Eval(EvalCommand::Metrics(a)) => eval::metrics(&a),
     }

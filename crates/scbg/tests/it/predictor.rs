@@ -252,3 +252,55 @@ fn label_writes_parquet_and_resumes() {
         before
     );
 }
+
+#[test]
+fn train_generator_saves_generator_and_range_predictor() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).display().to_string();
+    tiny_trained_model(dir.path(), 16, 12);
+    scbg_ok(&[
+        "train",
+        "generator",
+        "--predictor",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("gen"),
+        "--epochs",
+        "2",
+        "--samples",
+        "2",
+        "--batch-size",
+        "8",
+        "--range-steps",
+        "20",
+    ]);
+    let saved: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("gen/generator.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(saved["variant"], "full");
+    assert_eq!(saved["history"].as_array().unwrap().len(), 2);
+    assert!(saved["examples"].as_u64().unwrap() > 0);
+    assert!(saved["range_loss"].as_f64().unwrap().is_finite());
+    assert!(
+        dir.path().join("gen/generator.bpk").is_file()
+            && dir.path().join("gen/range.bpk").is_file()
+    );
+    // A malformed threshold is a clear error.
+    let bad = scbg(&[
+        "train",
+        "generator",
+        "--predictor",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("gen2"),
+        "--threshold",
+        "qx",
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--threshold"));
+}
