@@ -48,6 +48,18 @@ fn stats(scenes: &[PreparedScene]) -> FeatureStats {
     FeatureStats::fit(samples.iter())
 }
 
+fn step_options(variant: Variant, trajectory_weight: f32) -> StepOptions {
+    StepOptions {
+        variant,
+        alpha: 0.5,
+        beta: 1.0,
+        huber_delta: 1.0,
+        trajectory_weight,
+        reward: Reward::AverageSpeed,
+        learning_rate: 3e-3,
+    }
+}
+
 #[test]
 fn forward_shape() {
     let device = Device::flex();
@@ -90,15 +102,7 @@ fn variants_train_and_losses_fall() {
         device.seed(9);
         let mut generator = GeneratorConfig::new(config.embedding_width()).init(&device);
         let mut optim = AdamConfig::new().init();
-        let options = StepOptions {
-            variant,
-            alpha: 0.5,
-            beta: 1.0,
-            huber_delta: 1.0,
-            trajectory_weight: 1.0,
-            reward: Reward::AverageSpeed,
-            learning_rate: 3e-3,
-        };
+        let options = step_options(variant, 1.0);
         let mut first = None;
         let mut last = None;
         for _ in 0..30 {
@@ -127,15 +131,7 @@ fn variants_train_and_losses_fall() {
     // The courtesy loss alone (trajectory weight 0) must send gradients into the generator
     // through J_φ (with an untrained predictor they are tiny, but they must not be zero).
     let generator = GeneratorConfig::new(config.embedding_width()).init(&device);
-    let options = StepOptions {
-        variant: Variant::Full,
-        alpha: 0.5,
-        beta: 1.0,
-        huber_delta: 1.0,
-        trajectory_weight: 0.0,
-        reward: Reward::AverageSpeed,
-        learning_rate: 3e-3,
-    };
+    let options = step_options(Variant::Full, 0.0);
     let (loss, losses) = step_loss(&generator, &predictor, &refs, &options, &device);
     assert!(losses.courtesy > 0.0 && losses.trajectory > 0.0);
     let grads = loss.backward();

@@ -7,7 +7,7 @@ use scbg_scene::{
     RoadLineType, StopSign,
 };
 
-use super::{A_ID, B_ID, NUM_STEPS, Run, arc_path, idm, mp, noise_track, pts, vehicle_size};
+use super::{NUM_STEPS, PairSetup, Run, arc_path, idm, mp, noise_track, pts, vehicle_size};
 use crate::path::RefPath;
 use crate::sim::{Agent, Idm};
 
@@ -21,15 +21,7 @@ pub struct CrossingParams {
     from_right: bool,
     a_conflict_s: f64,
     b_conflict_s: f64,
-    a_size: (f64, f64),
-    b_size: (f64, f64),
-    a_idm: Idm,
-    b_idm: Idm,
-    a_s0: f64,
-    a_v0: f64,
-    b_s0: f64,
-    b_v0: f64,
-    reaction_steps: usize,
+    pair: PairSetup,
     follower: Option<(f64, f64, (f64, f64), Idm)>,
     pedestrians: Vec<(f64, f64, f64)>,
     noise: Vec<Vec<f64>>,
@@ -60,22 +52,34 @@ pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
             )
         })
         .collect();
-    CrossingParams {
-        curvature: rng.random_range(-1.0 / 1500.0..1.0 / 1500.0),
-        lane_width_m: rng.random_range(3.3..3.8),
-        crossing_angle_rad: rng.random_range(70f64..110.0).to_radians(),
-        from_right: rng.random_bool(0.5),
-        a_conflict_s,
-        b_conflict_s,
-        a_size: vehicle_size(rng),
-        b_size: vehicle_size(rng),
-        a_idm: idm(rng, a_v_des),
-        b_idm: idm(rng, b_v_des),
-        a_s0: (a_conflict_s - tau_a * a_v0).max(5.0),
+    // Draw order is part of the data: keep it.
+    let curvature = rng.random_range(-1.0 / 1500.0..1.0 / 1500.0);
+    let lane_width_m = rng.random_range(3.3..3.8);
+    let crossing_angle_rad = rng.random_range(70f64..110.0).to_radians();
+    let from_right = rng.random_bool(0.5);
+    let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
+    let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
+    let a_s0 = (a_conflict_s - tau_a * a_v0).max(5.0);
+    let reaction_steps = rng.random_range(3..8);
+    let pair = PairSetup {
+        a_size,
+        b_size,
+        a_idm,
+        b_idm,
+        a_s0,
         a_v0,
         b_s0,
         b_v0,
-        reaction_steps: rng.random_range(3..8),
+        reaction_steps,
+    };
+    CrossingParams {
+        curvature,
+        lane_width_m,
+        crossing_angle_rad,
+        from_right,
+        a_conflict_s,
+        b_conflict_s,
+        pair,
         follower,
         pedestrians,
         noise: (0..4).map(|_| noise_track(rng, NUM_STEPS)).collect(),
@@ -101,28 +105,7 @@ pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
     // Half-width of the crossing road along each path (both roads have two lanes).
     let half_zone = w / p.crossing_angle_rad.sin().abs() + 1.0;
     let stop_s = p.b_conflict_s - half_zone - 2.0;
-    let mut agents = vec![Agent::new(
-        A_ID,
-        ObjectType::Vehicle,
-        0,
-        p.a_size,
-        p.a_idm,
-        p.a_s0,
-        0.0,
-        p.a_v0,
-    )];
-    if with_b {
-        agents.push(Agent::new(
-            B_ID,
-            ObjectType::Vehicle,
-            1,
-            p.b_size,
-            p.b_idm,
-            p.b_s0,
-            0.0,
-            p.b_v0,
-        ));
-    }
+    let mut agents = p.pair.agents(1, 0.0, with_b);
     let follower_idx = agents.len();
     if let Some((gap, v, size, m)) = p.follower {
         agents.push(Agent::new(
@@ -131,7 +114,7 @@ pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
             0,
             size,
             m,
-            p.a_s0 - gap,
+            p.pair.a_s0 - gap,
             0.0,
             v,
         ));
@@ -184,7 +167,7 @@ pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
             let a = &agents[0];
             let mut leader = None;
             if with_b {
-                let (s_b, _, _) = agents[1].delayed(p.reaction_steps);
+                let (s_b, _, _) = agents[1].delayed(p.pair.reaction_steps);
                 let b_len = agents[1].length_m;
                 let b_in_or_coming = s_b > p.b_conflict_s - half_zone - b_len - 25.0
                     && (decision == Some(true) || s_b > stop_s + 0.5);

@@ -4,7 +4,7 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::{Lane, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
 
-use super::{A_ID, B_ID, NUM_STEPS, Run, arc_path, idm, noise_track, pts, vehicle_size};
+use super::{NUM_STEPS, PairSetup, Run, arc_path, idm, noise_track, pts, vehicle_size};
 use crate::sim::{Agent, Idm, STEP_SECS, closer};
 
 /// How far back a fully courteous B looks for a faster A to make way for.
@@ -20,19 +20,11 @@ pub struct CutinParams {
     lane_width_m: f64,
     /// true: B cuts into A's lane from the right; false: B, ahead in A's lane, makes way.
     cut_in: bool,
-    a_size: (f64, f64),
-    b_size: (f64, f64),
+    pair: PairSetup,
     o_size: (f64, f64),
-    a_idm: Idm,
-    b_idm: Idm,
     o_idm: Idm,
-    a_s0: f64,
-    a_v0: f64,
-    b_s0: f64,
-    b_v0: f64,
     o_s0: f64,
     lane_change_s: f64,
-    reaction_steps: usize,
     noise: Vec<Vec<f64>>,
 }
 
@@ -58,24 +50,35 @@ pub fn cutin_params(rng: &mut Pcg64Mcg) -> CutinParams {
     let o_size = (rng.random_range(6.0..10.0), 2.4);
     let mut o_idm = idm(rng, o_v);
     o_idm.max_accel_mps2 = 0.5;
-    CutinParams {
-        cut_in_variant: cut_in,
-        curvature: rng.random_range(-1.0 / 1000.0..1.0 / 1000.0),
-        lane_width_m: rng.random_range(3.4..3.8),
-        cut_in,
-        a_size: vehicle_size(rng),
-        b_size: vehicle_size(rng),
-        o_size,
-        a_idm: idm(rng, a_v_des),
-        b_idm: idm(rng, b_v_des),
-        o_idm,
+    // Draw order is part of the data: keep it.
+    let curvature = rng.random_range(-1.0 / 1000.0..1.0 / 1000.0);
+    let lane_width_m = rng.random_range(3.4..3.8);
+    let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
+    let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
+    let o_s0 = b_s0 + rng.random_range(45.0..75.0);
+    let lane_change_s = rng.random_range(3.0..4.5);
+    let reaction_steps = rng.random_range(3..8);
+    let pair = PairSetup {
+        a_size,
+        b_size,
+        a_idm,
+        b_idm,
         a_s0,
         a_v0,
         b_s0,
         b_v0,
-        o_s0: b_s0 + rng.random_range(45.0..75.0),
-        lane_change_s: rng.random_range(3.0..4.5),
-        reaction_steps: rng.random_range(3..8),
+        reaction_steps,
+    };
+    CutinParams {
+        cut_in_variant: cut_in,
+        curvature,
+        lane_width_m,
+        cut_in,
+        pair,
+        o_size,
+        o_idm,
+        o_s0,
+        lane_change_s,
         noise: (0..3).map(|_| noise_track(rng, NUM_STEPS)).collect(),
     }
 }
@@ -85,28 +88,7 @@ pub fn simulate_cutin(p: &CutinParams, c: f64, with_b: bool) -> Run {
     let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);
     let b_lane = if p.cut_in { -w } else { 0.0 };
     let b_target = if p.cut_in { 0.0 } else { -w };
-    let mut agents = vec![Agent::new(
-        A_ID,
-        ObjectType::Vehicle,
-        0,
-        p.a_size,
-        p.a_idm,
-        p.a_s0,
-        0.0,
-        p.a_v0,
-    )];
-    if with_b {
-        agents.push(Agent::new(
-            B_ID,
-            ObjectType::Vehicle,
-            0,
-            p.b_size,
-            p.b_idm,
-            p.b_s0,
-            b_lane,
-            p.b_v0,
-        ));
-    }
+    let mut agents = p.pair.agents(0, b_lane, with_b);
     let o = agents.len();
     // The slow vehicle in the right lane: B's reason to cut in, or the one B lets A avoid.
     agents.push(Agent::new(
@@ -209,7 +191,7 @@ pub fn simulate_cutin(p: &CutinParams, c: f64, with_b: bool) -> Run {
             agents[1].idm.desired_speed_mps = if drop_back {
                 (a.v * (1.0 - 0.4 * c)).max(5.0)
             } else {
-                p.b_idm.desired_speed_mps
+                p.pair.b_idm.desired_speed_mps
             };
         }
         for i in 0..agents.len() {
@@ -221,7 +203,14 @@ pub fn simulate_cutin(p: &CutinParams, c: f64, with_b: bool) -> Run {
                     Some(_) => leader_in(&agents, 1, me.s, b_target, false, 0),
                 }
             } else {
-                leader_in(&agents, i, me.s, me.d, i == 0 && with_b, p.reaction_steps)
+                leader_in(
+                    &agents,
+                    i,
+                    me.s,
+                    me.d,
+                    i == 0 && with_b,
+                    p.pair.reaction_steps,
+                )
             };
             cmds[i] = me.idm.accel(me.v, leader) + p.noise[i.min(2)][t];
         }

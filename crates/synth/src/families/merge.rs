@@ -4,7 +4,7 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::{Lane, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
 
-use super::{A_ID, B_ID, NUM_STEPS, Run, arc_path, idm, noise_track, pts, vehicle_size};
+use super::{NUM_STEPS, PairSetup, Run, arc_path, idm, noise_track, pts, vehicle_size};
 use crate::sim::{Agent, Idm, STEP_SECS, closer};
 
 /// Length over which the on-ramp's approach angle eases into the parallel lane.
@@ -21,15 +21,7 @@ pub struct MergeParams {
     taper_m: f64,
     accel_lane_m: f64,
     ramp_angle_rad: f64,
-    a_size: (f64, f64),
-    b_size: (f64, f64),
-    a_idm: Idm,
-    b_idm: Idm,
-    a_s0: f64,
-    a_v0: f64,
-    b_s0: f64,
-    b_v0: f64,
-    reaction_steps: usize,
+    pair: PairSetup,
     background: Vec<(f64, f64, (f64, f64), Idm)>,
     noise: Vec<Vec<f64>>,
 }
@@ -65,22 +57,32 @@ pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
         ));
     }
     let n_agents = 2 + background.len();
-    MergeParams {
-        curvature: rng.random_range(-1.0 / 900.0..1.0 / 900.0),
-        lane_width_m,
-        merge_end_s,
-        taper_m,
-        accel_lane_m: rng.random_range(20.0..60.0),
-        ramp_angle_rad: rng.random_range(5f64..15.0).to_radians(),
-        a_size: vehicle_size(rng),
-        b_size: vehicle_size(rng),
-        a_idm: idm(rng, a_v_des),
-        b_idm: idm(rng, b_v_des),
+    // Draw order is part of the data: keep it.
+    let curvature = rng.random_range(-1.0 / 900.0..1.0 / 900.0);
+    let accel_lane_m = rng.random_range(20.0..60.0);
+    let ramp_angle_rad = rng.random_range(5f64..15.0).to_radians();
+    let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
+    let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
+    let reaction_steps = rng.random_range(3..8);
+    let pair = PairSetup {
+        a_size,
+        b_size,
+        a_idm,
+        b_idm,
         a_s0,
         a_v0,
         b_s0,
         b_v0,
-        reaction_steps: rng.random_range(3..8),
+        reaction_steps,
+    };
+    MergeParams {
+        curvature,
+        lane_width_m,
+        merge_end_s,
+        taper_m,
+        accel_lane_m,
+        ramp_angle_rad,
+        pair,
         background,
         noise: (0..n_agents).map(|_| noise_track(rng, NUM_STEPS)).collect(),
     }
@@ -116,29 +118,8 @@ impl MergeParams {
 
 pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
     let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);
-    let mut agents = vec![Agent::new(
-        A_ID,
-        ObjectType::Vehicle,
-        0,
-        p.a_size,
-        p.a_idm,
-        p.a_s0,
-        0.0,
-        p.a_v0,
-    )];
-    let mut b_idm = p.b_idm;
-    if with_b {
-        agents.push(Agent::new(
-            B_ID,
-            ObjectType::Vehicle,
-            0,
-            p.b_size,
-            b_idm,
-            p.b_s0,
-            p.ramp_d(p.b_s0),
-            p.b_v0,
-        ));
-    }
+    let mut b_idm = p.pair.b_idm;
+    let mut agents = p.pair.agents(0, p.ramp_d(p.pair.b_s0), with_b);
     let bg0 = agents.len();
     for (k, &(s, v, size, m)) in p.background.iter().enumerate() {
         agents.push(Agent::new(
@@ -188,7 +169,7 @@ pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
                     continue;
                 }
                 let (s_j, d_j, v_j) = if i == 0 && with_b && j == 1 {
-                    other.delayed(p.reaction_steps)
+                    other.delayed(p.pair.reaction_steps)
                 } else {
                     (other.s, other.d, other.v)
                 };
@@ -225,7 +206,7 @@ pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
         let _ = bg0;
     }
     // Map: main lane before/after the merge, ramp lane, road lines and edges.
-    let ramp_start = (p.b_s0 - 30.0)
+    let ramp_start = (p.pair.b_s0 - 30.0)
         .min(taper_start - p.accel_lane_m - 20.0)
         .max(-50.0);
     let main_lane = |s0: f64, s1: f64| pts(path.offset_points(s0, s1, 1.0, |_| 0.0));

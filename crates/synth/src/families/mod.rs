@@ -15,7 +15,7 @@
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
-use scbg_scene::{Map, MapPoint};
+use scbg_scene::{Map, MapPoint, ObjectType};
 
 use crate::path::RefPath;
 use crate::sim::{Agent, Idm};
@@ -80,6 +80,50 @@ pub(super) fn noise_track(rng: &mut Pcg64Mcg, n: usize) -> Vec<f64> {
             e
         })
         .collect()
+}
+
+/// Vehicles A and B as every family sets them up (values drawn by the family, in its order).
+#[derive(Debug, Clone)]
+pub(super) struct PairSetup {
+    pub a_size: (f64, f64),
+    pub b_size: (f64, f64),
+    pub a_idm: Idm,
+    pub b_idm: Idm,
+    pub a_s0: f64,
+    pub a_v0: f64,
+    pub b_s0: f64,
+    pub b_v0: f64,
+    /// A's reaction delay to B, steps.
+    pub reaction_steps: usize,
+}
+
+impl PairSetup {
+    /// A on path 0 at lateral offset 0, then (with B) B on `b_path` at offset `b_d0`.
+    pub(super) fn agents(&self, b_path: usize, b_d0: f64, with_b: bool) -> Vec<Agent> {
+        let mut agents = vec![Agent::new(
+            A_ID,
+            ObjectType::Vehicle,
+            0,
+            self.a_size,
+            self.a_idm,
+            self.a_s0,
+            0.0,
+            self.a_v0,
+        )];
+        if with_b {
+            agents.push(Agent::new(
+                B_ID,
+                ObjectType::Vehicle,
+                b_path,
+                self.b_size,
+                self.b_idm,
+                self.b_s0,
+                b_d0,
+                self.b_v0,
+            ));
+        }
+        agents
+    }
 }
 
 mod crossing;
