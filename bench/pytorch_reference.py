@@ -100,7 +100,7 @@ class Multipath(nn.Module):
         self.road_mlp = mlp([ROAD] + p["road_mlp"])
         self.road_ctx = mlp([p["target_width"] + p["interaction_width"], p["road_context_hidden"], rw])
         self.road = MCG(rw, rw, rw, p["mcg_blocks"])
-        self.fut_pts = mlp([4, fh, fh])
+        self.fut_pts = mlp([6, fh, fh])
         self.fut = MCG(fh, p["target_width"], fh, p["mcg_blocks"])
         self.fuse = nn.Linear(e + fh + 1, e)
         self.anchors = nn.Parameter(torch.randn(p["num_modes"], e))
@@ -117,10 +117,13 @@ class Multipath(nn.Module):
         road = self.road_mlp(b["road"])
         _, road = self.road(road, self.road_ctx(torch.cat([target, inter], 1)), b["road_mask"])
         scene = torch.cat([target, inter, road], 1)
-        pts = b["condition"][:, 4::5] * torch.tensor([1 / 50, 1 / 50, 1.0])
+        raw, prev = b["condition"][:, 4::5], b["condition"][:, 3::5]
+        both = raw[:, :, 2:3] * prev[:, :, 2:3]
+        vel = (raw[:, :, :2] - prev[:, :, :2]) * both / (0.1 * 10.0)
+        pts = raw * torch.tensor([1 / 50, 1 / 50, 1.0])
         n = pts.shape[1]
         time_ = (torch.arange(1, n + 1) / n).reshape(1, n, 1).expand(B, n, 1)
-        _, cond = self.fut(self.fut_pts(torch.cat([pts, time_], -1)), target, pts[:, :, 2])
+        _, cond = self.fut(self.fut_pts(torch.cat([pts, vel, time_], -1)), target, pts[:, :, 2])
         flag = b["flag"]
         scene = scene + self.fuse(torch.cat([scene, cond * flag, flag], 1))
         K = self.anchors.shape[0]

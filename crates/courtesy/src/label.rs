@@ -93,11 +93,46 @@ pub struct PairLabels {
     pub futures_in_a: Vec<Vec<[f32; 2]>>,
 }
 
-/// How to label: how many futures of B to sample, and which reward.
+/// How `E[r(Y_A) | x]`, the second term of ψ, is estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MarginalEstimate {
+    /// The predictor's marginal mode (paper eq. 4).
+    Direct,
+    /// The law of total expectation through the conditional mode:
+    /// `E[r(Y_A) | x] = E_{y_B ~ p(y_B | x)} E[r(Y_A) | x, y_B]`, averaged over the sampled
+    /// futures of B (falls back to [`MarginalEstimate::Direct`] without samples). The two
+    /// modes of one network are not consistent with each other: with `Direct`, ψ carries a
+    /// per-scene offset (the conditional mode's bias) that is the same for every y_B. This
+    /// estimator removes it, so ψ measures what B's future changes for A relative to B's
+    /// plausible behaviours.
+    #[default]
+    ConditionalAverage,
+}
+
+impl MarginalEstimate {
+    pub fn parse(text: &str) -> Option<Self> {
+        match text {
+            "direct" => Some(Self::Direct),
+            "conditional-average" => Some(Self::ConditionalAverage),
+            _ => None,
+        }
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Direct => "direct",
+            Self::ConditionalAverage => "conditional-average",
+        }
+    }
+}
+
+/// How to label: how many futures of B to sample, which reward, and how E[r(Y_A) | x] is
+/// estimated.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LabelOptions {
     pub samples: usize,
     pub reward: Reward,
+    pub marginal: MarginalEstimate,
 }
 
 /// Labels one ordered pair. `a` is A's standardised sample conditioned on B's logged future;
@@ -111,7 +146,11 @@ pub fn label_pair(
     rng: &mut impl Rng,
     device: &Device,
 ) -> PairLabels {
-    let LabelOptions { samples, reward } = options;
+    let LabelOptions {
+        samples,
+        reward,
+        marginal,
+    } = options;
     let t = a.condition_future_valid.len();
     let logged: Vec<[f32; 2]> = (0..t)
         .map(|i| {
@@ -148,16 +187,20 @@ pub fn label_pair(
         .into_data()
         .try_to_vec::<f32>()
         .expect("f32");
-    let e_marg: f32 = expected_reward(
-        model,
-        &Batch::from_samples(&[a], &BatchAugment::default(), &mut batch_rng, device),
-        None,
-        reward,
-        0.1,
-    )
-    .into_data()
-    .try_to_vec::<f32>()
-    .expect("f32")[0];
+    let e_marg: f32 = if marginal == MarginalEstimate::ConditionalAverage && n > 1 {
+        e_cond[1..].iter().sum::<f32>() / (n - 1) as f32
+    } else {
+        expected_reward(
+            model,
+            &Batch::from_samples(&[a], &BatchAugment::default(), &mut batch_rng, device),
+            None,
+            reward,
+            0.1,
+        )
+        .into_data()
+        .try_to_vec::<f32>()
+        .expect("f32")[0]
+    };
     PairLabels {
         psi: e_cond.iter().map(|e| e - e_marg).collect(),
         e_cond,

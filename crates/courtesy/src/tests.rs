@@ -85,7 +85,7 @@ fn courtesy_gradient_matches_finite_differences() {
             batch.future_valid.clone(),
         );
         let grads = GradientsParams::from_grads(loss.backward(), &model);
-        model = optim.step(1e-2, model, grads);
+        model = optim.step(3e-3, model, grads);
     }
     let t = sample.future_valid.len();
     let base: Vec<f32> = (0..t)

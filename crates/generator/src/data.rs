@@ -10,6 +10,8 @@ use scbg_model::Multipath;
 /// One pair role with its labelled futures.
 #[derive(Debug, Clone)]
 pub struct Example {
+    /// The scenario the pair comes from.
+    pub scenario_id: String,
     /// A (the agent whose reward counts), standardised, conditioned on B's logged future.
     pub a: AgentSample,
     /// B (the generated agent), standardised, marginal.
@@ -22,6 +24,8 @@ pub struct Example {
     pub logged_valid: Vec<bool>,
     /// `[1 + M]` ψ labels.
     pub psi: Vec<f32>,
+    /// E[r(Y_A) | x] as the labels estimated it (ψ = E[r(Y_A) | x, y_B] − this).
+    pub e_marg: f32,
     /// B's scene embedding from the frozen predictor encoder (marginal mode).
     pub b_embedding: Vec<f32>,
 }
@@ -63,33 +67,17 @@ pub fn build_examples(
                         .iter()
                         .map(|f| change_frame(f, &a.world_from_agent, &b.world_from_agent))
                         .collect();
-                    let (pa, pb) = (a.world_from_agent, b.world_from_agent);
-                    let (tx, ty) = pa.agent_from_world(pb.x_m, pb.y_m);
-                    let a_from_b = [
-                        scbg_scene::wrap_angle_rad(pb.heading_rad - pa.heading_rad) as f32,
-                        tx as f32,
-                        ty as f32,
-                    ];
-                    // B's frozen embedding (marginal mode), computed once.
-                    let mut batch_rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
-                    let marginal = scbg_model::BatchAugment {
-                        condition_dropout: 1.0,
-                        history_mask_prob: 0.0,
-                    };
-                    let batch_b =
-                        scbg_model::Batch::from_samples(&[&b], &marginal, &mut batch_rng, device);
-                    let b_embedding = predictor
-                        .encode(&batch_b)
-                        .into_data()
-                        .try_to_vec::<f32>()
-                        .expect("f32 tensor");
+                    let a_from_b = a_from_b(&a, &b);
+                    let b_embedding = marginal_embedding(predictor, &b, device);
                     out.push(Example {
+                        scenario_id: scene.scenario_id.clone(),
                         logged_valid: a.condition_future_valid.clone(),
                         a,
                         b,
                         a_from_b,
                         futures_b,
                         psi: labels.psi,
+                        e_marg: labels.e_marg,
                         b_embedding,
                     });
                 }
@@ -97,4 +85,34 @@ pub fn build_examples(
         }
     }
     out
+}
+
+/// B's frame in A's frame: `[heading difference (rad), B's origin x, y in A's frame (m)]`.
+pub fn a_from_b(a: &AgentSample, b: &AgentSample) -> [f32; 3] {
+    let (pa, pb) = (a.world_from_agent, b.world_from_agent);
+    let (tx, ty) = pa.agent_from_world(pb.x_m, pb.y_m);
+    [
+        scbg_scene::wrap_angle_rad(pb.heading_rad - pa.heading_rad) as f32,
+        tx as f32,
+        ty as f32,
+    ]
+}
+
+/// The frozen predictor's scene embedding of a (standardised) sample in marginal mode.
+pub fn marginal_embedding(
+    predictor: &Multipath,
+    sample: &AgentSample,
+    device: &Device,
+) -> Vec<f32> {
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
+    let marginal = scbg_model::BatchAugment {
+        condition_dropout: 1.0,
+        history_mask_prob: 0.0,
+    };
+    let batch = scbg_model::Batch::from_samples(&[sample], &marginal, &mut rng, device);
+    predictor
+        .encode(&batch)
+        .into_data()
+        .try_to_vec::<f32>()
+        .expect("f32 tensor")
 }

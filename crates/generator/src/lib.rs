@@ -12,17 +12,21 @@
 //! **Architecture invariant:** no files or CLI; the predictor is passed in and never updated.
 
 mod data;
+pub mod eval;
+mod infer;
 mod model;
 mod range;
 mod train;
 
-pub use data::{Example, build_examples};
+pub use data::{Example, a_from_b, build_examples, marginal_embedding};
+pub use infer::{GenerateError, Generated, Scbg};
 pub use model::{Generator, GeneratorConfig};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, range_step, stored_embeddings,
 };
 pub use train::{
-    StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss, train_step,
+    StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss, threshold_value,
+    train_step,
 };
 
 #[cfg(test)]

@@ -15,6 +15,14 @@ pub struct GeneratorConfig {
     /// Hidden widths of the decoder MLP.
     pub hidden: Vec<usize>,
     pub future_steps: usize,
+    /// ψ is divided by this before the network sees it (the spread of the training labels;
+    /// ψ's scale depends on the data and the predictor, from ~0.03 to several m/s).
+    #[serde(default = "one")]
+    pub psi_scale: f32,
+}
+
+fn one() -> f32 {
+    1.0
 }
 
 impl GeneratorConfig {
@@ -24,6 +32,7 @@ impl GeneratorConfig {
             psi_width: 32,
             hidden: vec![256, 256],
             future_steps: 80,
+            psi_scale: 1.0,
         }
     }
 
@@ -35,6 +44,7 @@ impl GeneratorConfig {
             psi_mlp: Mlp::init(&[1, self.psi_width, self.psi_width], device),
             decoder: Mlp::init(&dims, device),
             future_steps: self.future_steps,
+            psi_scale: self.psi_scale,
         }
     }
 }
@@ -45,6 +55,7 @@ pub struct Generator {
     pub psi_mlp: Mlp,
     pub decoder: Mlp,
     pub future_steps: usize,
+    pub psi_scale: f32,
 }
 
 impl Generator {
@@ -53,7 +64,9 @@ impl Generator {
     /// `-> [batch, T, 2]` positions in B's frame (metres)
     pub fn forward(&self, embedding: Tensor<2>, psi: Tensor<1>) -> Tensor<3> {
         let [b, _] = embedding.dims();
-        let psi = self.psi_mlp.forward(psi.reshape([b, 1]));
+        let psi = self
+            .psi_mlp
+            .forward(psi.reshape([b, 1]) / self.psi_scale.max(1e-12));
         let out = self.decoder.forward(Tensor::cat(vec![embedding, psi], 1));
         out.reshape([b, self.future_steps, 2]).cumsum(1)
     }

@@ -5,12 +5,13 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand::seq::IndexedRandom;
 use scbg_courtesy::losses::{courtesy_loss, huber_trajectory};
-use scbg_courtesy::{Reward, courtesy};
+use scbg_courtesy::{Reward, expected_reward};
 use scbg_features::AgentSample;
 use scbg_model::{Batch, BatchAugment, Multipath};
 
 use crate::data::Example;
 use crate::model::Generator;
+use crate::range::stored_embeddings;
 
 /// The paper's three variants (Table II).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -32,6 +33,20 @@ pub enum Threshold {
     Quantile(f32),
 }
 
+/// The |ψ| above which an example counts as high courtesy.
+pub fn threshold_value(examples: &[Example], threshold: Threshold) -> f32 {
+    match threshold {
+        Threshold::Absolute(v) => v,
+        Threshold::Quantile(q) => {
+            let mut s: Vec<f32> = examples.iter().map(|e| e.psi[0].abs()).collect();
+            s.sort_by(f32::total_cmp);
+            s.get(((s.len() as f32 * q) as usize).min(s.len().saturating_sub(1)))
+                .copied()
+                .unwrap_or(0.0)
+        }
+    }
+}
+
 /// Batches of example indices, half from |ψ_logged| above the threshold and half from the
 /// rest (drawn with replacement when a side runs short), `count` batches.
 pub fn balanced_batches(
@@ -42,16 +57,7 @@ pub fn balanced_batches(
     rng: &mut impl Rng,
 ) -> Vec<Vec<usize>> {
     let abs: Vec<f32> = examples.iter().map(|e| e.psi[0].abs()).collect();
-    let thr = match threshold {
-        Threshold::Absolute(v) => v,
-        Threshold::Quantile(q) => {
-            let mut s = abs.clone();
-            s.sort_by(f32::total_cmp);
-            s.get(((s.len() as f32 * q) as usize).min(s.len().saturating_sub(1)))
-                .copied()
-                .unwrap_or(0.0)
-        }
-    };
+    let thr = threshold_value(examples, threshold);
     let high: Vec<usize> = (0..abs.len()).filter(|&i| abs[i] > thr).collect();
     let low: Vec<usize> = (0..abs.len()).filter(|&i| abs[i] <= thr).collect();
     (0..count)
@@ -95,13 +101,10 @@ pub struct StepOptions {
     pub learning_rate: f64,
 }
 
-fn rows_tensor(rows: Vec<f32>, shape: [usize; 3], device: &Device) -> Tensor<3> {
-    Tensor::from_data(TensorData::new(rows, shape), device)
-}
-
 /// One step: `L = Huber(y⁰, ŷ⁰) + α Σ_m Huber(y^m, ŷ^m) + β Σ_m (ψ_m − J_φ(x, ŷ^m))²`
 /// (paper eqs. (5)–(7)). `predictor` lives on the autodiff device so that J_φ passes gradients
-/// to ŷ; only the generator's parameters are updated.
+/// to ŷ; only the generator's parameters are updated. Pass the predictor through
+/// `Module::no_grad` first: then the backward pass skips the predictor's own weights.
 pub fn train_step(
     generator: Generator,
     optimizer: &mut ModuleOptimizer,
@@ -122,6 +125,12 @@ pub fn train_step(
 }
 
 /// The loss of [`train_step`] as a tensor (for the update, and for gradient checks).
+///
+/// All `1 + M` futures of every example go through the generator (and, for
+/// [`Variant::Full`], through J_φ) as one batch of `(1 + M) · n` rows, `m`-major. The marginal
+/// term E[r(Y_A) | x] of J_φ does not depend on ŷ: it is the labels' value; the
+/// courtesy loss is measured in units of the generator's `psi_scale` (the labels' spread), so
+/// β means the same on data whose ψ is 0.03 m/s wide or 3 m/s wide.
 pub fn step_loss(
     generator: &Generator,
     predictor: &Multipath,
@@ -131,84 +140,143 @@ pub fn step_loss(
 ) -> (Tensor<1>, StepLosses) {
     let n = examples.len();
     let t = examples[0].logged_valid.len();
-    let mut rng = rand_pcg::Pcg64Mcg::new(0x5eed);
-    let bs: Vec<&AgentSample> = examples.iter().map(|e| &e.b).collect();
-    let as_: Vec<&AgentSample> = examples.iter().map(|e| &e.a).collect();
-    let batch_b = Batch::from_samples(
-        &bs,
-        &BatchAugment {
-            condition_dropout: 1.0,
-            history_mask_prob: 0.0,
-        },
-        &mut rng,
-        device,
-    );
-    let embedding = predictor.encode(&batch_b).detach();
-    let batch_a = (options.variant == Variant::Full)
-        .then(|| Batch::from_samples(&as_, &BatchAugment::default(), &mut rng, device));
     let m_count = match options.variant {
         Variant::Baseline => 1,
         _ => examples.iter().map(|e| e.psi.len()).min().unwrap_or(1),
     };
-    // B's frame → A's frame, per example: rotation by θ then translation.
-    let (cos, sin): (Vec<f32>, Vec<f32>) = examples
-        .iter()
-        .map(|e| (e.a_from_b[0].cos(), e.a_from_b[0].sin()))
-        .unzip();
-    let col = |v: Vec<f32>| Tensor::<1>::from_data(TensorData::new(v, [n]), device).reshape([n, 1]);
-    let (cos, sin) = (col(cos), col(sin));
-    let tx = col(examples.iter().map(|e| e.a_from_b[1]).collect());
-    let ty = col(examples.iter().map(|e| e.a_from_b[2]).collect());
-    let mut traj_total: Option<Tensor<1>> = None;
-    let mut court_total: Option<Tensor<1>> = None;
-    for m in 0..m_count {
-        let psi = Tensor::<1>::from_data(
-            TensorData::new(examples.iter().map(|e| e.psi[m]).collect(), [n]),
-            device,
-        );
-        let target = rows_tensor(
-            examples
-                .iter()
-                .flat_map(|e| e.futures_b[m].iter().flat_map(|p| [p[0], p[1]]))
+    let rows = n * m_count;
+    let embedding = repeat_rows(stored_embeddings(examples, device), m_count);
+    let psi = Tensor::<1>::from_data(
+        TensorData::new(
+            (0..m_count)
+                .flat_map(|m| examples.iter().map(move |e| e.psi[m]))
                 .collect(),
-            [n, t, 2],
+            [rows],
+        ),
+        device,
+    );
+    let target = Tensor::<3>::from_data(
+        TensorData::new(
+            (0..m_count)
+                .flat_map(|m| {
+                    examples
+                        .iter()
+                        .flat_map(move |e| e.futures_b[m].iter().flat_map(|p| [p[0], p[1]]))
+                })
+                .collect(),
+            [rows, t, 2],
+        ),
+        device,
+    );
+    let valid = Tensor::<2>::from_data(
+        TensorData::new(
+            (0..m_count)
+                .flat_map(|m| {
+                    examples.iter().flat_map(move |e| {
+                        (0..t).map(move |s| f32::from(u8::from(m > 0 || e.logged_valid[s])))
+                    })
+                })
+                .collect(),
+            [rows, t],
+        ),
+        device,
+    );
+    let pred = generator.forward(embedding, psi.clone());
+    let mut traj = huber_trajectory(
+        pred.clone().narrow(0, 0, n),
+        target.clone().narrow(0, 0, n),
+        valid.clone().narrow(0, 0, n),
+        options.huber_delta,
+    );
+    if m_count > 1 {
+        // Σ_m of per-future means = (M) × the mean over the sampled rows (equal valid counts).
+        let sampled = huber_trajectory(
+            pred.clone().narrow(0, n, rows - n),
+            target.narrow(0, n, rows - n),
+            valid.narrow(0, n, rows - n),
+            options.huber_delta,
+        );
+        traj = traj + sampled * (options.alpha * (m_count - 1) as f32);
+    }
+    let court = (options.variant == Variant::Full).then(|| {
+        let batch_a = a_batch(examples, device);
+        // E[r(Y_A) | x] as in the labels (a constant for ŷ).
+        let e_marg = Tensor::<1>::from_data(
+            TensorData::new(
+                (0..m_count)
+                    .flat_map(|_| examples.iter().map(|e| e.e_marg))
+                    .collect(),
+                [rows],
+            ),
             device,
         );
-        let valid: Vec<f32> = examples
-            .iter()
-            .flat_map(|e| (0..t).map(move |s| if m > 0 || e.logged_valid[s] { 1.0 } else { 0.0 }))
-            .collect();
-        let valid = Tensor::<2>::from_data(TensorData::new(valid, [n, t]), device);
-        let pred = generator.forward(embedding.clone(), psi.clone());
-        let weight = if m == 0 { 1.0 } else { options.alpha };
-        let l = huber_trajectory(pred.clone(), target, valid, options.huber_delta) * weight;
-        traj_total = Some(match traj_total {
-            Some(acc) => acc + l,
-            None => l,
-        });
-        if let Some(batch_a) = &batch_a {
-            let x = pred.clone().narrow(2, 0, 1).reshape([n, t]);
-            let y = pred.narrow(2, 1, 1).reshape([n, t]);
-            let xa = x.clone() * cos.clone() - y.clone() * sin.clone() + tx.clone();
-            let ya = x * sin.clone() + y * cos.clone() + ty.clone();
-            let in_a = Tensor::stack::<3>(vec![xa, ya], 2);
-            let achieved = courtesy(predictor, batch_a, in_a, options.reward, 0.1).psi;
-            let c = courtesy_loss(psi, achieved);
-            court_total = Some(match court_total {
-                Some(acc) => acc + c,
-                None => c,
-            });
-        }
-    }
-    let traj = traj_total.expect("at least one target");
-    let total = match &court_total {
+        let in_a = b_to_a_frame(pred, examples, m_count, device);
+        let ones = Tensor::ones([rows, t, 1], device);
+        let e_cond = expected_reward(
+            predictor,
+            &batch_a.repeat(m_count),
+            Some(Tensor::cat(vec![in_a, ones], 2)),
+            options.reward,
+            STEP_SECS,
+        );
+        let scale = generator.psi_scale.max(1e-12);
+        courtesy_loss(psi / scale, (e_cond - e_marg) / scale) * m_count as f32
+    });
+    let total = match &court {
         Some(c) => traj.clone() * options.trajectory_weight + c.clone() * options.beta,
         None => traj.clone() * options.trajectory_weight,
     };
     let losses = StepLosses {
         trajectory: traj.into_scalar(),
-        courtesy: court_total.map_or(0.0, |c| c.into_scalar()),
+        courtesy: court.map_or(0.0, |c| c.into_scalar()),
         total: total.clone().into_scalar(),
     };
     (total, losses)
+}
+
+/// Time between future steps (10 Hz), seconds.
+pub(crate) const STEP_SECS: f32 = 0.1;
+
+/// `x` `times` times over along dim 0, block after block.
+pub(crate) fn repeat_rows(x: Tensor<2>, times: usize) -> Tensor<2> {
+    if times == 1 {
+        x
+    } else {
+        Tensor::cat(vec![x; times], 0)
+    }
+}
+
+/// A's samples as a batch without any augmentation (the condition is replaced by the caller).
+pub(crate) fn a_batch(examples: &[&Example], device: &Device) -> Batch {
+    let samples: Vec<&AgentSample> = examples.iter().map(|e| &e.a).collect();
+    let mut rng = rand_pcg::Pcg64Mcg::new(0x5eed);
+    Batch::from_samples(&samples, &BatchAugment::default(), &mut rng, device)
+}
+
+/// Trajectories in B's frame → A's frame, per example (row `k · n + i` belongs to example `i`).
+///
+/// # Shapes
+/// `pred: [times · n, T, 2]` `-> [times · n, T, 2]`
+pub(crate) fn b_to_a_frame(
+    pred: Tensor<3>,
+    examples: &[&Example],
+    times: usize,
+    device: &Device,
+) -> Tensor<3> {
+    let [rows, t, _] = pred.dims();
+    let col = |f: &dyn Fn(&Example) -> f32| {
+        let v: Vec<f32> = (0..times)
+            .flat_map(|_| examples.iter().map(|e| f(e)))
+            .collect();
+        Tensor::<1>::from_data(TensorData::new(v, [rows]), device).reshape([rows, 1])
+    };
+    let cos = col(&|e| e.a_from_b[0].cos());
+    let sin = col(&|e| e.a_from_b[0].sin());
+    let tx = col(&|e| e.a_from_b[1]);
+    let ty = col(&|e| e.a_from_b[2]);
+    let x = pred.clone().narrow(2, 0, 1).reshape([rows, t]);
+    let y = pred.narrow(2, 1, 1).reshape([rows, t]);
+    let xa = x.clone() * cos.clone() - y.clone() * sin.clone() + tx;
+    let ya = x * sin + y * cos + ty;
+    Tensor::stack::<3>(vec![xa, ya], 2)
 }

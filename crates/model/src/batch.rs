@@ -128,4 +128,28 @@ impl Batch {
             future_valid: t2(fv, [b, future]),
         }
     }
+
+    /// The batch `times` times over, block after block: row `k · batch + i` is sample `i`.
+    pub fn repeat(&self, times: usize) -> Self {
+        fn rep<const D: usize>(t: &Tensor<D>, times: usize) -> Tensor<D> {
+            if times == 1 {
+                t.clone()
+            } else {
+                Tensor::cat(vec![t.clone(); times], 0)
+            }
+        }
+        Self {
+            target_history: rep(&self.target_history, times),
+            target_diffs: rep(&self.target_diffs, times),
+            others_history: rep(&self.others_history, times),
+            others_diffs: rep(&self.others_diffs, times),
+            others_mask: rep(&self.others_mask, times),
+            road: rep(&self.road, times),
+            road_mask: rep(&self.road_mask, times),
+            condition: rep(&self.condition, times),
+            condition_flag: rep(&self.condition_flag, times),
+            future_xy: rep(&self.future_xy, times),
+            future_valid: rep(&self.future_valid, times),
+        }
+    }
 }

@@ -59,6 +59,32 @@ pub fn gmm_nll(out: &GmmOutput, target_xy: Tensor<3>, valid: Tensor<2>) -> Tenso
     nll.mean()
 }
 
+/// Cross-entropy of the mode probabilities against the mode closest to the ground truth (mean
+/// distance over valid steps), averaged over the batch — the classification term of MultiPath-
+/// style losses. In the mixture NLL alone, choosing the right mode is worth at most `log K`
+/// nats against hundreds from the regression, so mode probabilities (and with them anything
+/// the conditioning future should decide) learn slowly; this term gives them an O(1) signal.
+///
+/// # Shapes
+/// `out` (see [`GmmOutput`]), `target_xy: [batch, T, 2]`, `valid: [batch, T]` `-> [1]`
+pub fn mode_classification_loss(
+    out: &GmmOutput,
+    target_xy: Tensor<3>,
+    valid: Tensor<2>,
+) -> Tensor<1> {
+    let [b, k, t, _] = out.xy.dims();
+    let target = target_xy.reshape([b, 1, t, 2]).expand([b, k, t, 2]);
+    let dist = (target - out.xy.clone().detach())
+        .powf_scalar(2.0)
+        .sum_dim(3)
+        .sqrt()
+        .reshape([b, k, t]);
+    let v = valid.reshape([b, 1, t]).expand([b, k, t]);
+    let closest = (dist * v).sum_dim(2).reshape([b, k]).argmin(1); // [b, 1]
+    let log_pi = log_softmax(out.logits.clone(), 1);
+    log_pi.gather(1, closest).neg().mean()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -119,5 +145,25 @@ mod tests {
         let nll: f32 = gmm_nll(&out, target, Tensor::<2>::ones([1, 1], &d)).into_scalar();
         let quad = 2.0 * 1.25f32.sqrt() - 1.0;
         assert!((nll - 0.5 * quad).abs() < 1e-5, "{nll}");
+    }
+
+    #[test]
+    fn mode_classification_by_hand() {
+        // Two modes, two steps; target at the origin; mode 0 is 1 m away, mode 1 is 5 m away,
+        // except at an invalid step where mode 1 would be closer. π = (1/4, 3/4): CE = ln 4.
+        let d = Device::flex();
+        let out = GmmOutput {
+            xy: t4(
+                vec![1.0, 0.0, 100.0, 0.0, 5.0, 0.0, 0.0, 0.0],
+                [1, 2, 2, 2],
+                &d,
+            ),
+            cov_abc: t4(vec![0.0; 12], [1, 2, 2, 3], &d),
+            logits: Tensor::from_data(TensorData::new(vec![0.0f32, 3f32.ln()], [1, 2]), &d),
+        };
+        let target = Tensor::<3>::zeros([1, 2, 2], &d);
+        let valid = Tensor::<2>::from_data(TensorData::new(vec![1.0f32, 0.0], [1, 2]), &d);
+        let ce: f32 = mode_classification_loss(&out, target, valid).into_scalar();
+        assert!((ce - 4f32.ln()).abs() < 1e-5, "{ce}");
     }
 }

@@ -396,6 +396,225 @@ pub fn scatter(
     })
 }
 
+/// One line of a [`line_chart`]: points and an optional ± band (same length).
+#[derive(Debug, Clone, Default)]
+pub struct Series {
+    pub label: String,
+    pub points: Vec<(f64, f64)>,
+    pub band: Option<Vec<f64>>,
+}
+
+const PALETTE: [RGBColor; 6] = [
+    RGBColor(40, 90, 200),
+    RGBColor(240, 120, 0),
+    RGBColor(0, 150, 80),
+    RGBColor(200, 30, 60),
+    RGBColor(120, 60, 200),
+    RGBColor(0, 160, 160),
+];
+
+fn bounds(points: impl Iterator<Item = (f64, f64)>) -> ((f64, f64), (f64, f64)) {
+    let (x0, x1, y0, y1) = points.filter(|(x, y)| x.is_finite() && y.is_finite()).fold(
+        (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        ),
+        |(a, b, c, d), (x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
+    );
+    let pad = |a: f64, b: f64| {
+        if !a.is_finite() || !b.is_finite() {
+            (-1.0, 1.0)
+        } else if b - a < 1e-9 {
+            (a - 1.0, b + 1.0)
+        } else {
+            (a - 0.05 * (b - a), b + 0.05 * (b - a))
+        }
+    };
+    (pad(x0, x1), pad(y0, y1))
+}
+
+/// Lines with optional ± bands and a legend, e.g. input quantile → achieved courtesy (paper
+/// Fig. 4) or → A's expected speed (Fig. 5b).
+pub fn line_chart(
+    series: &[Series],
+    x_label: &str,
+    y_label: &str,
+    title: &str,
+    path: &Path,
+) -> Result<(), PlotError> {
+    let all = series.iter().flat_map(|s| {
+        s.points.iter().enumerate().flat_map(move |(i, &(x, y))| {
+            let b = s
+                .band
+                .as_ref()
+                .and_then(|b| b.get(i))
+                .copied()
+                .unwrap_or(0.0);
+            [(x, y - b), (x, y + b)]
+        })
+    });
+    let ((x0, x1), (y0, y1)) = bounds(all);
+    draw_png(path, (800, 600), |root| {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 18))
+            .margin(10)
+            .x_label_area_size(40)
+            .y_label_area_size(70)
+            .build_cartesian_2d(x0..x1, y0..y1)?;
+        chart
+            .configure_mesh()
+            .x_desc(x_label)
+            .y_desc(y_label)
+            .label_style(("sans-serif", 12))
+            .draw()?;
+        for (k, s) in series.iter().enumerate() {
+            let c = PALETTE[k % PALETTE.len()];
+            if let Some(band) = &s.band {
+                let upper = s.points.iter().zip(band).map(|(&(x, y), b)| (x, y + b));
+                let lower = s
+                    .points
+                    .iter()
+                    .zip(band)
+                    .rev()
+                    .map(|(&(x, y), b)| (x, y - b));
+                let poly: Vec<(f64, f64)> = upper.chain(lower).collect();
+                chart.draw_series(std::iter::once(Polygon::new(poly, c.mix(0.15).filled())))?;
+            }
+            chart
+                .draw_series(LineSeries::new(s.points.clone(), c.stroke_width(2)))?
+                .label(s.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], c.stroke_width(2))
+                });
+            chart.draw_series(
+                s.points
+                    .iter()
+                    .map(|&(x, y)| Circle::new((x, y), 3, c.filled())),
+            )?;
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 12))
+            .draw()?;
+        root.present()?;
+        Ok(())
+    })
+}
+
+/// The part of segment `p`–`q` inside the box `(x0, x1, y0, y1)` (Liang–Barsky).
+fn clip_segment(
+    p: (f64, f64),
+    q: (f64, f64),
+    (x0, x1, y0, y1): (f64, f64, f64, f64),
+) -> Option<((f64, f64), (f64, f64))> {
+    let (dx, dy) = (q.0 - p.0, q.1 - p.1);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (pk, qk) in [
+        (-dx, p.0 - x0),
+        (dx, x1 - p.0),
+        (-dy, p.1 - y0),
+        (dy, y1 - p.1),
+    ] {
+        if pk == 0.0 {
+            if qk < 0.0 {
+                return None;
+            }
+        } else {
+            let r = qk / pk;
+            if pk < 0.0 {
+                t0 = t0.max(r);
+            } else {
+                t1 = t1.min(r);
+            }
+        }
+    }
+    (t0 <= t1).then_some((
+        (p.0 + t0 * dx, p.1 + t0 * dy),
+        (p.0 + t1 * dx, p.1 + t1 * dy),
+    ))
+}
+
+/// One labelled polyline of [`trajectories`]; `rgb` is its colour.
+#[derive(Debug, Clone)]
+pub struct Line {
+    pub label: String,
+    pub rgb: (u8, u8, u8),
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Trajectories over grey background polylines (e.g. the road), equal axis scales, with a
+/// legend (paper Fig. 5a). Colours are RGB triples.
+pub fn trajectories(
+    background: &[Vec<(f64, f64)>],
+    lines: &[Line],
+    title: &str,
+    path: &Path,
+) -> Result<(), PlotError> {
+    let ((x0, x1), (y0, y1)) = bounds(lines.iter().flat_map(|l| l.points.iter().copied()));
+    // Square view around the trajectories, at least 40 m wide.
+    let (cx, cy) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+    let half = ((x1 - x0).max(y1 - y0) / 2.0 + 10.0).max(20.0);
+    let size = 800u32;
+    draw_png(path, (size, size), |root| {
+        root.fill(&WHITE)?;
+        let mut chart = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(10)
+            .x_label_area_size(30)
+            .y_label_area_size(40)
+            .build_cartesian_2d(cx - half..cx + half, cy - half..cy + half)?;
+        chart
+            .configure_mesh()
+            .disable_mesh()
+            .label_style(("sans-serif", 11))
+            .draw()?;
+        let bbox = (cx - half, cx + half, cy - half, cy + half);
+        for poly in background {
+            for seg in poly.windows(2) {
+                if let Some((p, q)) = clip_segment(seg[0], seg[1], bbox) {
+                    chart.draw_series(std::iter::once(PathElement::new(
+                        vec![p, q],
+                        RGBColor(190, 190, 190).stroke_width(1),
+                    )))?;
+                }
+            }
+        }
+        for Line {
+            label,
+            rgb: (r, g, b),
+            points: pts,
+        } in lines
+        {
+            let c = RGBColor(*r, *g, *b);
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    pts.clone(),
+                    c.stroke_width(2),
+                )))?
+                .label(label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 16, y)], c.stroke_width(2))
+                });
+            if let Some(&start) = pts.first() {
+                chart.draw_series(std::iter::once(Circle::new(start, 4, c.filled())))?;
+            }
+        }
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 11))
+            .draw()?;
+        root.present()?;
+        Ok(())
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -478,5 +697,49 @@ mod tests {
             &dir.path().join("s.png"),
         )
         .unwrap();
+    }
+
+    #[test]
+    fn line_chart_and_trajectories_png() {
+        let dir = tempfile::tempdir().unwrap();
+        let series = vec![
+            Series {
+                label: "full".into(),
+                points: vec![(0.1, -0.2), (0.5, 0.0), (0.9, 0.3)],
+                band: Some(vec![0.1, 0.1, 0.2]),
+            },
+            Series {
+                label: "flat".into(),
+                points: vec![(0.1, 0.0), (0.9, 0.0)],
+                band: None,
+            },
+        ];
+        line_chart(&series, "q", "ψ", "t", &dir.path().join("l.png")).unwrap();
+        let img = image::open(dir.path().join("l.png")).unwrap().to_rgb8();
+        assert!(img.pixels().any(|p| p.0 == [40, 90, 200]));
+        assert!(img.pixels().any(|p| p.0 == [240, 120, 0]));
+        // Empty input draws axes instead of failing.
+        line_chart(&[], "q", "ψ", "empty", &dir.path().join("e.png")).unwrap();
+        trajectories(
+            &[vec![(-50.0, 0.0), (50.0, 0.0)]],
+            &[
+                Line {
+                    label: "A".into(),
+                    rgb: (220, 20, 30),
+                    points: vec![(0.0, 0.0), (30.0, 0.0)],
+                },
+                Line {
+                    label: "B".into(),
+                    rgb: (40, 90, 200),
+                    points: vec![(0.0, 5.0), (20.0, 2.0)],
+                },
+            ],
+            "t",
+            &dir.path().join("t.png"),
+        )
+        .unwrap();
+        let img = image::open(dir.path().join("t.png")).unwrap().to_rgb8();
+        assert!(img.pixels().any(|p| p.0 == [220, 20, 30]));
+        assert!(img.pixels().any(|p| p.0 == [190, 190, 190]));
     }
 }

@@ -29,6 +29,8 @@ pub enum Command {
     /// Train models.
     #[command(subcommand)]
     Train(TrainCommand),
+    /// Generate B's future at a chosen courtesy quantile for a pair in a WOMD scenario file.
+    Generate(GenerateArgs),
     /// Evaluate models and predictions.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -49,8 +51,17 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 1500)]
     pub scenarios: usize,
     /// Predictor training epochs.
-    #[arg(long, default_value_t = 12)]
+    #[arg(long, default_value_t = 30)]
     pub epochs: usize,
+    /// Training epochs of each generator variant.
+    #[arg(long, default_value_t = 8)]
+    pub generator_epochs: usize,
+    /// Weight β of the courtesy loss (in units of the labels' ψ spread) for the full variant.
+    #[arg(long, default_value_t = 1.0)]
+    pub beta: f32,
+    /// How E[r(Y_A) | x] is estimated: conditional-average or direct (see `scbg label --help`).
+    #[arg(long, default_value = "conditional-average")]
+    pub marginal: String,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }
@@ -72,6 +83,12 @@ pub struct LabelArgs {
     /// Reward r(y_A): average_speed or progress.
     #[arg(long, default_value = "average_speed")]
     pub reward: String,
+    /// How E[r(Y_A) | x] is estimated: `conditional-average` (mean of the conditional
+    /// expectations over the sampled futures of B; removes the per-scene offset between the two
+    /// modes) or `direct` (the marginal mode, as in the paper).
+    #[arg(long, default_value = "conditional-average")]
+    pub marginal: String,
+
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Synthetic ground truth (ground_truth.jsonl) for the Spearman check against the latent courtesy.
@@ -106,6 +123,12 @@ pub struct TrainGeneratorArgs {
     /// Futures sampled from B's marginal prediction per pair role.
     #[arg(long, default_value_t = 8)]
     pub samples: usize,
+    /// How E[r(Y_A) | x] is estimated: `conditional-average` (mean of the conditional
+    /// expectations over the sampled futures of B; removes the per-scene offset between the two
+    /// modes) or `direct` (the marginal mode, as in the paper).
+    #[arg(long, default_value = "conditional-average")]
+    pub marginal: String,
+
     #[arg(long, default_value_t = 32)]
     pub batch_size: usize,
     /// Weight α of the sampled futures' trajectory loss.
@@ -149,6 +172,64 @@ pub enum EvalCommand {
     Predictor(EvalPredictorArgs),
     /// Waymo motion metrics of external predictions (JSON) against WOMD scenario files.
     Metrics(EvalMetricsArgs),
+    /// Evaluate SCBG generator variants: CourtesyMSE, TrajADE, correlation (paper Table II,
+    /// Figs. 4 and 5).
+    Scbg(EvalScbgArgs),
+}
+
+#[derive(Debug, Args)]
+pub struct EvalScbgArgs {
+    /// Generator folders (`scbg train generator --out`), one per variant; they must share one
+    /// predictor.
+    #[arg(long, required = true, num_args = 1..)]
+    pub model: Vec<PathBuf>,
+    /// Prepared cache folder.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
+    /// Evaluate on the validation split (by scenario id) or on every pair.
+    #[arg(long, value_parser = ["validation", "all"], default_value = "validation")]
+    pub split: String,
+    /// Folder for the figures (fig4_quantile_courtesy.png, fig5a_*.png, fig5b_*.png).
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Args)]
+pub struct GenerateArgs {
+    /// Generator folder (`scbg train generator --out`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
+    /// WOMD Scenario or tf.Example TFRecord file.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// Which scenario of the file (default: the first with both tracks).
+    #[arg(long)]
+    pub scenario_id: Option<String>,
+    /// Track id of A (whose reward the courtesy is about).
+    #[arg(long)]
+    pub a: i64,
+    /// Track id of B (the generated agent).
+    #[arg(long)]
+    pub b: i64,
+    /// Courtesy quantiles in [0, 1] (0.1 and 0.9 are the predicted range's ends).
+    #[arg(long, required = true, num_args = 1..)]
+    pub quantile: Vec<f32>,
+    /// Write the trajectories as JSON here instead of stdout.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Draw the scene with the generated futures of B.
+    #[arg(long)]
+    pub render: Option<PathBuf>,
 }
 
 #[derive(Debug, Args)]

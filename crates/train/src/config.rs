@@ -33,6 +33,13 @@ pub struct TrainConfig {
     pub max_road_segments: usize,
     /// Cap on marginal samples per window (all vehicles when 0).
     pub max_targets_per_window: usize,
+    /// `plateau` (multiply by `plateau_factor` after `plateau_patience` epochs without a better
+    /// validation loss) or `cosine` (per step from `learning_rate` down to 1 % of it at the
+    /// last step).
+    pub lr_schedule: String,
+    /// Weight of the mode-classification cross-entropy added to the GMM NLL
+    /// (`scbg_model::loss::mode_classification_loss`; 0 = NLL only).
+    pub classification_weight: f32,
     /// `flex`, `tch` or `cuda`.
     pub backend: String,
 }
@@ -56,6 +63,8 @@ impl Default for TrainConfig {
             max_other_agents: 16,
             max_road_segments: 64,
             max_targets_per_window: 4,
+            lr_schedule: "cosine".into(),
+            classification_weight: 1.0,
             backend: "flex".into(),
         }
     }
@@ -89,6 +98,17 @@ impl TrainConfig {
         if !(0.0..1.0).contains(&self.validation_fraction) {
             return Err(ConfigError::Invalid(
                 "validation_fraction must be in [0, 1)".into(),
+            ));
+        }
+        if !["plateau", "cosine"].contains(&self.lr_schedule.as_str()) {
+            return Err(ConfigError::Invalid(format!(
+                "lr_schedule {:?}: expected \"plateau\" or \"cosine\"",
+                self.lr_schedule
+            )));
+        }
+        if !self.classification_weight.is_finite() || self.classification_weight < 0.0 {
+            return Err(ConfigError::Invalid(
+                "classification_weight must be finite and >= 0".into(),
             ));
         }
         Ok(())

@@ -7,7 +7,7 @@ use scbg_features::cache::{Manifest, ShardSummary, ShardWriter};
 use scbg_features::{PairConfig, PreparedScene, WindowConfig};
 
 use crate::config::TrainConfig;
-use crate::{Checkpoint, NoProgress, train};
+use crate::{Checkpoint, NoProgress, Progress, train};
 
 /// Writes a prepared cache of `n` synthetic scenarios.
 pub(crate) fn tiny_cache(dir: &Path, n: u64) {
@@ -100,17 +100,16 @@ fn resume_gives_the_same_weights_as_an_uninterrupted_run() {
         "{:?}",
         ckpt.history
     );
+    // The same 2-epoch run, interrupted after its first epoch, then resumed.
+    struct StopAfterOne;
+    impl Progress for StopAfterOne {
+        fn stop_requested(&self) -> bool {
+            true
+        }
+    }
     let resumed = dir.path().join("resumed");
-    train(&data, &resumed, &tiny_config(1), false, &NoProgress).unwrap();
-    // Continue to 2 epochs: the checkpoint's config says 1, so rewrite it as a 2-epoch run
-    // would have been started (the epoch count is the only difference).
-    let mut c = Checkpoint::read(&resumed).unwrap();
-    c.train_config.epochs = 2;
-    std::fs::write(
-        resumed.join(crate::checkpoint::CHECKPOINT_FILE),
-        serde_json::to_string(&c).unwrap(),
-    )
-    .unwrap();
+    let first = train(&data, &resumed, &tiny_config(2), false, &StopAfterOne).unwrap();
+    assert_eq!(first.state.epoch, 1);
     train(&data, &resumed, &tiny_config(2), true, &NoProgress).unwrap();
     let (a, b) = (weights(&straight), weights(&resumed));
     assert_eq!(a.len(), b.len());

@@ -10,6 +10,7 @@ use rand::SeedableRng;
 use rand::seq::SliceRandom;
 use scbg_features::AgentSample;
 use scbg_features::cache::{CacheError, PreparedDataset};
+use scbg_model::loss::mode_classification_loss;
 use scbg_model::{Batch, BatchAugment, gmm_nll};
 
 use crate::checkpoint::{Checkpoint, CheckpointError, EpochReport, TrainState};
@@ -38,6 +39,11 @@ pub trait Progress {
     fn epoch_start(&self, _epoch: usize, _batches: usize) {}
     fn batch_done(&self, _loss: f64) {}
     fn epoch_end(&self, _report: &EpochReport) {}
+    /// Asked after each epoch's checkpoint is saved: `true` ends training there, as an
+    /// interruption would (`--resume` continues from that checkpoint).
+    fn stop_requested(&self) -> bool {
+        false
+    }
 }
 
 #[derive(Debug)]
@@ -132,11 +138,16 @@ pub fn train(
             let refs: Vec<&AgentSample> = chunk.iter().map(|&i| &train_set.samples[i]).collect();
             let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(mix(config.seed ^ 0x5CB6, state.step));
             let batch = Batch::from_samples(&refs, &augment, &mut rng, &device);
-            let loss = gmm_nll(
-                &model.forward(&batch),
-                batch.future_xy.clone(),
-                batch.future_valid.clone(),
-            );
+            let out = model.forward(&batch);
+            let mut loss = gmm_nll(&out, batch.future_xy.clone(), batch.future_valid.clone());
+            if config.classification_weight != 0.0 {
+                loss = loss
+                    + mode_classification_loss(
+                        &out,
+                        batch.future_xy.clone(),
+                        batch.future_valid.clone(),
+                    ) * config.classification_weight;
+            }
             let value: f32 = loss.clone().into_scalar();
             state.step += 1;
             if !value.is_finite() {
@@ -148,7 +159,8 @@ pub fn train(
                 continue;
             }
             let grads = GradientsParams::from_grads(loss.backward(), &model);
-            model = optim.step(state.learning_rate, model, grads);
+            let lr = state.learning_rate * schedule_factor(config, state.step - 1, batches);
+            model = optim.step(lr, model, grads);
             loss_sum += f64::from(value);
             loss_n += 1;
             progress.batch_done(f64::from(value));
@@ -190,7 +202,9 @@ pub fn train(
         match (val_loss, state.best_val_loss) {
             (Some(v), Some(best)) if v >= best => {
                 state.epochs_without_improvement += 1;
-                if state.epochs_without_improvement >= config.plateau_patience {
+                if config.lr_schedule != "cosine"
+                    && state.epochs_without_improvement >= config.plateau_patience
+                {
                     state.learning_rate *= config.plateau_factor;
                     state.epochs_without_improvement = 0;
                 }
@@ -211,7 +225,8 @@ pub fn train(
             },
             val_loss,
             val_min_ade_8s,
-            learning_rate: state.learning_rate,
+            learning_rate: state.learning_rate
+                * schedule_factor(config, state.step.saturating_sub(1), batches),
             skipped_batches: skipped,
             seconds: started.elapsed().as_secs_f64(),
         };
@@ -228,9 +243,22 @@ pub fn train(
         };
         ckpt.clone().save(out_dir, &model, &optim)?;
         last = Some(Checkpoint::read(out_dir)?);
+        if progress.stop_requested() {
+            break;
+        }
     }
     match last {
         Some(c) => Ok(c),
         None => Ok(Checkpoint::read(out_dir)?),
     }
+}
+
+/// The learning-rate multiplier of the schedule at optimizer step `step` (0-based).
+fn schedule_factor(config: &TrainConfig, step: u64, batches_per_epoch: usize) -> f64 {
+    if config.lr_schedule != "cosine" {
+        return 1.0;
+    }
+    let total = (config.epochs * batches_per_epoch).max(1) as f64;
+    let progress = (step as f64 / total).min(1.0);
+    (0.5 * (1.0 + (std::f64::consts::PI * progress).cos())).max(0.01)
 }

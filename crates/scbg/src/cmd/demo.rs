@@ -1,8 +1,9 @@
 //! `scbg demo`: the README's main command — the pipeline end to end, with a report.
 //!
-//! Today: synthetic data (or the user's WOMD files) → prepared cache → Multipath++ predictor
-//! (marginal + conditional, cpu-small) → evaluation beside the baselines → report. The
-//! courtesy labelling, the SCBG generator and its evaluation join here as they land.
+//! Synthetic data (or the user's WOMD files) → prepared cache → Multipath++ predictor, marginal
+//! and conditional, cpu-small → evaluation beside the baselines → courtesy labels, with the
+//! ground-truth check on synthetic data → the three generator variants and the range
+//! predictor → the paper's evaluation (Table II, Figs. 4–5) → report.md and report.json.
 
 use std::io::Write;
 use std::path::Path;
@@ -17,7 +18,7 @@ fn stage(n: usize, total: usize, what: &str) {
     eprintln!("\n[{n}/{total}] {what}");
 }
 
-fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
+pub(crate) fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -34,7 +35,7 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let out = &args.out;
     std::fs::create_dir_all(out.join("figures"))
         .with_context(|| format!("creating {}", out.display()))?;
-    let total = 6;
+    let total = 8;
     let inputs: Vec<String> = if args.data.is_empty() {
         stage(
             1,
@@ -82,8 +83,6 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let config = scbg_train::TrainConfig {
         epochs: args.epochs,
         seed: args.seed,
-        condition_dropout: 0.5,
-        plateau_patience: 3,
         ..Default::default()
     };
     let predictor_dir = out.join("predictor");
@@ -120,6 +119,7 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         out: labels_dir.clone(),
         samples: 8,
         reward: "average_speed".into(),
+        marginal: args.marginal.clone(),
         seed: args.seed,
         ground_truth,
     })?;
@@ -128,7 +128,76 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         out.join("figures/psi_histogram.png"),
     )?;
 
-    stage(6, total, "writing figures and the report");
+    stage(
+        6,
+        total,
+        &format!(
+            "training the SCBG generator variants (baseline, aug, full; {} epochs each) and the range predictor",
+            args.generator_epochs
+        ),
+    );
+    let predictors = super::generator::load_predictors(&predictor_dir)?;
+    let marginal = super::label::parse_marginal(&args.marginal)?;
+    eprintln!("labelling the training split for the generator (logged + 8 sampled futures of B)");
+    let examples = super::generator::examples_for_split(
+        &predictors.plain,
+        &predictors.ckpt,
+        &predictors.plain_device,
+        &cache,
+        Some(scbg_train::data::Split::Train),
+        scbg_courtesy::label::LabelOptions {
+            samples: 8,
+            reward: scbg_courtesy::Reward::AverageSpeed,
+            marginal,
+        },
+        args.seed,
+    )?;
+    let mut generator_dirs = Vec::new();
+    let mut generator_seconds = serde_json::Map::new();
+    for variant in [
+        scbg_generator::Variant::Baseline,
+        scbg_generator::Variant::Augmented,
+        scbg_generator::Variant::Full,
+    ] {
+        let name = super::generator::variant_name(variant);
+        let dir = out.join(format!("generator_{name}"));
+        let saved = super::generator::train_variant(
+            &predictors,
+            &examples,
+            &super::generator::VariantSettings {
+                variant,
+                epochs: args.generator_epochs,
+                batch_size: 32,
+                alpha: 0.5,
+                beta: args.beta,
+                threshold: "q0.8".into(),
+                learning_rate: 1e-3,
+                range_steps: 300,
+                seed: args.seed,
+                marginal,
+            },
+            &dir,
+        )?;
+        generator_seconds.insert(name.into(), json!(saved.seconds));
+        generator_dirs.push(dir);
+    }
+    drop(predictors);
+
+    stage(
+        7,
+        total,
+        "evaluating the generators on held-out pairs (CourtesyMSE, TrajADE, correlation; Figs. 4–5)",
+    );
+    let scbg_eval = super::eval_scbg::evaluate_scbg(
+        &generator_dirs,
+        &cache,
+        None,
+        Some(scbg_train::data::Split::Validation),
+        args.seed,
+        Some(&out.join("figures")),
+    )?;
+
+    stage(8, total, "writing figures and the report");
     let first_file = crate::inputs::expand(&inputs)?
         .into_iter()
         .next()
@@ -161,22 +230,39 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         .filter(|r| r.sample == 0)
         .map(|r| f64::from(r.psi))
         .collect();
+    let within = super::label::within_pair_std(&labels.rows);
+    let checks = acceptance_checks(&scbg_eval);
     let report_json = json!({
         "data": {"inputs": inputs, "scenarios": manifest.total.scenarios, "windows": manifest.total.windows, "pairs": manifest.total.pairs, "skipped": manifest.total.skipped},
         "predictor": predictor_json,
-        "labels": {"futures": labels.rows.len(), "logged": logged.len()},
+        "labels": {"futures": labels.rows.len(), "logged": logged.len(), "psi_within_pair_std": within},
         "spearman_latent": spearman,
+        "variants": scbg_eval.variants_json(),
+        "scbg_eval": {"examples": scbg_eval.examples, "high_threshold_psi": scbg_eval.high_threshold_psi, "psi_min": scbg_eval.psi_range.0, "psi_max": scbg_eval.psi_range.1, "figures": scbg_eval.figures},
+        "checks": checks.iter().map(|(k, v, _)| (k.to_string(), json!(v))).collect::<serde_json::Map<_, _>>(),
+        "generator_seconds": generator_seconds,
         "seconds": started.elapsed().as_secs_f64(),
     });
     write_atomic(
         &out.join("report.json"),
         &serde_json::to_string_pretty(&report_json)?,
     )?;
+    let fig5a: String = scbg_eval
+        .figures
+        .iter()
+        .filter(|f| f.starts_with("fig5a"))
+        .map(|f| format!("![{f}](figures/{f})\n"))
+        .collect();
     let md = format!(
         "# scbg demo report\n\nData: {} scenarios, {} windows, {} interacting pairs (skipped: {:?}).\n\n\
          ## Predictor (paper Table I layout, held-out scenarios)\n\n{}\n\
-         ## Courtesy labels (paper Fig. 3)\n\n{} labelled futures ({} logged).\n\n![psi](figures/psi_histogram.png)\n\n\
-         Ground-truth check — Spearman(ψ of the logged future, latent courtesy of the generator):\n\n{}\n\
+         ## Courtesy labels (paper Fig. 3)\n\n{} labelled futures ({} logged); ψ std within a pair role (the part B's future decides): {:.4}.\n\n![psi](figures/psi_histogram.png)\n\n\
+         Ground-truth check — Spearman(ψ of the logged future, latent courtesy of the generator):\n\n{}\n\n\
+         ## SCBG generator (paper Table II layout, held-out pairs)\n\n{}\n\
+         Acceptance checks (as measured):\n\n{}\n\n\
+         ### Fig. 4 — input quantile → courtesy of the generated trajectory\n\n![fig4](figures/fig4_quantile_courtesy.png)\n\n\
+         ### Fig. 5a — B generated at quantiles 0.1…0.9 (full variant), A's logged future in red\n\n{}\n\
+         ### Fig. 5b — A's expected speed vs quantile\n\n![fig5b](figures/fig5b_quantile_speed.png)\n\n\
          ![scene](figures/scene.png)\n\nRun time: {:.0} s.\n",
         manifest.total.scenarios,
         manifest.total.windows,
@@ -185,6 +271,7 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         eval.to_markdown(),
         labels.rows.len(),
         logged.len(),
+        within,
         if labels.spearman_latent.is_empty() {
             "(no synthetic ground truth for this data)".to_string()
         } else {
@@ -200,6 +287,13 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
                 .collect::<Vec<_>>()
                 .join("\n")
         },
+        scbg_eval.to_markdown(),
+        checks
+            .iter()
+            .map(|(_, ok, text)| format!("- [{}] {text}", if *ok { "x" } else { " " }))
+            .collect::<Vec<_>>()
+            .join("\n"),
+        fig5a,
         started.elapsed().as_secs_f64()
     );
     write_atomic(&out.join("report.md"), &md)?;
@@ -227,8 +321,51 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
             rho.map_or("-".into(), |r| format!("{r:.3}"))
         );
     }
+    eprint!("{}", scbg_eval.to_markdown());
+    for (_, ok, text) in &checks {
+        eprintln!("[{}] {text}", if *ok { "ok" } else { "MISS" });
+    }
     eprintln!("report: {}", out.join("report.md").display());
     Ok(())
+}
+
+/// The issue's acceptance points on the demo's held-out split: (key, passed, description).
+fn acceptance_checks(e: &super::eval_scbg::ScbgEval) -> Vec<(&'static str, bool, String)> {
+    let get = |name: &str| e.variants.iter().find(|(n, _)| n == name).map(|(_, v)| v);
+    let mut out = Vec::new();
+    if let Some(full) = get("full") {
+        let mean = |m: &Option<scbg_generator::eval::MeanStd>| m.map_or(f64::NAN, |m| m.mean);
+        let (range, arb) = (
+            mean(&full.courtesy_mse_range),
+            mean(&full.courtesy_mse_arbitrary),
+        );
+        out.push((
+            "range_below_arbitrary",
+            range < arb,
+            format!("full: CourtesyMSE(range) {range:.3e} < CourtesyMSE(arbitrary) {arb:.3e}"),
+        ));
+        let corr = full.corr_quantile.unwrap_or(f64::NAN);
+        out.push((
+            "corr_quantile_at_least_0_5",
+            corr >= 0.5,
+            format!("full: corr(quantile, courtesy) {corr:.3} ≥ 0.5"),
+        ));
+        if let Some(base) = get("baseline") {
+            let (fd, bd) = (mean(&full.courtesy_mse_data), mean(&base.courtesy_mse_data));
+            out.push((
+                "full_courtesy_mse_data_no_worse",
+                fd <= bd,
+                format!("CourtesyMSE(data): full {fd:.3e} ≤ baseline {bd:.3e}"),
+            ));
+            let (ft, bt) = (mean(&full.traj_ade), mean(&base.traj_ade));
+            out.push((
+                "full_traj_ade_no_worse",
+                ft <= bt,
+                format!("TrajADE: full {ft:.3} m ≤ baseline {bt:.3} m"),
+            ));
+        }
+    }
+    out
 }
 
 fn toml_of(config: &scbg_train::TrainConfig) -> anyhow::Result<String> {

@@ -9,7 +9,7 @@ use arrow_array::{ArrayRef, Float32Array, Int64Array, RecordBatch, StringArray, 
 use arrow_schema::{DataType, Field, Schema};
 use rand::SeedableRng;
 use scbg_courtesy::Reward;
-use scbg_courtesy::label::{LabelOptions, label_pair, marginal_mixtures};
+use scbg_courtesy::label::{LabelOptions, MarginalEstimate, label_pair, marginal_mixtures};
 use scbg_features::SampleBuilder;
 use scbg_features::cache::{PreparedDataset, Shard};
 use scbg_train::Checkpoint;
@@ -165,6 +165,7 @@ fn label_shard(
 ) -> anyhow::Result<Vec<LabelRow>> {
     let device = scbg_model::device::device(&ckpt.train_config.backend)?;
     let features = ckpt.train_config.feature_config();
+    let marginal = parse_marginal(&args.marginal)?;
     let mut rows = Vec::new();
     for i in 0..shard.len() {
         let scene = shard.get(i)?;
@@ -192,6 +193,7 @@ fn label_shard(
                         LabelOptions {
                             samples: args.samples,
                             reward,
+                            marginal,
                         },
                         &mut rng,
                         &device,
@@ -277,7 +279,36 @@ pub struct LabelSummary {
     pub spearman_latent: BTreeMap<String, (Option<f64>, usize)>,
 }
 
+/// The spread of ψ that B's future causes: the square root of the mean, over pair roles, of
+/// the variance of ψ across that role's futures (logged and sampled). When it is small next to
+/// the overall std, ψ says more about the scene than about what B does.
+pub fn within_pair_std(rows: &[LabelRow]) -> f64 {
+    let mut groups: BTreeMap<(&str, u32, i64, i64), Vec<f64>> = BTreeMap::new();
+    for r in rows {
+        groups
+            .entry((r.scenario_id.as_str(), r.window_step, r.a_id, r.b_id))
+            .or_default()
+            .push(f64::from(r.psi));
+    }
+    let vars: Vec<f64> = groups
+        .values()
+        .filter(|v| v.len() > 1)
+        .map(|v| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64
+        })
+        .collect();
+    (vars.iter().sum::<f64>() / vars.len().max(1) as f64).sqrt()
+}
+
+/// `--marginal direct|conditional-average`.
+pub fn parse_marginal(text: &str) -> anyhow::Result<MarginalEstimate> {
+    MarginalEstimate::parse(text)
+        .with_context(|| format!("--marginal {text:?}: expected direct or conditional-average"))
+}
+
 pub fn label(args: &LabelArgs) -> anyhow::Result<LabelSummary> {
+    parse_marginal(&args.marginal)?;
     let reward = Reward::parse(&args.reward)
         .with_context(|| format!("unknown reward {:?} (average_speed, progress)", args.reward))?;
     let ckpt = Checkpoint::read(&args.model)?;
@@ -321,6 +352,7 @@ pub fn label(args: &LabelArgs) -> anyhow::Result<LabelSummary> {
         (v.iter().map(|x| (x - mean(v)).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
     };
     let high = all.iter().filter(|p| p.abs() > 2.0).count();
+    let within = within_pair_std(&rows);
     scbg_plot::histogram(
         &logged,
         40,
@@ -336,18 +368,21 @@ pub fn label(args: &LabelArgs) -> anyhow::Result<LabelSummary> {
         "pairs_roles": logged.len(),
         "samples_per_pair": args.samples,
         "reward": reward.name(),
+        "marginal": args.marginal,
         "psi_logged": {"mean": mean(&logged), "std": std(&logged)},
+        "psi_within_pair_std": within,
         "psi_all": {"mean": mean(&all), "std": std(&all), "min": all.iter().copied().fold(f64::INFINITY, f64::min), "max": all.iter().copied().fold(f64::NEG_INFINITY, f64::max), "fraction_abs_gt_2": high as f64 / all.len() as f64},
         "spearman_latent": spearman.iter().map(|(f, (rho, n))| (f.clone(), json!({"rho": rho, "n": n}))).collect::<serde_json::Map<_, _>>(),
     });
     scbg_features::cache::write_json_atomic(&args.out.join("summary.json"), &summary)?;
     eprintln!(
-        "labelled {} futures ({} pair roles × {} each); ψ of logged futures: mean {:.3}, std {:.3}; |ψ| > 2 for {:.1} % of all",
+        "labelled {} futures ({} pair roles × {} each); ψ of logged futures: mean {:.3}, std {:.3}; std within a pair role {:.3}; |ψ| > 2 for {:.1} % of all",
         rows.len(),
         logged.len(),
         1 + args.samples,
         mean(&logged),
         std(&logged),
+        within,
         100.0 * high as f64 / all.len() as f64
     );
     for (family, (rho, n)) in &spearman {

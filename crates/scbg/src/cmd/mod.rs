@@ -4,6 +4,8 @@ mod bench;
 mod data;
 mod demo;
 mod eval;
+mod eval_scbg;
+mod generator;
 mod label;
 mod synth;
 mod train;
@@ -22,7 +24,9 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Synth(a)) => bench::synth(&a),
         Command::Bench(BenchCommand::Train(a)) => bench::train(&a),
         Command::Train(TrainCommand::Predictor(a)) => train::predictor(&a),
-        Command::Train(TrainCommand::Generator(a)) => train::generator(&a).map(|_| ()),
+        Command::Train(TrainCommand::Generator(a)) => generator::train(&a).map(|_| ()),
+        Command::Generate(a) => generator::generate(&a),
+        Command::Eval(EvalCommand::Scbg(a)) => eval_scbg::eval(&a).map(|_| ()),
         Command::Eval(EvalCommand::Predictor(a)) => eval::predictor(&a),
         Command::Eval(EvalCommand::Metrics(a)) => eval::metrics(&a),
     }

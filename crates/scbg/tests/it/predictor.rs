@@ -191,6 +191,8 @@ fn demo_writes_a_report() {
         "40",
         "--epochs",
         "1",
+        "--generator-epochs",
+        "1",
     ]);
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
@@ -199,9 +201,34 @@ fn demo_writes_a_report() {
         report["predictor"]["Marginal (interacting agents)"]["min_ade"].is_number(),
         "{report}"
     );
+    // The report.json layout.
+    for variant in ["baseline", "aug", "full"] {
+        let v = &report["variants"][variant];
+        for key in [
+            "courtesy_mse_data",
+            "courtesy_mse_range",
+            "courtesy_mse_arbitrary",
+            "traj_ade",
+        ] {
+            assert!(v[key]["mean"].is_number(), "{variant}.{key}: {report}");
+        }
+        assert!(v.get("corr_quantile").is_some() && v.get("corr_quantile_high").is_some());
+    }
+    let families = report["spearman_latent"].as_object().unwrap();
+    assert_eq!(families.len(), 3, "{report}");
+    assert!(report["checks"]["range_below_arbitrary"].is_boolean());
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("| Conditional (interacting agents) |"), "{md}");
-    assert!(out.join("figures/scene.png").is_file());
+    assert!(md.contains("| ①+②+③ courtesy loss |"), "{md}");
+    for f in [
+        "scene.png",
+        "psi_histogram.png",
+        "fig4_quantile_courtesy.png",
+        "fig5a_case1.png",
+        "fig5b_quantile_speed.png",
+    ] {
+        assert!(out.join("figures").join(f).is_file(), "{f}");
+    }
 }
 
 #[test]
@@ -288,6 +315,144 @@ fn train_generator_saves_generator_and_range_predictor() {
         dir.path().join("gen/generator.bpk").is_file()
             && dir.path().join("gen/range.bpk").is_file()
     );
+    scbg_ok(&[
+        "train",
+        "generator",
+        "--predictor",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("gen_base"),
+        "--variant",
+        "baseline",
+        "--epochs",
+        "1",
+        "--samples",
+        "2",
+        "--batch-size",
+        "8",
+        "--range-steps",
+        "20",
+    ]);
+
+    // `scbg generate` on a pair of the synthetic ground truth.
+    let gt = std::fs::read_to_string(dir.path().join("synth/ground_truth.jsonl")).unwrap();
+    let first: Value = serde_json::from_str(gt.lines().next().unwrap()).unwrap();
+    let (a, b) = (first["a_id"].to_string(), first["b_id"].to_string());
+    let file = std::fs::read_dir(dir.path().join("synth"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "tfrecord"))
+        .unwrap();
+    let file = file.display().to_string();
+    let sid = first["scenario_id"].as_str().unwrap();
+    scbg_ok(&[
+        "generate",
+        "--model",
+        &p("gen"),
+        "--scenario",
+        &file,
+        "--scenario-id",
+        sid,
+        "--a",
+        &a,
+        "--b",
+        &b,
+        "--quantile",
+        "0.1",
+        "0.5",
+        "0.9",
+        "--out",
+        &p("traj.json"),
+        "--render",
+        &p("traj.png"),
+    ]);
+    let traj: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("traj.json")).unwrap())
+            .unwrap();
+    let trajs = traj["trajectories"].as_array().unwrap();
+    assert_eq!(trajs.len(), 3);
+    assert_eq!(trajs[0]["world_xy_m"].as_array().unwrap().len(), 80);
+    assert!(trajs[0]["psi"].as_f64().unwrap() <= trajs[2]["psi"].as_f64().unwrap());
+    assert!(dir.path().join("traj.png").is_file());
+    // Bad requests name what is wrong and exit 2.
+    let bad = scbg(&[
+        "generate",
+        "--model",
+        &p("gen"),
+        "--scenario",
+        &file,
+        "--scenario-id",
+        sid,
+        "--a",
+        &a,
+        "--b",
+        "987654321",
+        "--quantile",
+        "0.5",
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("987654321"));
+    let bad = scbg(&[
+        "generate",
+        "--model",
+        &p("gen"),
+        "--scenario",
+        &file,
+        "--scenario-id",
+        sid,
+        "--a",
+        &a,
+        "--b",
+        &b,
+        "--quantile",
+        "1.5",
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("quantile"));
+
+    // `scbg eval scbg` over both variants, with figures.
+    let out = scbg_ok(&[
+        "eval",
+        "scbg",
+        "--model",
+        &p("gen_base"),
+        &p("gen"),
+        "--data",
+        &p("cache"),
+        "--split",
+        "all",
+        "--json",
+        "--figures",
+        &p("figs"),
+    ]);
+    let eval: Value = serde_json::from_str(&out).unwrap();
+    for variant in ["baseline", "full"] {
+        let v = &eval["variants"][variant];
+        for key in [
+            "courtesy_mse_data",
+            "courtesy_mse_range",
+            "courtesy_mse_arbitrary",
+            "traj_ade",
+        ] {
+            assert!(
+                v[key]["mean"].as_f64().unwrap().is_finite(),
+                "{variant} {key}"
+            );
+            assert!(v[key]["std"].as_f64().unwrap() >= 0.0);
+        }
+        assert!(v.get("corr_quantile").is_some() && v.get("corr_quantile_high").is_some());
+        assert_eq!(v["per_quantile"].as_array().unwrap().len(), 9);
+    }
+    for f in [
+        "fig4_quantile_courtesy.png",
+        "fig5a_case1.png",
+        "fig5b_quantile_speed.png",
+    ] {
+        assert!(dir.path().join("figs").join(f).is_file(), "{f}");
+    }
+
     // A malformed threshold is a clear error.
     let bad = scbg(&[
         "train",

@@ -1,0 +1,312 @@
+//! The paper's evaluation of a generator (Sec. IV-C, Table II, Figs. 4–5): pure functions of
+//! examples, the frozen predictor, the generator and the range predictor.
+//!
+//! Definitions (per held-out example, i.e. one ordered pair (A, B) in one window):
+//! - **CourtesyMSE** `(ψ − J_φ(x, g(x, ψ)))²`, mean ± std over the requested ψ values of every
+//!   example, for ψ = *data* (the label of B's logged future), *range* (the ψ of quantiles
+//!   0.1, 0.2, …, 0.9 of the predicted range, [`psi_for_quantile`]) and *arbitrary* (9 evenly
+//!   spaced values from the dataset's smallest to its largest ψ).
+//! - **TrajADE** mean distance between `g(x, ψ_data)` and B's logged future over its valid steps.
+//! - **corr_quantile** Pearson correlation of the input quantile and the achieved
+//!   `J_φ(x, g(x, ψ_q))`, pooled over all examples and the 9 quantiles; `corr_quantile_high`
+//!   the same over examples whose logged |ψ| exceeds the high-courtesy threshold.
+
+use burn::tensor::{Device, Tensor, TensorData};
+use scbg_courtesy::{Reward, expected_reward};
+use scbg_model::Multipath;
+use serde::Serialize;
+
+use crate::data::Example;
+use crate::model::Generator;
+use crate::range::{RangePredictor, psi_for_quantile, stored_embeddings};
+use crate::train::{STEP_SECS, a_batch, b_to_a_frame, repeat_rows};
+
+/// The quantiles of the *range* evaluation and of Fig. 4.
+pub const EVAL_QUANTILES: [f32; 9] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9];
+
+/// Generated futures of B and what J_φ says about them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measured {
+    /// `[example][k]` achieved ψ = E[r(Y_A) | x, ŷ] − E[r(Y_A) | x].
+    pub psi: Vec<Vec<f32>>,
+    /// `[example][k]` E[r(Y_A) | x, ŷ] (A's expected average speed for the default reward).
+    pub e_cond: Vec<Vec<f32>>,
+    /// `[example]` E[r(Y_A) | x].
+    pub e_marg: Vec<f32>,
+    /// `[example][k][T]` the generated futures in B's frame.
+    pub futures_b: Vec<Vec<Vec<[f32; 2]>>>,
+}
+
+fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+    t.into_data().try_to_vec::<f32>().expect("f32 tensor")
+}
+
+/// Generates B's future for every requested ψ of every example (`psi[i]` holds example `i`'s
+/// values, the same count for all) and measures J_φ on each. Run it on a plain device.
+pub fn generate_and_measure(
+    generator: &Generator,
+    predictor: &Multipath,
+    examples: &[&Example],
+    psi: &[Vec<f32>],
+    reward: Reward,
+    device: &Device,
+) -> Measured {
+    let k = psi.first().map_or(0, Vec::len);
+    let mut out = Measured {
+        psi: Vec::new(),
+        e_cond: Vec::new(),
+        e_marg: Vec::new(),
+        futures_b: Vec::new(),
+    };
+    if k == 0 {
+        return out;
+    }
+    // Chunks of about 256 generated futures per forward.
+    let chunk = (256 / k).max(1);
+    for (c, exs) in examples.chunks(chunk).enumerate() {
+        let n = exs.len();
+        let rows = n * k;
+        let psi_rows: Vec<f32> = (0..k)
+            .flat_map(|j| (0..n).map(move |i| psi[c * chunk + i][j]))
+            .collect();
+        let embedding = repeat_rows(stored_embeddings(exs, device), k);
+        let pred = generator.forward(
+            embedding,
+            Tensor::from_data(TensorData::new(psi_rows, [rows]), device),
+        );
+        let [_, t, _] = pred.dims();
+        let batch_a = a_batch(exs, device);
+        // E[r(Y_A) | x] as the labels estimated it.
+        let e_marg: Vec<f32> = exs.iter().map(|e| e.e_marg).collect();
+        let in_a = b_to_a_frame(pred.clone(), exs, k, device);
+        let e_cond = to_vec(expected_reward(
+            predictor,
+            &batch_a.repeat(k),
+            Some(Tensor::cat(
+                vec![in_a, Tensor::ones([rows, t, 1], device)],
+                2,
+            )),
+            reward,
+            STEP_SECS,
+        ));
+        let xy = to_vec(pred);
+        for i in 0..n {
+            let cond: Vec<f32> = (0..k).map(|j| e_cond[j * n + i]).collect();
+            out.psi.push(cond.iter().map(|e| e - e_marg[i]).collect());
+            out.e_cond.push(cond);
+            out.e_marg.push(e_marg[i]);
+            out.futures_b.push(
+                (0..k)
+                    .map(|j| {
+                        let base = (j * n + i) * t * 2;
+                        (0..t)
+                            .map(|s| [xy[base + 2 * s], xy[base + 2 * s + 1]])
+                            .collect()
+                    })
+                    .collect(),
+            );
+        }
+    }
+    out
+}
+
+/// The predicted 0.1 and 0.9 quantiles of ψ for each example.
+pub fn predicted_ranges(
+    range: &RangePredictor,
+    examples: &[&Example],
+    device: &Device,
+) -> Vec<(f32, f32)> {
+    if examples.is_empty() {
+        return Vec::new();
+    }
+    let (low, high) = range.forward(stored_embeddings(examples, device));
+    to_vec(low).into_iter().zip(to_vec(high)).collect()
+}
+
+/// Mean and standard deviation (population) of a set of values.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MeanStd {
+    pub mean: f64,
+    pub std: f64,
+}
+
+impl MeanStd {
+    pub fn of(values: &[f64]) -> Option<Self> {
+        if values.is_empty() {
+            return None;
+        }
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let var = values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        Some(Self {
+            mean,
+            std: var.sqrt(),
+        })
+    }
+}
+
+/// Achieved courtesy at one input quantile (Figs. 4 and 5b).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct QuantilePoint {
+    pub quantile: f32,
+    /// Requested ψ, mean over examples.
+    pub target_psi_mean: f64,
+    /// Achieved ψ, mean ± std over examples.
+    pub achieved_psi: MeanStd,
+    /// E[r(Y_A) | x, ŷ], mean over examples (m/s for the default reward).
+    pub a_expected_reward_mean: f64,
+}
+
+/// One variant's row of Table II, with the per-quantile curve.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct VariantEval {
+    pub courtesy_mse_data: Option<MeanStd>,
+    pub courtesy_mse_range: Option<MeanStd>,
+    pub courtesy_mse_arbitrary: Option<MeanStd>,
+    /// Metres.
+    pub traj_ade: Option<MeanStd>,
+    pub corr_quantile: Option<f64>,
+    pub corr_quantile_high: Option<f64>,
+    /// Mean over examples of the Pearson correlation of quantile and achieved ψ within the
+    /// example (the pooled correlations also count differences between scenes).
+    pub corr_quantile_within: Option<f64>,
+    pub examples: usize,
+    pub high_examples: usize,
+    /// Achieved ψ per quantile over all examples (empty without examples).
+    pub per_quantile: Vec<QuantilePoint>,
+    /// The same over the high-courtesy examples (paper Fig. 4).
+    pub per_quantile_high: Vec<QuantilePoint>,
+}
+
+/// What [`evaluate`] needs besides the models.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EvalOptions {
+    /// Dataset ψ range for the *arbitrary* evaluation.
+    pub arbitrary_min: f32,
+    pub arbitrary_max: f32,
+    /// |ψ_logged| above this counts as high courtesy (corr_quantile_high).
+    pub high_threshold: f32,
+    pub reward: Reward,
+}
+
+/// Evaluates one generator variant on held-out examples (see the module docs).
+pub fn evaluate(
+    generator: &Generator,
+    range: &RangePredictor,
+    predictor: &Multipath,
+    examples: &[&Example],
+    options: &EvalOptions,
+    device: &Device,
+) -> VariantEval {
+    let ranges = predicted_ranges(range, examples, device);
+    let nq = EVAL_QUANTILES.len();
+    let arbitrary: Vec<f32> = (0..nq)
+        .map(|j| {
+            options.arbitrary_min
+                + (options.arbitrary_max - options.arbitrary_min) * j as f32 / (nq - 1) as f32
+        })
+        .collect();
+    // Per example: [ψ_data, ψ of the 9 quantiles, the 9 arbitrary values].
+    let requested: Vec<Vec<f32>> = examples
+        .iter()
+        .zip(&ranges)
+        .map(|(e, &(lo, hi))| {
+            let mut v = vec![e.psi[0]];
+            v.extend(EVAL_QUANTILES.iter().map(|&q| psi_for_quantile(q, lo, hi)));
+            v.extend(&arbitrary);
+            v
+        })
+        .collect();
+    let m = generate_and_measure(
+        generator,
+        predictor,
+        examples,
+        &requested,
+        options.reward,
+        device,
+    );
+    let sq = |i: usize, j: usize| f64::from(requested[i][j] - m.psi[i][j]).powi(2);
+    let n = examples.len();
+    let data: Vec<f64> = (0..n).map(|i| sq(i, 0)).collect();
+    let range_err: Vec<f64> = (0..n)
+        .flat_map(|i| (1..=nq).map(move |j| (i, j)))
+        .map(|(i, j)| sq(i, j))
+        .collect();
+    let arbitrary_err: Vec<f64> = (0..n)
+        .flat_map(|i| (nq + 1..=2 * nq).map(move |j| (i, j)))
+        .map(|(i, j)| sq(i, j))
+        .collect();
+    let ade: Vec<f64> = examples
+        .iter()
+        .zip(&m.futures_b)
+        .filter_map(|(e, f)| {
+            let (sum, count) = f[0]
+                .iter()
+                .zip(&e.futures_b[0])
+                .zip(&e.logged_valid)
+                .filter(|(_, v)| **v)
+                .fold((0.0f64, 0usize), |(s, c), ((p, g), _)| {
+                    let d = f64::from((p[0] - g[0]).hypot(p[1] - g[1]));
+                    (s + d, c + 1)
+                });
+            (count > 0).then(|| sum / count as f64)
+        })
+        .collect();
+    let corr = |keep: &dyn Fn(usize) -> bool| {
+        let (mut q, mut a) = (Vec::new(), Vec::new());
+        for i in (0..n).filter(|&i| keep(i)) {
+            for (j, &qq) in EVAL_QUANTILES.iter().enumerate() {
+                q.push(f64::from(qq));
+                a.push(f64::from(m.psi[i][1 + j]));
+            }
+        }
+        scbg_metrics::pearson(&q, &a)
+    };
+    let high = |i: usize| examples[i].psi[0].abs() > options.high_threshold;
+    let curve = |keep: &dyn Fn(usize) -> bool| -> Vec<QuantilePoint> {
+        let idx: Vec<usize> = (0..n).filter(|&i| keep(i)).collect();
+        if idx.is_empty() {
+            return Vec::new();
+        }
+        EVAL_QUANTILES
+            .iter()
+            .enumerate()
+            .map(|(j, &q)| {
+                let achieved: Vec<f64> = idx.iter().map(|&i| f64::from(m.psi[i][1 + j])).collect();
+                let mean = |f: &dyn Fn(usize) -> f32| {
+                    idx.iter().map(|&i| f64::from(f(i))).sum::<f64>() / idx.len() as f64
+                };
+                QuantilePoint {
+                    quantile: q,
+                    target_psi_mean: mean(&|i| requested[i][1 + j]),
+                    achieved_psi: MeanStd::of(&achieved).expect("non-empty"),
+                    a_expected_reward_mean: mean(&|i| m.e_cond[i][1 + j]),
+                }
+            })
+            .collect()
+    };
+    let per_quantile = curve(&|_| true);
+    let per_quantile_high = curve(&high);
+    VariantEval {
+        courtesy_mse_data: MeanStd::of(&data),
+        courtesy_mse_range: MeanStd::of(&range_err),
+        courtesy_mse_arbitrary: MeanStd::of(&arbitrary_err),
+        traj_ade: MeanStd::of(&ade),
+        corr_quantile: corr(&|_| true),
+        corr_quantile_high: corr(&high),
+        corr_quantile_within: {
+            let q: Vec<f64> = EVAL_QUANTILES.iter().map(|&q| f64::from(q)).collect();
+            let per: Vec<f64> = (0..n)
+                .filter_map(|i| {
+                    let a: Vec<f64> = (0..nq).map(|j| f64::from(m.psi[i][1 + j])).collect();
+                    scbg_metrics::pearson(&q, &a)
+                })
+                .collect();
+            MeanStd::of(&per).map(|m| m.mean)
+        },
+        examples: n,
+        high_examples: (0..n).filter(|&i| high(i)).count(),
+        per_quantile,
+        per_quantile_high,
+    }
+}

@@ -1,0 +1,157 @@
+//! Inference: `generate(scene, a, b, quantile) → B's future in the world frame` (paper Sec.
+//! III-E). The user's quantile `q ∈ [0, 1]` becomes a ψ through the range predictor's 0.1 and
+//! 0.9 quantiles ([`psi_for_quantile`]), the generator turns ψ into B's future, and J_φ reports
+//! the courtesy the future actually achieves.
+
+use burn::tensor::Device;
+use rand::SeedableRng;
+use scbg_courtesy::label::{LabelOptions, label_pair, marginal_mixtures};
+use scbg_features::{
+    FeatureConfig, FeatureStats, PreparedScene, SampleBuilder, SampleError, Window,
+};
+use scbg_model::Multipath;
+use serde::Serialize;
+
+use crate::data::{Example, a_from_b, marginal_embedding};
+use crate::eval::{generate_and_measure, predicted_ranges};
+use crate::model::Generator;
+use crate::range::{RangePredictor, psi_for_quantile};
+
+/// The trained models and the feature settings they were trained with, on one plain device.
+#[derive(Debug)]
+pub struct Scbg {
+    pub predictor: Multipath,
+    pub generator: Generator,
+    pub range: RangePredictor,
+    pub stats: FeatureStats,
+    pub features: FeatureConfig,
+    /// Reward, number of sampled futures of B and marginal estimator: as in training, so ψ
+    /// means the same thing.
+    pub labels: LabelOptions,
+}
+
+/// Why a trajectory could not be generated.
+#[derive(Debug, thiserror::Error)]
+pub enum GenerateError {
+    #[error("no track with id {0} in scenario {1}")]
+    NoSuchTrack(i64, String),
+    #[error("quantile {0} is outside [0, 1]")]
+    Quantile(f32),
+    #[error("A and B are the same track ({0})")]
+    SameTrack(i64),
+    #[error("track {id}: {error}")]
+    Sample { id: i64, error: SampleError },
+}
+
+/// One generated future of B.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Generated {
+    pub quantile: f32,
+    /// The ψ the quantile maps to (m/s for the default reward).
+    pub psi: f32,
+    /// The predicted 0.1 and 0.9 quantiles of ψ for this scene and pair.
+    pub psi_low: f32,
+    pub psi_high: f32,
+    /// J_φ of the generated future: what the predictor expects it does to A.
+    pub achieved_psi: f32,
+    /// E[r(Y_A) | x, ŷ_B] and E[r(Y_A) | x].
+    pub a_expected_reward_conditional: f32,
+    pub a_expected_reward_marginal: f32,
+    /// B's future, world frame, metres, at `step_secs` intervals after the current step.
+    pub world_xy_m: Vec<[f64; 2]>,
+    pub step_secs: f32,
+}
+
+impl Scbg {
+    /// B's futures for each quantile, for the pair (A = `a_id`, B = `b_id`) at `window`.
+    pub fn generate(
+        &self,
+        scene: &PreparedScene,
+        window: &Window,
+        a_id: i64,
+        b_id: i64,
+        quantiles: &[f32],
+        device: &Device,
+    ) -> Result<Vec<Generated>, GenerateError> {
+        if a_id == b_id {
+            return Err(GenerateError::SameTrack(a_id));
+        }
+        if let Some(&q) = quantiles.iter().find(|q| !(0.0..=1.0).contains(*q)) {
+            return Err(GenerateError::Quantile(q));
+        }
+        let index = |id: i64| {
+            scene
+                .track_index(id)
+                .ok_or_else(|| GenerateError::NoSuchTrack(id, scene.scenario_id.clone()))
+        };
+        let (ia, ib) = (index(a_id)?, index(b_id)?);
+        let mut builder = SampleBuilder::new(scene, &self.features);
+        let mut a = builder
+            .sample(window, ia, Some(ib))
+            .map_err(|error| GenerateError::Sample { id: a_id, error })?;
+        let mut b = builder
+            .sample(window, ib, None)
+            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
+        self.stats.normalize(&mut a);
+        self.stats.normalize(&mut b);
+        // E[r(Y_A) | x] estimated as in the labels (B's sampled futures, fixed seed).
+        let mixture = marginal_mixtures(&self.predictor, &[&b], device).remove(0);
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0x5cb6);
+        let e_marg = label_pair(
+            &self.predictor,
+            &a,
+            &b,
+            &mixture,
+            self.labels,
+            &mut rng,
+            device,
+        )
+        .e_marg;
+        let example = Example {
+            e_marg,
+            scenario_id: scene.scenario_id.clone(),
+            logged_valid: a.condition_future_valid.clone(),
+            a_from_b: a_from_b(&a, &b),
+            b_embedding: marginal_embedding(&self.predictor, &b, device),
+            futures_b: Vec::new(),
+            psi: Vec::new(),
+            a,
+            b,
+        };
+        let (low, high) = predicted_ranges(&self.range, &[&example], device)[0];
+        let psi: Vec<f32> = quantiles
+            .iter()
+            .map(|&q| psi_for_quantile(q, low, high))
+            .collect();
+        let measured = generate_and_measure(
+            &self.generator,
+            &self.predictor,
+            &[&example],
+            std::slice::from_ref(&psi),
+            self.labels.reward,
+            device,
+        );
+        let pose = example.b.world_from_agent;
+        Ok(quantiles
+            .iter()
+            .enumerate()
+            .map(|(j, &q)| Generated {
+                quantile: q,
+                psi: psi[j],
+                psi_low: low,
+                psi_high: high,
+                achieved_psi: measured.psi[0][j],
+                a_expected_reward_conditional: measured.e_cond[0][j],
+                a_expected_reward_marginal: measured.e_marg[0],
+                world_xy_m: measured.futures_b[0][j]
+                    .iter()
+                    .map(|p| {
+                        let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
+                        [x, y]
+                    })
+                    .collect(),
+                step_secs: crate::train::STEP_SECS,
+            })
+            .collect())
+    }
+}
