@@ -479,7 +479,7 @@ mod tests {
             ..Default::default()
         };
         let f = config.future_steps;
-        let samples: Vec<AgentSample> = (0..32)
+        let samples: Vec<AgentSample> = (0..32usize)
             .map(|i| {
                 let mut s = straight_sample(&features, true);
                 let crosses = i.is_multiple_of(2);
