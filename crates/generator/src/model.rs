@@ -19,10 +19,19 @@ pub struct GeneratorConfig {
     /// ψ's scale depends on the data and the predictor, from ~0.03 to several m/s).
     #[serde(default = "one")]
     pub psi_scale: f32,
+    /// The decoder emits one displacement per `knot_stride` steps (5 = 2 Hz knots), and the
+    /// positions between knots are interpolated linearly: futures are smooth by construction
+    /// (per-step outputs trained for a few epochs zigzag by decimetres).
+    #[serde(default = "one_step")]
+    pub knot_stride: usize,
 }
 
 fn one() -> f32 {
     1.0
+}
+
+fn one_step() -> usize {
+    1
 }
 
 impl GeneratorConfig {
@@ -33,16 +42,36 @@ impl GeneratorConfig {
             hidden: vec![256, 256],
             future_steps: 80,
             psi_scale: 1.0,
+            knot_stride: 5,
         }
     }
 
     pub fn init(&self, device: &Device) -> Generator {
         let mut dims = vec![self.embedding_width + self.psi_width];
         dims.extend(&self.hidden);
-        dims.push(2 * self.future_steps);
+        let stride = self.knot_stride.max(1);
+        let knots = self.future_steps.div_ceil(stride);
+        dims.push(2 * knots);
+        // interpolation[s][j]: weight of knot j in step s (knot j sits at step (j + 1)·stride,
+        // the origin before knot 0 is the current position, zero in B's frame).
+        let mut weights = vec![0.0f32; self.future_steps * knots];
+        for s in 0..self.future_steps {
+            let t = (s + 1) as f32 / stride as f32; // in knot units; knot j at t = j + 1
+            let hi = (t.ceil() as usize).clamp(1, knots);
+            let frac = t - (hi - 1) as f32;
+            weights[s * knots + hi - 1] = frac;
+            if hi >= 2 {
+                weights[s * knots + hi - 2] = 1.0 - frac;
+            }
+        }
         Generator {
             psi_mlp: Mlp::init(&[1, self.psi_width, self.psi_width], device),
             decoder: Mlp::init(&dims, device),
+            interpolation: burn::module::Param::from_tensor(Tensor::from_data(
+                burn::tensor::TensorData::new(weights, [self.future_steps, knots]),
+                device,
+            ))
+            .set_require_grad(false),
             future_steps: self.future_steps,
             psi_scale: self.psi_scale,
         }
@@ -54,6 +83,8 @@ impl GeneratorConfig {
 pub struct Generator {
     pub psi_mlp: Mlp,
     pub decoder: Mlp,
+    /// `[T, knots]` fixed linear interpolation from knots to steps (not trained).
+    pub interpolation: burn::module::Param<Tensor<2>>,
     pub future_steps: usize,
     pub psi_scale: f32,
 }
@@ -68,6 +99,12 @@ impl Generator {
             .psi_mlp
             .forward(psi.reshape([b, 1]) / self.psi_scale.max(1e-12));
         let out = self.decoder.forward(Tensor::cat(vec![embedding, psi], 1));
-        out.reshape([b, self.future_steps, 2]).cumsum(1)
+        let [t, knots] = self.interpolation.dims();
+        let knot_xy = out.reshape([b, knots, 2]).cumsum(1);
+        self.interpolation
+            .val()
+            .reshape([1, t, knots])
+            .expand([b, t, knots])
+            .matmul(knot_xy)
     }
 }

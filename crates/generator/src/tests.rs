@@ -61,6 +61,23 @@ fn step_options(variant: Variant, trajectory_weight: f32) -> StepOptions {
 }
 
 #[test]
+fn knots_are_interpolated_linearly() {
+    let device = Device::flex();
+    let g = GeneratorConfig::new(24).init(&device);
+    let w: Vec<f32> = g.interpolation.val().into_data().try_to_vec().unwrap();
+    let knots = 16;
+    let row = |s: usize| &w[s * knots..(s + 1) * knots];
+    // Step 1 (index 0) is a fifth of the way from the origin to knot 0.
+    assert!((row(0)[0] - 0.2).abs() < 1e-6 && row(0)[1..].iter().all(|v| *v == 0.0));
+    // Step 5 is knot 0; step 8 is 40 % knot 0 + 60 % knot 1; step 80 is the last knot.
+    assert!((row(4)[0] - 1.0).abs() < 1e-6);
+    assert!((row(7)[0] - 0.4).abs() < 1e-6 && (row(7)[1] - 0.6).abs() < 1e-6);
+    assert!((row(79)[15] - 1.0).abs() < 1e-6);
+    // Every row's weights sum to at most 1 (the origin takes the rest).
+    assert!((0..80).all(|s| row(s).iter().sum::<f32>() <= 1.0 + 1e-6));
+}
+
+#[test]
 fn forward_shape() {
     let device = Device::flex();
     let g = GeneratorConfig::new(24).init(&device);

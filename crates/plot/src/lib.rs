@@ -563,7 +563,7 @@ pub fn trajectories(
     draw_png(path, (size, size), |root| {
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 16))
+            .caption(title, ("sans-serif", 18))
             .margin(10)
             .x_label_area_size(30)
             .y_label_area_size(40)
@@ -571,7 +571,7 @@ pub fn trajectories(
         chart
             .configure_mesh()
             .disable_mesh()
-            .label_style(("sans-serif", 11))
+            .label_style(("sans-serif", 14))
             .draw()?;
         let bbox = (cx - half, cx + half, cy - half, cy + half);
         for poly in background {
@@ -606,9 +606,10 @@ pub fn trajectories(
         }
         chart
             .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
-            .label_font(("sans-serif", 11))
+            .label_font(("sans-serif", 14))
             .draw()?;
         root.present()?;
         Ok(())

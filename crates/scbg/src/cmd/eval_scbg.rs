@@ -43,6 +43,16 @@ fn ms_text(m: &Option<MeanStd>) -> String {
     m.map_or("-".into(), |m| format!("{} ± {}", num(m.mean), num(m.std)))
 }
 
+/// The variant's name in figures (the bundled font has no circled digits).
+fn plot_label(name: &str) -> &str {
+    match name {
+        "baseline" => "(1) baseline",
+        "aug" => "(1)+(2) augmentation",
+        "full" => "(1)+(2)+(3) courtesy loss",
+        other => other,
+    }
+}
+
 fn label_of(name: &str) -> &str {
     match name {
         "baseline" => "① baseline",
@@ -222,7 +232,7 @@ fn write_figures(
                 &v.per_quantile
             };
             scbg_plot::Series {
-                label: format!("{} (mean ± std)", label_of(name)),
+                label: format!("{} (mean ± std)", plot_label(name)),
                 points: curve
                     .iter()
                     .map(|p| (f64::from(p.quantile), p.achieved_psi.mean))
