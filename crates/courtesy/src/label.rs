@@ -32,13 +32,14 @@ pub fn marginal_mixtures(
 /// Drawing futures from a predicted mixture.
 pub trait SampleMixture {
     /// Draws `m` trajectories: a mode from π, then one standard-normal 2-vector z shared by
-    /// every step, `y_t = μ_t + L_t z` with `L_t` the Cholesky factor of Σ_t. Sharing z keeps
-    /// samples smooth (independent per-step noise would make them jitter).
-    fn sample(&self, m: usize, rng: &mut impl Rng) -> Vec<Vec<[f32; 2]>>;
+    /// every step, `y_t = μ_t + noise · L_t z` with `L_t` the Cholesky factor of Σ_t. Sharing
+    /// z keeps samples smooth (independent per-step noise would make them jitter). `noise` = 1
+    /// samples the mixture; 0 gives mode means drawn by π.
+    fn sample(&self, m: usize, noise: f32, rng: &mut impl Rng) -> Vec<Vec<[f32; 2]>>;
 }
 
 impl SampleMixture for Mixture {
-    fn sample(&self, m: usize, rng: &mut impl Rng) -> Vec<Vec<[f32; 2]>> {
+    fn sample(&self, m: usize, noise: f32, rng: &mut impl Rng) -> Vec<Vec<[f32; 2]>> {
         (0..m)
             .map(|_| {
                 let u: f32 = rng.random();
@@ -49,6 +50,7 @@ impl SampleMixture for Mixture {
                 });
                 let k = k.unwrap_or(self.probs.len() - 1);
                 let z: [f32; 2] = [StandardNormal.sample(rng), StandardNormal.sample(rng)];
+                let z = [z[0] * noise, z[1] * noise];
                 self.xy[k]
                     .iter()
                     .zip(&self.abc[k])
@@ -133,6 +135,9 @@ pub struct LabelOptions {
     pub samples: usize,
     pub reward: Reward,
     pub marginal: MarginalEstimate,
+    /// Scale of the Gaussian part of B's sampled futures (1 = samples of the mixture, 0 =
+    /// mode means); see [`SampleMixture::sample`].
+    pub sample_noise: f32,
 }
 
 /// Labels one ordered pair. `a` is A's standardised sample conditioned on B's logged future;
@@ -150,6 +155,7 @@ pub fn label_pair(
         samples,
         reward,
         marginal,
+        sample_noise,
     } = options;
     let t = a.condition_future_valid.len();
     let logged: Vec<[f32; 2]> = (0..t)
@@ -163,7 +169,7 @@ pub fn label_pair(
     let mut futures = vec![logged];
     futures.extend(
         b_mixture
-            .sample(samples, rng)
+            .sample(samples, sample_noise, rng)
             .iter()
             .map(|tr| change_frame(tr, &b.world_from_agent, &a.world_from_agent)),
     );

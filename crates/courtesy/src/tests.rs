@@ -186,7 +186,7 @@ fn frames_and_smooth_samples() {
         probs: vec![0.5, 0.5],
     };
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(1);
-    let draws = mix.sample(50, &mut rng);
+    let draws = mix.sample(50, 1.0, &mut rng);
     assert_eq!(draws.len(), 50);
     // One shared z per draw: the offset from the mean is the same at every step (Σ constant).
     for d in &draws {
@@ -200,4 +200,11 @@ fn frames_and_smooth_samples() {
     }
     let spread: f32 = draws.iter().map(|d| d[0][1].abs()).sum::<f32>() / 50.0;
     assert!(spread > 0.3 && spread < 1.5, "{spread}");
+    // noise 0: mode means only.
+    let means = mix.sample(10, 0.0, &mut rng);
+    assert!(means.iter().all(|d| {
+        d.iter()
+            .enumerate()
+            .all(|(i, p)| p[0] == (i + 1) as f32 && p[1] == 0.0)
+    }));
 }

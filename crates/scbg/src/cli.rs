@@ -62,6 +62,10 @@ pub struct DemoArgs {
     /// How E[r(Y_A) | x] is estimated: conditional-average or direct (see `scbg label --help`).
     #[arg(long, default_value = "conditional-average")]
     pub marginal: String,
+    /// Scale of the Gaussian part of B's sampled futures: 1 samples the predicted mixture,
+    /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
+    #[arg(long, default_value_t = 1.0)]
+    pub sample_noise: f32,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }
@@ -88,6 +92,10 @@ pub struct LabelArgs {
     /// modes) or `direct` (the marginal mode, as in the paper).
     #[arg(long, default_value = "conditional-average")]
     pub marginal: String,
+    /// Scale of the Gaussian part of B's sampled futures: 1 samples the predicted mixture,
+    /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
+    #[arg(long, default_value_t = 1.0)]
+    pub sample_noise: f32,
 
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -128,6 +136,10 @@ pub struct TrainGeneratorArgs {
     /// modes) or `direct` (the marginal mode, as in the paper).
     #[arg(long, default_value = "conditional-average")]
     pub marginal: String,
+    /// Scale of the Gaussian part of B's sampled futures: 1 samples the predicted mixture,
+    /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
+    #[arg(long, default_value_t = 1.0)]
+    pub sample_noise: f32,
 
     #[arg(long, default_value_t = 32)]
     pub batch_size: usize,

@@ -120,6 +120,7 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         samples: 8,
         reward: "average_speed".into(),
         marginal: args.marginal.clone(),
+        sample_noise: args.sample_noise,
         seed: args.seed,
         ground_truth,
     })?;
@@ -138,18 +139,21 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     );
     let predictors = super::generator::load_predictors(&predictor_dir)?;
     let marginal = super::label::parse_marginal(&args.marginal)?;
+    super::label::check_sample_noise(args.sample_noise)?;
     eprintln!("labelling the training split for the generator (logged + 8 sampled futures of B)");
+    let label_options = scbg_courtesy::label::LabelOptions {
+        samples: 8,
+        reward: scbg_courtesy::Reward::AverageSpeed,
+        marginal,
+        sample_noise: args.sample_noise,
+    };
     let examples = super::generator::examples_for_split(
         &predictors.plain,
         &predictors.ckpt,
         &predictors.plain_device,
         &cache,
         Some(scbg_train::data::Split::Train),
-        scbg_courtesy::label::LabelOptions {
-            samples: 8,
-            reward: scbg_courtesy::Reward::AverageSpeed,
-            marginal,
-        },
+        label_options,
         args.seed,
     )?;
     let mut generator_dirs = Vec::new();
@@ -174,7 +178,7 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
                 learning_rate: 1e-3,
                 range_steps: 300,
                 seed: args.seed,
-                marginal,
+                labels: label_options,
             },
             &dir,
         )?;

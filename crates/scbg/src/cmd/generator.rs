@@ -35,6 +35,9 @@ pub struct GeneratorCheckpoint {
     /// How the labels estimated E[r(Y_A) | x] (`direct` or `conditional-average`).
     #[serde(default = "direct")]
     pub marginal: String,
+    /// Scale of the Gaussian part of B's sampled futures in the labels.
+    #[serde(default = "one")]
+    pub sample_noise: f32,
     /// |ψ| above which a logged future counted as high courtesy in training.
     #[serde(default)]
     pub threshold_psi: f32,
@@ -58,6 +61,10 @@ fn direct() -> String {
     "direct".into()
 }
 
+fn one() -> f32 {
+    1.0
+}
+
 impl GeneratorCheckpoint {
     /// The labelling settings the generator was trained with.
     pub fn label_options(&self) -> anyhow::Result<LabelOptions> {
@@ -65,6 +72,7 @@ impl GeneratorCheckpoint {
             samples: self.samples,
             reward: Reward::AverageSpeed,
             marginal: super::label::parse_marginal(&self.marginal)?,
+            sample_noise: self.sample_noise,
         })
     }
 }
@@ -147,8 +155,8 @@ pub struct VariantSettings {
     pub learning_rate: f64,
     pub range_steps: usize,
     pub seed: u64,
-    /// How the examples' labels estimated E[r(Y_A) | x] (recorded in generator.json).
-    pub marginal: scbg_courtesy::label::MarginalEstimate,
+    /// How the examples were labelled (recorded in generator.json).
+    pub labels: LabelOptions,
 }
 
 pub fn variant_name(v: Variant) -> &'static str {
@@ -206,7 +214,7 @@ pub fn train_variant(
     let started = std::time::Instant::now();
     anyhow::ensure!(!examples.is_empty(), "no labelled pairs to train on");
     let threshold = parse_threshold(&s.threshold)?;
-    let marginal = s.marginal;
+    let marginal = s.labels.marginal;
     let device = &p.device;
     device.seed(s.seed);
     let mut gen_config = GeneratorConfig::new(p.ckpt.model_config.embedding_width());
@@ -307,6 +315,7 @@ pub fn train_variant(
         beta: s.beta,
         threshold: s.threshold.clone(),
         marginal: marginal.name().into(),
+        sample_noise: s.labels.sample_noise,
         threshold_psi: scbg_generator::threshold_value(examples, threshold),
         psi_min,
         psi_max,
@@ -330,6 +339,7 @@ pub fn train(args: &TrainGeneratorArgs) -> anyhow::Result<GeneratorCheckpoint> {
     let variant = parse_variant(&args.variant)?;
     parse_threshold(&args.threshold)?;
     let marginal = super::label::parse_marginal(&args.marginal)?;
+    super::label::check_sample_noise(args.sample_noise)?;
     let p = load_predictors(&args.predictor)?;
     eprintln!(
         "labelling the training split ({} futures of B per pair role)",
@@ -345,6 +355,7 @@ pub fn train(args: &TrainGeneratorArgs) -> anyhow::Result<GeneratorCheckpoint> {
             samples: args.samples,
             reward: Reward::AverageSpeed,
             marginal,
+            sample_noise: args.sample_noise,
         },
         args.seed,
     )?;
@@ -366,7 +377,12 @@ pub fn train(args: &TrainGeneratorArgs) -> anyhow::Result<GeneratorCheckpoint> {
             learning_rate: args.learning_rate,
             range_steps: args.range_steps,
             seed: args.seed,
-            marginal,
+            labels: LabelOptions {
+                samples: args.samples,
+                reward: Reward::AverageSpeed,
+                marginal,
+                sample_noise: args.sample_noise,
+            },
         },
         &args.out,
     )

@@ -194,6 +194,7 @@ fn label_shard(
                             samples: args.samples,
                             reward,
                             marginal,
+                            sample_noise: args.sample_noise,
                         },
                         &mut rng,
                         &device,
@@ -307,8 +308,18 @@ pub fn parse_marginal(text: &str) -> anyhow::Result<MarginalEstimate> {
         .with_context(|| format!("--marginal {text:?}: expected direct or conditional-average"))
 }
 
+/// `--sample-noise` must be a finite scale ≥ 0.
+pub fn check_sample_noise(noise: f32) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        noise.is_finite() && noise >= 0.0,
+        "--sample-noise {noise}: expected a finite number >= 0"
+    );
+    Ok(())
+}
+
 pub fn label(args: &LabelArgs) -> anyhow::Result<LabelSummary> {
     parse_marginal(&args.marginal)?;
+    check_sample_noise(args.sample_noise)?;
     let reward = Reward::parse(&args.reward)
         .with_context(|| format!("unknown reward {:?} (average_speed, progress)", args.reward))?;
     let ckpt = Checkpoint::read(&args.model)?;
