@@ -100,12 +100,12 @@ class Multipath(nn.Module):
         self.road_mlp = mlp([ROAD] + p["road_mlp"])
         self.road_ctx = mlp([p["target_width"] + p["interaction_width"], p["road_context_hidden"], rw])
         self.road = MCG(rw, rw, rw, p["mcg_blocks"])
-        self.fut_pts = mlp([6, fh, fh])
-        self.fut = MCG(fh, p["target_width"], fh, p["mcg_blocks"])
+        self.fut = mlp([(T // 5) * 5 + p["target_width"], fh, fh, fh])
         self.fuse = nn.Linear(e + fh + 1, e)
         self.anchors = nn.Parameter(torch.randn(p["num_modes"], e))
         self.dec = MCG(e, e, p["decoder_width"], p["mcg_blocks"])
         self.dec_mlp = mlp([p["decoder_width"], p["decoder_hidden"], 5 * T + 1])
+        self.mode_logits = nn.Linear(e, p["num_modes"])
 
     def forward(self, b):
         B, A = b["others_history"].shape[:2]
@@ -120,10 +120,8 @@ class Multipath(nn.Module):
         raw, prev = b["condition"][:, 4::5], b["condition"][:, 3::5]
         both = raw[:, :, 2:3] * prev[:, :, 2:3]
         vel = (raw[:, :, :2] - prev[:, :, :2]) * both / (0.1 * 10.0)
-        pts = raw * torch.tensor([1 / 50, 1 / 50, 1.0])
-        n = pts.shape[1]
-        time_ = (torch.arange(1, n + 1) / n).reshape(1, n, 1).expand(B, n, 1)
-        _, cond = self.fut(self.fut_pts(torch.cat([pts, vel, time_], -1)), target, pts[:, :, 2])
+        feats = torch.cat([raw[:, :, :2] / 50, raw[:, :, 2:3], vel], -1).reshape(B, -1)
+        cond = self.fut(torch.cat([feats, target], 1))
         flag = b["flag"]
         scene = scene + self.fuse(torch.cat([scene, cond * flag, flag], 1))
         K = self.anchors.shape[0]
@@ -131,7 +129,7 @@ class Multipath(nn.Module):
         out = self.dec_mlp(torch.relu(modes))
         xy = out[..., : 2 * T].reshape(B, K, T, 2).cumsum(2)
         abc = out[..., 2 * T: 5 * T].reshape(B, K, T, 3)
-        return xy, abc, out[..., 5 * T]
+        return xy, abc, out[..., 5 * T] + self.mode_logits(scene)
 
 
 def gmm_nll(xy, abc, logits, target, valid):
