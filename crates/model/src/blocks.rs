@@ -2,7 +2,7 @@
 
 use burn::module::Module;
 use burn::nn::{Linear, LinearConfig};
-use burn::tensor::activation::relu;
+use burn::tensor::activation::{relu, sigmoid};
 use burn::tensor::{Device, Tensor};
 
 /// A stack of linear layers with ReLU between them (not after the last).
@@ -127,6 +127,53 @@ impl Mcg {
     }
 }
 
+/// An LSTM that returns its final hidden state, with the four gates fused: two matmuls per step
+/// (`[d_in, 4h]` and `[h, 4h]`; burn's `Lstm` runs eight and writes every step's output). Same parameters as a
+/// PyTorch LSTM (input and hidden weights and biases for the i, f, g, o gates, in that order).
+#[derive(Module, Debug)]
+pub struct FusedLstm {
+    /// `d_in → 4h`
+    pub input: Linear,
+    /// `h → 4h`
+    pub hidden: Linear,
+    pub d_hidden: usize,
+}
+
+impl FusedLstm {
+    pub fn init(d_input: usize, d_hidden: usize, device: &Device) -> Self {
+        Self {
+            input: LinearConfig::new(d_input, 4 * d_hidden).init(device),
+            hidden: LinearConfig::new(d_hidden, 4 * d_hidden).init(device),
+            d_hidden,
+        }
+    }
+
+    /// # Shapes
+    /// `x: [batch, steps, d_in]` `-> [batch, d_hidden]` (the hidden state after the last step)
+    pub fn forward(&self, x: Tensor<3>) -> Tensor<2> {
+        let [n, steps, _] = x.dims();
+        let h_width = self.d_hidden;
+        let device = x.device();
+        let d_in = x.dims()[2];
+        let mut h = Tensor::<2>::zeros([n, h_width], &device);
+        let mut c = Tensor::<2>::zeros([n, h_width], &device);
+        for t in 0..steps {
+            // Per step rather than one [n, steps, 4h] product sliced per step: slicing a tracked
+            // tensor makes every step's backward allocate a zero gradient of the whole product
+            // (the inputs need no gradient, so slicing them is free).
+            let x_t = x.clone().narrow(1, t, 1).reshape([n, d_in]);
+            let g = self.input.forward(x_t) + self.hidden.forward(h);
+            let i = sigmoid(g.clone().narrow(1, 0, h_width));
+            let f = sigmoid(g.clone().narrow(1, h_width, h_width));
+            let cand = g.clone().narrow(1, 2 * h_width, h_width).tanh();
+            let o = sigmoid(g.narrow(1, 3 * h_width, h_width));
+            c = f * c + i * cand;
+            h = o * c.clone().tanh();
+        }
+        h
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -176,5 +223,62 @@ mod tests {
             .try_to_vec::<f32>()
             .unwrap();
         assert_eq!(a, b);
+    }
+
+    #[test]
+    fn fused_lstm_matches_the_textbook_cell() {
+        let device = Device::flex();
+        device.seed(4);
+        let (d_in, h, steps, n) = (3, 2, 4, 2);
+        let lstm = FusedLstm::init(d_in, h, &device);
+        let xs: Vec<f32> = (0..n * steps * d_in)
+            .map(|i| ((i * 7) % 11) as f32 / 5.0 - 1.0)
+            .collect();
+        let x = Tensor::<3>::from_data(TensorData::new(xs.clone(), [n, steps, d_in]), &device);
+        let out: Vec<f32> = lstm.forward(x).into_data().try_to_vec().unwrap();
+        let v = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+        let v1 = |t: Tensor<1>| t.into_data().try_to_vec::<f32>().unwrap();
+        // burn's Linear weight is [d_in, d_out]: y = x W + b.
+        let (wi, bi) = (
+            v(lstm.input.weight.val()),
+            v1(lstm.input.bias.as_ref().unwrap().val()),
+        );
+        let (wh, bh) = (
+            v(lstm.hidden.weight.val()),
+            v1(lstm.hidden.bias.as_ref().unwrap().val()),
+        );
+        let sig = |z: f32| 1.0 / (1.0 + (-z).exp());
+        for b in 0..n {
+            let (mut hs, mut cs) = (vec![0.0f32; h], vec![0.0f32; h]);
+            for t in 0..steps {
+                let xt = &xs[(b * steps + t) * d_in..(b * steps + t + 1) * d_in];
+                let gate = |k: usize, j: usize| {
+                    let col = k * h + j;
+                    let mut z = bi[col] + bh[col];
+                    for (d, xv) in xt.iter().enumerate() {
+                        z += xv * wi[d * 4 * h + col];
+                    }
+                    for (d, hv) in hs.iter().enumerate() {
+                        z += hv * wh[d * 4 * h + col];
+                    }
+                    z
+                };
+                let mut next_h = vec![0.0f32; h];
+                for j in 0..h {
+                    let (i, f, g, o) = (
+                        sig(gate(0, j)),
+                        sig(gate(1, j)),
+                        gate(2, j).tanh(),
+                        sig(gate(3, j)),
+                    );
+                    cs[j] = f * cs[j] + i * g;
+                    next_h[j] = o * cs[j].tanh();
+                }
+                hs = next_h;
+            }
+            for j in 0..h {
+                assert!((out[b * h + j] - hs[j]).abs() < 1e-5, "{out:?} vs {hs:?}");
+            }
+        }
     }
 }

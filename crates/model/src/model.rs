@@ -1,13 +1,13 @@
 //! The Multipath++ model: encoders, the conditional future encoder and the anchor decoder.
 
 use burn::module::{Module, Param};
-use burn::nn::{Initializer, Linear, LinearConfig, Lstm, LstmConfig};
+use burn::nn::{Initializer, Linear, LinearConfig};
 use burn::tensor::activation::relu;
 use burn::tensor::{Device, Tensor, TensorData};
 use scbg_features::{AGENT_FEATURES, DIFF_FEATURES, ROAD_FEATURES};
 
 use crate::batch::Batch;
-use crate::blocks::{Mcg, Mlp};
+use crate::blocks::{FusedLstm, Mcg, Mlp};
 use crate::config::MultipathConfig;
 
 /// Scale (metres) dividing the conditioning future's coordinates before the future encoder.
@@ -23,8 +23,8 @@ const CONDITION_POINT_FEATURES: usize = 5;
 /// per-step MLP embeddings (features + one-hot time step).
 #[derive(Module, Debug)]
 pub struct HistoryEncoder {
-    pub lstm_steps: Lstm,
-    pub lstm_diffs: Lstm,
+    pub lstm_steps: FusedLstm,
+    pub lstm_diffs: FusedLstm,
     pub step_mlp: Mlp,
     pub step_mcg: Mcg,
     pub history_steps: usize,
@@ -37,8 +37,8 @@ impl HistoryEncoder {
         dims.extend(&config.step_mlp);
         let w = config.history_width();
         Self {
-            lstm_steps: LstmConfig::new(AGENT_FEATURES, config.lstm_hidden, true).init(device),
-            lstm_diffs: LstmConfig::new(DIFF_FEATURES, config.lstm_hidden, true).init(device),
+            lstm_steps: FusedLstm::init(AGENT_FEATURES, config.lstm_hidden, device),
+            lstm_diffs: FusedLstm::init(DIFF_FEATURES, config.lstm_hidden, device),
             step_mlp: Mlp::init(&dims, device),
             step_mcg: Mcg::init(w, 1, w, config.mcg_blocks, device),
             history_steps: h,
@@ -50,8 +50,8 @@ impl HistoryEncoder {
     pub fn forward(&self, history: Tensor<3>, diffs: Tensor<3>) -> Tensor<2> {
         let [n, steps, _] = history.dims();
         let device = history.device();
-        let (_, state_steps) = self.lstm_steps.forward(history.clone(), None);
-        let (_, state_diffs) = self.lstm_diffs.forward(diffs, None);
+        let state_steps = self.lstm_steps.forward(history.clone());
+        let state_diffs = self.lstm_diffs.forward(diffs);
         let mut eye = vec![0.0f32; steps * steps];
         for i in 0..steps {
             eye[i * steps + i] = 1.0;
@@ -65,7 +65,7 @@ impl HistoryEncoder {
         let (_, summary) = self
             .step_mcg
             .forward(step_embed, Tensor::ones([n, 1], &device), valid);
-        Tensor::cat(vec![state_steps.hidden, state_diffs.hidden, summary], 1)
+        Tensor::cat(vec![state_steps, state_diffs, summary], 1)
     }
 }
 
@@ -466,7 +466,7 @@ mod tests {
     /// front or stays where it is; histories are identical. After a short training the
     /// conditional mixture must put its weight on the right mode. (Without the direct
     /// embedding → logits head this stayed at 50/50 for 1,500 steps; without the mode
-    /// classification term it took about twice as many steps.)
+    /// classification term it took about twice as many steps. 600 steps pass for seeds 3, 4, 5.)
     #[test]
     fn conditional_mode_uses_the_content_of_the_condition() {
         let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
@@ -513,7 +513,7 @@ mod tests {
             condition_dropout: 0.5,
             history_mask_prob: 0.0,
         };
-        for _ in 0..300 {
+        for _ in 0..600 {
             let batch = Batch::from_samples(&refs, &train, &mut rng, &device);
             let out = model.forward(&batch);
             let loss = gmm_nll(&out, batch.future_xy.clone(), batch.future_valid.clone())
