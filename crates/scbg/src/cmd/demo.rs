@@ -158,11 +158,22 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     )?;
     let mut generator_dirs = Vec::new();
     let mut generator_seconds = serde_json::Map::new();
-    for variant in [
-        scbg_generator::Variant::Baseline,
-        scbg_generator::Variant::Augmented,
-        scbg_generator::Variant::Full,
-    ] {
+    let mut skipped: Option<String> = None;
+    if examples.is_empty() {
+        let why = "no interacting pair in the training split: the generators are not trained";
+        eprintln!("{why}");
+        skipped = Some(why.into());
+    }
+    let variants = if examples.is_empty() {
+        Vec::new()
+    } else {
+        vec![
+            scbg_generator::Variant::Baseline,
+            scbg_generator::Variant::Augmented,
+            scbg_generator::Variant::Full,
+        ]
+    };
+    for variant in variants {
         let name = super::generator::variant_name(variant);
         let dir = out.join(format!("generator_{name}"));
         let saved = super::generator::train_variant(
@@ -192,14 +203,22 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         total,
         "evaluating the generators on held-out pairs (CourtesyMSE, TrajADE, correlation; Figs. 4–5)",
     );
-    let scbg_eval = super::eval_scbg::evaluate_scbg(
-        &generator_dirs,
-        &cache,
-        None,
-        Some(scbg_train::data::Split::Validation),
-        args.seed,
-        Some(&out.join("figures")),
-    )?;
+    let scbg_eval = match skipped {
+        Some(why) => super::eval_scbg::ScbgEval::not_evaluated(why),
+        None => super::eval_scbg::evaluate_scbg(
+            &generator_dirs,
+            &cache,
+            None,
+            Some(scbg_train::data::Split::Validation),
+            args.seed,
+            Some(&out.join("figures")),
+        )
+        .unwrap_or_else(|err| {
+            let why = format!("the generators were not evaluated: {err:#}");
+            eprintln!("{why}");
+            super::eval_scbg::ScbgEval::not_evaluated(why)
+        }),
+    };
 
     stage(8, total, "writing figures and the report");
     let first_file = crate::inputs::expand(&inputs)?

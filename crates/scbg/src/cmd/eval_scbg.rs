@@ -21,6 +21,8 @@ pub struct ScbgEval {
     pub psi_range: (f32, f32),
     /// Figure files written (relative names inside the figures folder).
     pub figures: Vec<String>,
+    /// Why nothing was evaluated (the demo goes on without generators on data without pairs).
+    pub not_evaluated: Option<String>,
 }
 
 fn ms_json(m: &Option<MeanStd>) -> serde_json::Value {
@@ -63,6 +65,17 @@ fn label_of(name: &str) -> &str {
 }
 
 impl ScbgEval {
+    pub fn not_evaluated(why: String) -> Self {
+        Self {
+            variants: Vec::new(),
+            examples: 0,
+            high_threshold_psi: f32::NAN,
+            psi_range: (f32::NAN, f32::NAN),
+            figures: Vec::new(),
+            not_evaluated: Some(why),
+        }
+    }
+
     /// `{"<variant>": {courtesy_mse_data: {mean, std}, …, traj_ade, corr_quantile,
     /// corr_quantile_high, examples, high_examples, per_quantile, per_quantile_high}}`.
     pub fn variants_json(&self) -> serde_json::Value {
@@ -104,6 +117,9 @@ impl ScbgEval {
 
     /// Table II of the paper, plus the correlation columns.
     pub fn to_markdown(&self) -> String {
+        if let Some(why) = &self.not_evaluated {
+            return format!("(not evaluated: {why})\n");
+        }
         let mut s = String::from(
             "| model | CourtesyMSE *data* | CourtesyMSE *range* | CourtesyMSE *arbitrary* | TrajADE (m) | corr(q, ψ) all | corr(q, ψ) high | corr(q, ψ) within a pair |\n|---|---|---|---|---|---|---|---|\n",
         );
@@ -206,6 +222,7 @@ pub fn evaluate_scbg(
         high_threshold_psi: high,
         psi_range,
         figures: written,
+        not_evaluated: None,
     })
 }
 
@@ -429,4 +446,21 @@ pub fn eval(args: &EvalScbgArgs) -> anyhow::Result<ScbgEval> {
         print!("{}", result.to_markdown());
     }
     Ok(result)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_skipped_evaluation_still_reports() {
+        let e = ScbgEval::not_evaluated("no interacting pair".into());
+        assert!(
+            e.to_markdown()
+                .contains("not evaluated: no interacting pair")
+        );
+        let j = e.to_json();
+        assert_eq!(j["variants"], json!({}));
+        assert_eq!(j["examples"], 0);
+    }
 }
