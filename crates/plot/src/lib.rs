@@ -356,23 +356,7 @@ pub fn scatter(
         .copied()
         .filter(|(x, y)| x.is_finite() && y.is_finite())
         .collect();
-    let (x0, x1, y0, y1) = fin.iter().fold(
-        (
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        ),
-        |(a, b, c, d), &(x, y)| (a.min(x), b.max(x), c.min(y), d.max(y)),
-    );
-    let pad = |a: f64, b: f64| {
-        if fin.is_empty() || b - a < 1e-9 {
-            (a.min(0.0) - 1.0, b.max(0.0) + 1.0)
-        } else {
-            (a - 0.05 * (b - a), b + 0.05 * (b - a))
-        }
-    };
-    let ((x0, x1), (y0, y1)) = (pad(x0, x1), pad(y0, y1));
+    let ((x0, x1), (y0, y1)) = bounds(fin.iter().copied());
     draw_png(path, (800, 600), |root| {
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
