@@ -62,6 +62,7 @@ fn step_options(variant: Variant, trajectory_weight: f32) -> StepOptions {
 
 #[test]
 fn knots_are_interpolated_linearly() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
     let g = GeneratorConfig::new(24).init(&device);
     let w: Vec<f32> = g.interpolation.val().into_data().try_to_vec().unwrap();

@@ -227,6 +227,8 @@ mod tests {
 
     #[test]
     fn fused_lstm_matches_the_textbook_cell() {
+        // The seed is process-wide: hold the lock like every other seeding test.
+        let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
         let device = Device::flex();
         device.seed(4);
         let (d_in, h, steps, n) = (3, 2, 4, 2);

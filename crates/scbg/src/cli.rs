@@ -59,15 +59,25 @@ pub struct DemoArgs {
     /// Weight β of the courtesy loss (in units of the labels' ψ spread) for the full variant.
     #[arg(long, default_value_t = 1.0)]
     pub beta: f32,
-    /// How E[r(Y_A) | x] is estimated: conditional-average or direct (see `scbg label --help`).
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+}
+
+/// How courtesy labels estimate E[r(Y_A) | x] and sample B's futures (shared by `label`,
+/// `train generator` and `demo`).
+#[derive(Debug, Clone, Args)]
+pub struct EstimatorArgs {
+    /// How E[r(Y_A) | x] is estimated: `conditional-average` (mean of the conditional
+    /// expectations over the sampled futures of B; removes the per-scene offset between the two
+    /// modes) or `direct` (the marginal mode, as in the paper).
     #[arg(long, default_value = "conditional-average")]
     pub marginal: String,
     /// Scale of the Gaussian part of B's sampled futures: 1 samples the predicted mixture,
     /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
     #[arg(long, default_value_t = 1.0)]
     pub sample_noise: f32,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
 }
 
 #[derive(Debug, Args)]
@@ -87,15 +97,8 @@ pub struct LabelArgs {
     /// Reward r(y_A): average_speed or progress.
     #[arg(long, default_value = "average_speed")]
     pub reward: String,
-    /// How E[r(Y_A) | x] is estimated: `conditional-average` (mean of the conditional
-    /// expectations over the sampled futures of B; removes the per-scene offset between the two
-    /// modes) or `direct` (the marginal mode, as in the paper).
-    #[arg(long, default_value = "conditional-average")]
-    pub marginal: String,
-    /// Scale of the Gaussian part of B's sampled futures: 1 samples the predicted mixture,
-    /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
-    #[arg(long, default_value_t = 1.0)]
-    pub sample_noise: f32,
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
 
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
@@ -131,15 +134,8 @@ pub struct TrainGeneratorArgs {
     /// Futures sampled from B's marginal prediction per pair role.
     #[arg(long, default_value_t = 8)]
     pub samples: usize,
-    /// How E[r(Y_A) | x] is estimated: `conditional-average` (mean of the conditional
-    /// expectations over the sampled futures of B; removes the per-scene offset between the two
-    /// modes) or `direct` (the marginal mode, as in the paper).
-    #[arg(long, default_value = "conditional-average")]
-    pub marginal: String,
-    /// Scale of the Gaussian part of B's sampled futures: 1 samples the predicted mixture,
-    /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
-    #[arg(long, default_value_t = 1.0)]
-    pub sample_noise: f32,
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
 
     #[arg(long, default_value_t = 32)]
     pub batch_size: usize,

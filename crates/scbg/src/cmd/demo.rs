@@ -32,6 +32,9 @@ pub(crate) fn write_atomic(path: &Path, text: &str) -> anyhow::Result<()> {
 
 pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
     let started = Instant::now();
+    // Checked before any work: a bad flag must not cost a predictor training.
+    let label_options =
+        super::label::label_options(&args.estimator, 8, scbg_courtesy::Reward::AverageSpeed)?;
     let out = &args.out;
     std::fs::create_dir_all(out.join("figures"))
         .with_context(|| format!("creating {}", out.display()))?;
@@ -119,8 +122,7 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         out: labels_dir.clone(),
         samples: 8,
         reward: "average_speed".into(),
-        marginal: args.marginal.clone(),
-        sample_noise: args.sample_noise,
+        estimator: args.estimator.clone(),
         seed: args.seed,
         ground_truth,
     })?;
@@ -138,15 +140,7 @@ pub fn demo(args: &DemoArgs) -> anyhow::Result<()> {
         ),
     );
     let predictors = super::generator::load_predictors(&predictor_dir)?;
-    let marginal = super::label::parse_marginal(&args.marginal)?;
-    super::label::check_sample_noise(args.sample_noise)?;
     eprintln!("labelling the training split for the generator (logged + 8 sampled futures of B)");
-    let label_options = scbg_courtesy::label::LabelOptions {
-        samples: 8,
-        reward: scbg_courtesy::Reward::AverageSpeed,
-        marginal,
-        sample_noise: args.sample_noise,
-    };
     let examples = super::generator::examples_for_split(
         &predictors.plain,
         &predictors.ckpt,

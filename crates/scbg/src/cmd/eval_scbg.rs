@@ -294,7 +294,10 @@ fn write_figures(
     let last = loaded.last().expect("at least one model");
     let scbg: &Scbg = &last.scbg;
     let quantiles = [0.1f32, 0.3, 0.5, 0.7, 0.9];
-    let dataset = scbg_features::cache::PreparedDataset::open(data)?;
+    let roads = case_roads(
+        data,
+        cases.iter().map(|&i| examples[i].scenario_id.as_str()),
+    )?;
     let mut speed_series = Vec::new();
     for (k, &i) in cases.iter().enumerate() {
         let e = examples[i];
@@ -374,7 +377,16 @@ fn write_figures(
                 in_a(&measured.futures_b[0][j]),
             ));
         }
-        let background = road_in_a_frame(&dataset, &e.scenario_id, &e.a.world_from_agent)?;
+        let background: Vec<Vec<(f64, f64)>> = roads
+            .get(e.scenario_id.as_str())
+            .into_iter()
+            .flatten()
+            .map(|line| {
+                line.iter()
+                    .map(|&(x, y)| e.a.world_from_agent.agent_from_world(x, y))
+                    .collect()
+            })
+            .collect();
         let name = format!("fig5a_case{}.png", k + 1);
         scbg_plot::trajectories(
             &background,
@@ -403,30 +415,43 @@ fn write_figures(
     Ok(written)
 }
 
-/// The road polylines of `scenario_id` in the frame `a_world` (found by a scan of the cache).
-fn road_in_a_frame(
-    dataset: &scbg_features::cache::PreparedDataset,
-    scenario_id: &str,
-    a_world: &Pose2,
-) -> anyhow::Result<Vec<Vec<(f64, f64)>>> {
+/// Polylines, world frame, metres.
+type Polylines = Vec<Vec<(f64, f64)>>;
+
+/// World-frame road polylines of the given scenarios, by scenario id (one scan of the cache).
+fn case_roads<'a>(
+    data: &Path,
+    ids: impl Iterator<Item = &'a str>,
+) -> anyhow::Result<std::collections::HashMap<&'a str, Polylines>> {
+    let mut wanted: std::collections::HashMap<&str, Polylines> =
+        ids.map(|id| (id, Vec::new())).collect();
+    if wanted.is_empty() {
+        return Ok(wanted);
+    }
+    let dataset = scbg_features::cache::PreparedDataset::open(data)?;
+    let mut found = 0;
     for i in 0..dataset.len() {
         let scene = dataset.scene(i)?;
-        if scene.scenario_id != scenario_id {
+        let Some(road) = wanted.get_mut(scene.scenario_id.as_str()) else {
             continue;
-        }
+        };
         let [ox, oy] = scene.origin_xy_m;
-        return Ok(scene
+        *road = scene
             .road
             .iter()
             .map(|r| {
                 r.xy_m
                     .iter()
-                    .map(|p| a_world.agent_from_world(ox + f64::from(p[0]), oy + f64::from(p[1])))
+                    .map(|p| (ox + f64::from(p[0]), oy + f64::from(p[1])))
                     .collect()
             })
-            .collect());
+            .collect();
+        found += 1;
+        if found == wanted.len() {
+            break;
+        }
     }
-    Ok(Vec::new())
+    Ok(wanted)
 }
 
 /// `scbg eval scbg`.

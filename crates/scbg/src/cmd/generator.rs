@@ -338,8 +338,7 @@ pub fn train_variant(
 pub fn train(args: &TrainGeneratorArgs) -> anyhow::Result<GeneratorCheckpoint> {
     let variant = parse_variant(&args.variant)?;
     parse_threshold(&args.threshold)?;
-    let marginal = super::label::parse_marginal(&args.marginal)?;
-    super::label::check_sample_noise(args.sample_noise)?;
+    let labels = super::label::label_options(&args.estimator, args.samples, Reward::AverageSpeed)?;
     let p = load_predictors(&args.predictor)?;
     eprintln!(
         "labelling the training split ({} futures of B per pair role)",
@@ -351,12 +350,7 @@ pub fn train(args: &TrainGeneratorArgs) -> anyhow::Result<GeneratorCheckpoint> {
         &p.plain_device,
         &args.data,
         Some(Split::Train),
-        LabelOptions {
-            samples: args.samples,
-            reward: Reward::AverageSpeed,
-            marginal,
-            sample_noise: args.sample_noise,
-        },
+        labels,
         args.seed,
     )?;
     anyhow::ensure!(
@@ -377,12 +371,7 @@ pub fn train(args: &TrainGeneratorArgs) -> anyhow::Result<GeneratorCheckpoint> {
             learning_rate: args.learning_rate,
             range_steps: args.range_steps,
             seed: args.seed,
-            labels: LabelOptions {
-                samples: args.samples,
-                reward: Reward::AverageSpeed,
-                marginal,
-                sample_noise: args.sample_noise,
-            },
+            labels,
         },
         &args.out,
     )

@@ -15,7 +15,7 @@ use scbg_features::cache::{PreparedDataset, Shard};
 use scbg_train::Checkpoint;
 use serde_json::json;
 
-use crate::cli::LabelArgs;
+use crate::cli::{EstimatorArgs, LabelArgs};
 use crate::progress;
 
 /// One labelled future of B for target A.
@@ -159,13 +159,12 @@ fn label_shard(
     ckpt: &Checkpoint,
     model: &scbg_model::Multipath,
     args: &LabelArgs,
-    reward: Reward,
+    options: LabelOptions,
     shard_index: usize,
     pb: &indicatif::ProgressBar,
 ) -> anyhow::Result<Vec<LabelRow>> {
     let device = scbg_model::device::device(&ckpt.train_config.backend)?;
     let features = ckpt.train_config.feature_config();
-    let marginal = parse_marginal(&args.marginal)?;
     let mut rows = Vec::new();
     for i in 0..shard.len() {
         let scene = shard.get(i)?;
@@ -185,20 +184,7 @@ fn label_shard(
                     ckpt.stats.normalize(&mut sa);
                     ckpt.stats.normalize(&mut sb);
                     let mixture = marginal_mixtures(model, &[&sb], &device).remove(0);
-                    let labels = label_pair(
-                        model,
-                        &sa,
-                        &sb,
-                        &mixture,
-                        LabelOptions {
-                            samples: args.samples,
-                            reward,
-                            marginal,
-                            sample_noise: args.sample_noise,
-                        },
-                        &mut rng,
-                        &device,
-                    );
+                    let labels = label_pair(model, &sa, &sb, &mixture, options, &mut rng, &device);
                     for (k, psi) in labels.psi.iter().enumerate() {
                         rows.push(LabelRow {
                             scenario_id: scene.scenario_id.clone(),
@@ -308,20 +294,29 @@ pub fn parse_marginal(text: &str) -> anyhow::Result<MarginalEstimate> {
         .with_context(|| format!("--marginal {text:?}: expected direct or conditional-average"))
 }
 
-/// `--sample-noise` must be a finite scale ≥ 0.
-pub fn check_sample_noise(noise: f32) -> anyhow::Result<()> {
+/// The labelling options of `--marginal` and `--sample-noise` (a finite scale ≥ 0).
+pub fn label_options(
+    estimator: &EstimatorArgs,
+    samples: usize,
+    reward: Reward,
+) -> anyhow::Result<LabelOptions> {
+    let noise = estimator.sample_noise;
     anyhow::ensure!(
         noise.is_finite() && noise >= 0.0,
         "--sample-noise {noise}: expected a finite number >= 0"
     );
-    Ok(())
+    Ok(LabelOptions {
+        samples,
+        reward,
+        marginal: parse_marginal(&estimator.marginal)?,
+        sample_noise: noise,
+    })
 }
 
 pub fn label(args: &LabelArgs) -> anyhow::Result<LabelSummary> {
-    parse_marginal(&args.marginal)?;
-    check_sample_noise(args.sample_noise)?;
     let reward = Reward::parse(&args.reward)
         .with_context(|| format!("unknown reward {:?} (average_speed, progress)", args.reward))?;
+    let options = label_options(&args.estimator, args.samples, reward)?;
     let ckpt = Checkpoint::read(&args.model)?;
     let device = scbg_model::device::device(&ckpt.train_config.backend)?;
     let model = ckpt.load_model(&args.model, &device)?;
@@ -344,7 +339,7 @@ pub fn label(args: &LabelArgs) -> anyhow::Result<LabelSummary> {
             continue;
         }
         let shard = Shard::open(&args.data.join(&entry.file))?;
-        let shard_rows = label_shard(&shard, &ckpt, &model, args, reward, si, &pb)?;
+        let shard_rows = label_shard(&shard, &ckpt, &model, args, options, si, &pb)?;
         write_parquet(&out_path, &shard_rows)?;
         rows.extend(shard_rows);
     }
@@ -379,7 +374,8 @@ pub fn label(args: &LabelArgs) -> anyhow::Result<LabelSummary> {
         "pairs_roles": logged.len(),
         "samples_per_pair": args.samples,
         "reward": reward.name(),
-        "marginal": args.marginal,
+        "marginal": options.marginal.name(),
+        "sample_noise": options.sample_noise,
         "psi_logged": {"mean": mean(&logged), "std": std(&logged)},
         "psi_within_pair_std": within,
         "psi_all": {"mean": mean(&all), "std": std(&all), "min": all.iter().copied().fold(f64::INFINITY, f64::min), "max": all.iter().copied().fold(f64::NEG_INFINITY, f64::max), "fraction_abs_gt_2": high as f64 / all.len() as f64},
