@@ -23,9 +23,15 @@ impl Mlp {
         }
     }
 
+    /// Leading dimensions are folded into rows first, so every layer is one `[rows, d_in] ×
+    /// [d_in, d_out]` GEMM (forward and backward) rather than a batched product against a
+    /// broadcast weight, whose backward sums per-batch weight gradients.
+    ///
     /// # Shapes
     /// `[..., d_in] -> [..., d_out]`
-    pub fn forward<const D: usize>(&self, mut x: Tensor<D>) -> Tensor<D> {
+    pub fn forward<const D: usize>(&self, x: Tensor<D>) -> Tensor<D> {
+        let dims = x.dims();
+        let mut x = x.reshape([-1, dims[D - 1] as i32]);
         let n = self.layers.len();
         for (i, layer) in self.layers.iter().enumerate() {
             x = layer.forward(x);
@@ -33,7 +39,9 @@ impl Mlp {
                 x = relu(x);
             }
         }
-        x
+        let mut out_dims = dims;
+        out_dims[D - 1] = x.dims()[1];
+        x.reshape(out_dims)
     }
 }
 
@@ -112,7 +120,12 @@ impl Mcg {
     /// `s: [batch, n, d_in]`, `c: [batch, d_context]`, `mask: [batch, n]`
     /// `-> (s: [batch, n, width], c: [batch, width])`
     pub fn forward(&self, s: Tensor<3>, c: Tensor<2>, mask: Tensor<2>) -> (Tensor<3>, Tensor<2>) {
-        let mut s_acc = self.input_s.forward(s);
+        let [b, n, d_in] = s.dims();
+        let width = self.input_s.weight.dims()[1];
+        let mut s_acc = self
+            .input_s
+            .forward(s.reshape([b * n, d_in]))
+            .reshape([b, n, width]);
         let mut c_acc = self.input_c.forward(c);
         let (mut s_in, mut c_in) = (s_acc.clone(), c_acc.clone());
         for (k, block) in self.blocks.iter().enumerate() {
@@ -127,9 +140,11 @@ impl Mcg {
     }
 }
 
-/// An LSTM that returns its final hidden state, with the four gates fused: two matmuls per step
-/// (`[d_in, 4h]` and `[h, 4h]`; burn's `Lstm` runs eight and writes every step's output). Same parameters as a
-/// PyTorch LSTM (input and hidden weights and biases for the i, f, g, o gates, in that order).
+/// An LSTM that returns its final hidden state, with the four gates fused (`[d_in, 4h]` and
+/// `[h, 4h]` weights; burn's `Lstm` keeps eight matrices and writes every step's output). Same
+/// parameters as a PyTorch LSTM (input and hidden weights and biases for the i, f, g, o gates,
+/// in that order). On `flex` it runs as one fused op with a hand-written backward
+/// ([`crate::lstm_kernel`]).
 #[derive(Module, Debug)]
 pub struct FusedLstm {
     /// `d_in → 4h`
@@ -148,9 +163,32 @@ impl FusedLstm {
         }
     }
 
+    /// On a `flex` device this runs the fused kernel of [`crate::lstm_kernel`]; elsewhere the
+    /// tensor-op formulation [`Self::forward_ops`].
+    ///
     /// # Shapes
     /// `x: [batch, steps, d_in]` `-> [batch, d_hidden]` (the hidden state after the last step)
     pub fn forward(&self, x: Tensor<3>) -> Tensor<2> {
+        if let (Some(b_ih), Some(b_hh)) = (&self.input.bias, &self.hidden.bias)
+            && x.dtype() == burn::tensor::DType::F32
+            && crate::lstm_kernel::has_fused_lstm(&x.device())
+        {
+            return crate::lstm_kernel::lstm_last_hidden(
+                x,
+                self.input.weight.val(),
+                b_ih.val(),
+                self.hidden.weight.val(),
+                b_hh.val(),
+            );
+        }
+        self.forward_ops(x)
+    }
+
+    /// The same LSTM from tensor ops (any backend).
+    ///
+    /// # Shapes
+    /// `x: [batch, steps, d_in]` `-> [batch, d_hidden]`
+    pub fn forward_ops(&self, x: Tensor<3>) -> Tensor<2> {
         let [n, steps, _] = x.dims();
         let h_width = self.d_hidden;
         let device = x.device();

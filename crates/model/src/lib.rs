@@ -14,6 +14,7 @@ pub mod blocks;
 pub mod config;
 pub mod device;
 pub mod loss;
+pub mod lstm_kernel;
 pub mod model;
 
 pub use batch::{Batch, BatchAugment};
