@@ -574,4 +574,40 @@ mod tests {
             assert!((u - w).abs() <= 1e-6, "{h_plain:?} vs {:?}", fused[0]);
         }
     }
+
+    /// The multiversioned entry point (AVX-512 on this project's machines) and the baseline
+    /// build of the same code agree, so the fallback path is tested too.
+    #[test]
+    fn dispatched_and_baseline_builds_agree() {
+        let (n, steps, d_in, h) = (3, 5, 2, 3);
+        let vals = |len: usize, k: usize| -> Vec<f32> {
+            (0..len)
+                .map(|i| ((i * k) % 13) as f32 / 6.0 - 1.0)
+                .collect()
+        };
+        let x = f32_tensor(vals(n * steps * d_in, 7), [n, steps, d_in]);
+        let w_ih = f32_tensor(vals(d_in * 4 * h, 5), [d_in, 4 * h]);
+        let b_ih = f32_tensor(vals(4 * h, 3), [4 * h]);
+        let w_hh = f32_tensor(vals(h * 4 * h, 11), [h, 4 * h]);
+        let b_hh = f32_tensor(vals(4 * h, 2), [4 * h]);
+        let (out_a, tape_a) = forward(&x, &w_ih, &b_ih, &w_hh, &b_hh, true);
+        let (out_b, tape_b) = forward_impl(&x, &w_ih, &b_ih, &w_hh, &b_hh, true);
+        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(u, v)| (u - v).abs() < 1e-6);
+        assert!(close(slice(&out_a), slice(&out_b)));
+        let st = |tape: Option<Tape>| LstmState {
+            x: x.clone(),
+            w_ih: w_ih.clone(),
+            w_hh: w_hh.clone(),
+            tape: Arc::new(tape.unwrap()),
+        };
+        let grad = f32_tensor(vals(n * h, 3), [n, h]);
+        let (ga, gb) = (
+            backward(&st(tape_a), &grad, true),
+            backward_impl(&st(tape_b), &grad, true),
+        );
+        assert!(close(slice(&ga.w_ih), slice(&gb.w_ih)));
+        assert!(close(slice(&ga.w_hh), slice(&gb.w_hh)));
+        assert!(close(slice(&ga.bias), slice(&gb.bias)));
+        assert!(close(slice(&ga.x.unwrap()), slice(&gb.x.unwrap())));
+    }
 }
