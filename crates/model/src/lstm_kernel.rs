@@ -510,7 +510,7 @@ mod tests {
     }
 
     /// The fused kernel against the tensor-op LSTM (same weights): outputs, and the gradients of
-    /// all five parameters and of the input, on the autodiff flex device.
+    /// all four parameters and of the input, on the autodiff flex device.
     #[test]
     fn fused_lstm_matches_the_tensor_op_lstm() {
         let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
