@@ -610,4 +610,35 @@ mod tests {
         assert!(close(slice(&ga.bias), slice(&gb.bias)));
         assert!(close(slice(&ga.x.unwrap()), slice(&gb.x.unwrap())));
     }
+
+    /// Degenerate sizes: no sequences, and a single step.
+    #[test]
+    fn empty_batches_and_single_steps() {
+        let device = Device::flex().autodiff();
+        let lstm = FusedLstm::init(3, 2, &device);
+        let empty = Tensor::<3>::zeros([0, 4, 3], &device);
+        let out = lstm.forward(empty);
+        assert_eq!(out.dims(), [0, 2]);
+        let grads = out.sum().backward();
+        let g: Vec<f32> = lstm
+            .hidden
+            .weight
+            .val()
+            .grad(&grads)
+            .unwrap()
+            .into_data()
+            .try_to_vec()
+            .unwrap();
+        assert!(g.iter().all(|v| *v == 0.0), "{g:?}");
+        let x = Tensor::<3>::ones([2, 1, 3], &device);
+        let (a, b) = (lstm.forward(x.clone()), lstm.forward_ops(x));
+        let (a, b): (Vec<f32>, Vec<f32>) = (
+            a.into_data().try_to_vec().unwrap(),
+            b.into_data().try_to_vec().unwrap(),
+        );
+        assert!(
+            a.iter().zip(&b).all(|(u, v)| (u - v).abs() < 1e-6),
+            "{a:?} vs {b:?}"
+        );
+    }
 }
