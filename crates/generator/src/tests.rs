@@ -48,6 +48,33 @@ fn stats(scenes: &[PreparedScene]) -> FeatureStats {
     FeatureStats::fit(samples.iter())
 }
 
+/// Labelled examples of the first `n_scenes` test scenes (the paper's direct estimator, B's
+/// futures sampled from the full mixture).
+fn labelled(
+    predictor: &scbg_model::Multipath,
+    n_scenes: u64,
+    samples: usize,
+    reward: Reward,
+    seed: u64,
+    device: &Device,
+) -> Vec<Example> {
+    let scenes = scenes(n_scenes);
+    build_examples(
+        predictor,
+        &scenes,
+        &stats(&scenes),
+        &features(),
+        LabelOptions {
+            samples,
+            reward,
+            marginal: MarginalEstimate::Direct,
+            sample_noise: 1.0,
+        },
+        seed,
+        device,
+    )
+}
+
 fn step_options(variant: Variant, trajectory_weight: f32) -> StepOptions {
     StepOptions {
         variant,
@@ -93,21 +120,7 @@ fn variants_train_and_losses_fall() {
     device.seed(5);
     let config = MultipathConfig::cpu_small();
     let predictor = config.init(&device);
-    let scenes = scenes(3);
-    let examples = build_examples(
-        &predictor,
-        &scenes,
-        &stats(&scenes),
-        &features(),
-        LabelOptions {
-            samples: 3,
-            reward: Reward::AverageSpeed,
-            marginal: MarginalEstimate::Direct,
-            sample_noise: 1.0,
-        },
-        1,
-        &device,
-    );
+    let examples = labelled(&predictor, 3, 3, Reward::AverageSpeed, 1, &device);
     assert_eq!(examples.len(), 6, "3 scenes × 1 pair × 2 roles");
     assert!(
         examples
@@ -177,21 +190,7 @@ fn balanced_batches_mix_high_and_low() {
     let device = Device::flex();
     device.seed(5);
     let predictor = MultipathConfig::cpu_small().init(&device);
-    let scenes = scenes(2);
-    let base = build_examples(
-        &predictor,
-        &scenes,
-        &stats(&scenes),
-        &features(),
-        LabelOptions {
-            samples: 1,
-            reward: Reward::Progress,
-            marginal: MarginalEstimate::Direct,
-            sample_noise: 1.0,
-        },
-        1,
-        &device,
-    );
+    let base = labelled(&predictor, 2, 1, Reward::Progress, 1, &device);
     for (i, psi) in [0.1f32, 0.2, 3.0, 0.05, 2.5, 0.0, 0.3, 4.0]
         .iter()
         .enumerate()
@@ -231,21 +230,7 @@ fn range_predictor_learns_the_quantiles_and_stays_ordered() {
     device.seed(5);
     let config = MultipathConfig::cpu_small();
     let predictor = config.init(&device);
-    let scenes = scenes(2);
-    let mut examples = build_examples(
-        &predictor,
-        &scenes,
-        &stats(&scenes),
-        &features(),
-        LabelOptions {
-            samples: 1,
-            reward: Reward::Progress,
-            marginal: MarginalEstimate::Direct,
-            sample_noise: 1.0,
-        },
-        1,
-        &device,
-    );
+    let mut examples = labelled(&predictor, 2, 1, Reward::Progress, 1, &device);
     // Replace the labels by a known distribution: ψ uniform on 0..10 in every example, so the
     // 0.1 and 0.9 quantiles are 1 and 9 whatever the scene.
     for e in &mut examples {
@@ -282,21 +267,7 @@ fn measured_courtesy_matches_the_courtesy_function() {
     device.seed(11);
     let config = MultipathConfig::cpu_small();
     let predictor = config.init(&device);
-    let scenes = scenes(3);
-    let examples = build_examples(
-        &predictor,
-        &scenes,
-        &stats(&scenes),
-        &features(),
-        LabelOptions {
-            samples: 2,
-            reward: Reward::AverageSpeed,
-            marginal: MarginalEstimate::Direct,
-            sample_noise: 1.0,
-        },
-        3,
-        &device,
-    );
+    let examples = labelled(&predictor, 3, 2, Reward::AverageSpeed, 3, &device);
     let refs: Vec<&Example> = examples.iter().collect();
     let generator = GeneratorConfig::new(config.embedding_width()).init(&device);
     let psi: Vec<Vec<f32>> = refs.iter().map(|_| vec![-0.5, 0.0, 0.7]).collect();

@@ -93,20 +93,17 @@ impl LstmBackend for Flex {
     }
 }
 
-/// What the backward pass needs from the forward pass.
+/// What the backward pass needs from the forward pass (sizes come from `x` and `w_hh`).
 #[derive(Debug)]
 struct Tape {
-    n: usize,
-    steps: usize,
-    hidden: usize,
     /// Activated gates i, f, g, o: `[steps, n, 4h]`.
     gates: Vec<f32>,
     /// Cell states `c_0 = 0, c_1, …, c_steps`: `[steps + 1, n, h]`.
     cells: Vec<f32>,
     /// `tanh(c_1), …, tanh(c_steps)`: `[steps, n, h]`.
     tanh_cells: Vec<f32>,
-    /// The hidden state entering each step, `h_{t−1}`, in `x`'s row order: `[n, steps, h]`.
-    h_prev: Vec<f32>,
+    /// The hidden state entering each step, `h_{t−1}`, in `x`'s row order: `[n·steps, h]`.
+    h_prev: FlexTensor,
 }
 
 #[derive(Clone, Debug)]
@@ -154,20 +151,21 @@ impl<C: CheckpointStrategy> LstmBackend for Autodiff<Flex, C> {
         w_hh: FloatTensor<Self>,
         b_hh: FloatTensor<Self>,
     ) -> FloatTensor<Self> {
-        match LstmBackward
+        let prep = LstmBackward
             .prepare::<C>([x.node(), w_ih.node(), b_ih.node(), w_hh.node(), b_hh.node()])
             .compute_bound()
-            .stateful()
-        {
+            .stateful();
+        let tracked = matches!(prep, OpsKind::Tracked(_));
+        let (h, tape) = forward(
+            x.primitive(),
+            w_ih.primitive(),
+            b_ih.primitive(),
+            w_hh.primitive(),
+            b_hh.primitive(),
+            tracked,
+        );
+        match prep {
             OpsKind::Tracked(prep) => {
-                let (h, tape) = forward(
-                    x.primitive(),
-                    w_ih.primitive(),
-                    b_ih.primitive(),
-                    w_hh.primitive(),
-                    b_hh.primitive(),
-                    true,
-                );
                 let state = LstmState {
                     x: x.primitive().clone(),
                     w_ih: w_ih.primitive().clone(),
@@ -176,17 +174,7 @@ impl<C: CheckpointStrategy> LstmBackend for Autodiff<Flex, C> {
                 };
                 prep.finish(state, h)
             }
-            OpsKind::UnTracked(prep) => prep.finish(
-                forward(
-                    x.primitive(),
-                    w_ih.primitive(),
-                    b_ih.primitive(),
-                    w_hh.primitive(),
-                    b_hh.primitive(),
-                    false,
-                )
-                .0,
-            ),
+            OpsKind::UnTracked(prep) => prep.finish(h),
         }
     }
 }
@@ -198,7 +186,7 @@ fn f32_tensor(values: Vec<f32>, shape: impl Into<Shape>) -> FlexTensor {
 /// A contiguous `f32` copy-free view where possible.
 fn contiguous(t: &FlexTensor) -> FlexTensor {
     assert_eq!(t.dtype(), DType::F32, "the fused LSTM runs in f32");
-    if t.is_contiguous() && t.as_slice::<f32>().is_some() {
+    if t.as_slice::<f32>().is_some() {
         t.clone()
     } else {
         t.to_contiguous()
@@ -256,8 +244,8 @@ fn activate_gates(z: &mut [f32], h_width: usize) {
     }
 }
 
-/// Runs `$body` (a call of an `#[inline(always)]` function) compiled for AVX-512 or AVX2 + FMA
-/// when the CPU has them, else for the build's baseline: the gate loops then vectorize 16 or 8
+/// Defines `$name`, which runs `$impl` (an `#[inline(always)]` function) compiled for AVX-512 or
+/// AVX2 + FMA when the CPU has them, else for the build's baseline: the gate loops then vectorize 16 or 8
 /// lanes wide instead of SSE2's 4. (Runtime detection, as burn's own `x86-v4` GEMM does.)
 macro_rules! multiversion {
     ($name:ident, ($($arg:ident: $ty:ty),*) -> $ret:ty, $impl:ident) => {
@@ -338,14 +326,14 @@ fn forward_impl(
     let mut c = vec![0.0f32; n * h_width];
     let mut tanh_c = vec![0.0f32; n * h_width];
     let mut z = vec![0.0f32; n * four_h];
-    let mut tape = keep_tape.then(|| Tape {
-        n,
-        steps,
-        hidden: h_width,
-        gates: Vec::with_capacity(steps * n * four_h),
-        cells: vec![0.0f32; n * h_width],
-        tanh_cells: Vec::with_capacity(steps * n * h_width),
-        h_prev: vec![0.0f32; n * steps * h_width],
+    // The tape, filled step by step when asked for: gates, c_0..c_steps, tanh(c_t), h_{t−1}.
+    let mut tape = keep_tape.then(|| {
+        (
+            Vec::with_capacity(steps * n * four_h),
+            vec![0.0f32; n * h_width],
+            Vec::with_capacity(steps * n * h_width),
+            vec![0.0f32; n * steps * h_width],
+        )
     });
     for t in 0..steps {
         // h_0 = 0: the first step has no recurrent product.
@@ -383,14 +371,14 @@ fn forward_impl(
         for (tc, cv) in tanh_c.iter_mut().zip(&c) {
             *tc = tanh_f32(*cv);
         }
-        if let Some(tape) = tape.as_mut() {
+        if let Some((gates, cells, tanh_cells, h_prev)) = tape.as_mut() {
             for b in 0..n {
-                tape.h_prev[(b * steps + t) * h_width..][..h_width]
+                h_prev[(b * steps + t) * h_width..][..h_width]
                     .copy_from_slice(&h[b * h_width..][..h_width]);
             }
-            tape.gates.extend_from_slice(&z);
-            tape.cells.extend_from_slice(&c);
-            tape.tanh_cells.extend_from_slice(&tanh_c);
+            gates.extend_from_slice(&z);
+            cells.extend_from_slice(&c);
+            tanh_cells.extend_from_slice(&tanh_c);
         }
         for (b, gate_row) in z.chunks_exact(four_h).enumerate() {
             let o = &gate_row[3 * h_width..];
@@ -401,6 +389,12 @@ fn forward_impl(
             }
         }
     }
+    let tape = tape.map(|(gates, cells, tanh_cells, h_prev)| Tape {
+        gates,
+        cells,
+        tanh_cells,
+        h_prev: f32_tensor(h_prev, [n * steps, h_width]),
+    });
     (f32_tensor(h, [n, h_width]), tape)
 }
 
@@ -416,15 +410,13 @@ struct LstmGrads {
 #[inline(always)]
 fn backward_impl(st: &LstmState, grad_h: &FlexTensor, need_x: bool) -> LstmGrads {
     let Tape {
-        n,
-        steps,
-        hidden: h_width,
         ref gates,
         ref cells,
         ref tanh_cells,
         ref h_prev,
     } = *st.tape;
-    let four_h = 4 * h_width;
+    let [n, steps, d_in] = st.x.layout().shape().dims();
+    let [h_width, four_h] = st.w_hh.layout().shape().dims();
     let w_hh_t = Flex::float_transpose(st.w_hh.clone());
     let mut dh = slice(&contiguous(grad_h)).to_vec();
     let mut dc = vec![0.0f32; n * h_width];
@@ -466,12 +458,10 @@ fn backward_impl(st: &LstmState, grad_h: &FlexTensor, need_x: bool) -> LstmGrads
             *acc += v;
         }
     }
-    let d_in = st.x.layout().shape().dims::<3>()[2];
     let x_flat = contiguous(&st.x).reshape(Shape::new([n * steps, d_in]));
     let dz = f32_tensor(dz_all, [n * steps, four_h]);
     let w_ih = Flex::float_matmul(Flex::float_transpose(x_flat), dz.clone());
-    let h_prev = f32_tensor(h_prev.clone(), [n * steps, h_width]);
-    let w_hh = Flex::float_matmul(Flex::float_transpose(h_prev), dz.clone());
+    let w_hh = Flex::float_matmul(Flex::float_transpose(h_prev.clone()), dz.clone());
     let x = need_x.then(|| {
         let dx = Flex::float_matmul(dz, Flex::float_transpose(st.w_ih.clone()));
         contiguous(&dx).reshape(Shape::new([n, steps, d_in]))

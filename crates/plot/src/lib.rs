@@ -343,7 +343,7 @@ pub fn histogram(values: &[f64], bins: usize, x_label: &str, path: &Path) -> Res
     })
 }
 
-/// A scatter of (x, y) points with a fitted line label, e.g. quantile → courtesy (paper Fig. 4).
+/// A scatter of the finite (x, y) points, e.g. predicted vs labelled courtesy.
 pub fn scatter(
     points: &[(f64, f64)],
     x_label: &str,

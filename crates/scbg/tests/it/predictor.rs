@@ -347,27 +347,44 @@ fn train_generator_saves_generator_and_range_predictor() {
         .unwrap();
     let file = file.display().to_string();
     let sid = first["scenario_id"].as_str().unwrap();
-    scbg_ok(&[
-        "generate",
-        "--model",
-        &p("gen"),
-        "--scenario",
-        &file,
-        "--scenario-id",
-        sid,
-        "--a",
-        &a,
-        "--b",
+    let gen_dir = p("gen");
+    // `scbg generate` for this scenario and A, with B and the remaining arguments given.
+    let generate = |b: &str, rest: &[&str]| {
+        let mut args = vec![
+            "generate",
+            "--model",
+            &gen_dir,
+            "--scenario",
+            &file,
+            "--scenario-id",
+            sid,
+            "--a",
+            &a,
+            "--b",
+            b,
+        ];
+        args.extend_from_slice(rest);
+        scbg(&args)
+    };
+    let (traj_json, traj_png) = (p("traj.json"), p("traj.png"));
+    let ok = generate(
         &b,
-        "--quantile",
-        "0.1",
-        "0.5",
-        "0.9",
-        "--out",
-        &p("traj.json"),
-        "--render",
-        &p("traj.png"),
-    ]);
+        &[
+            "--quantile",
+            "0.1",
+            "0.5",
+            "0.9",
+            "--out",
+            &traj_json,
+            "--render",
+            &traj_png,
+        ],
+    );
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
     let traj: Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("traj.json")).unwrap())
             .unwrap();
@@ -377,38 +394,10 @@ fn train_generator_saves_generator_and_range_predictor() {
     assert!(trajs[0]["psi"].as_f64().unwrap() <= trajs[2]["psi"].as_f64().unwrap());
     assert!(dir.path().join("traj.png").is_file());
     // Bad requests name what is wrong and exit 2.
-    let bad = scbg(&[
-        "generate",
-        "--model",
-        &p("gen"),
-        "--scenario",
-        &file,
-        "--scenario-id",
-        sid,
-        "--a",
-        &a,
-        "--b",
-        "987654321",
-        "--quantile",
-        "0.5",
-    ]);
+    let bad = generate("987654321", &["--quantile", "0.5"]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("987654321"));
-    let bad = scbg(&[
-        "generate",
-        "--model",
-        &p("gen"),
-        "--scenario",
-        &file,
-        "--scenario-id",
-        sid,
-        "--a",
-        &a,
-        "--b",
-        &b,
-        "--quantile",
-        "1.5",
-    ]);
+    let bad = generate(&b, &["--quantile", "1.5"]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("quantile"));
 
