@@ -4,8 +4,8 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
-use scbg_features::AgentSample;
-use scbg_model::{Batch, BatchAugment, Mixture, Multipath};
+use scbg_features::{AgentSample, FeatureConfig, FeatureStats, PreparedScene, SampleBuilder};
+use scbg_model::{Batch, Mixture, Mode, Multipath};
 use scbg_scene::Pose2;
 
 use crate::{Reward, expected_reward};
@@ -16,17 +16,9 @@ pub fn marginal_mixtures(
     samples: &[&AgentSample],
     device: &Device,
 ) -> Vec<Mixture> {
-    let mut rng = rand_pcg::Pcg64Mcg::new(0xcafe);
-    let batch = Batch::from_samples(
-        samples,
-        &BatchAugment {
-            condition_dropout: 1.0,
-            history_mask_prob: 0.0,
-        },
-        &mut rng,
-        device,
-    );
-    model.forward(&batch).into_mixtures()
+    model
+        .forward(&Batch::for_mode(samples, Mode::Marginal, device))
+        .into_mixtures()
 }
 
 /// Drawing futures from a predicted mixture.
@@ -89,14 +81,20 @@ pub fn change_frame(points: &[[f32; 2]], from: &Pose2, to: &Pose2) -> Vec<[f32; 
 pub struct PairLabels {
     /// `[1 + M]`: index 0 is the logged future, 1.. the sampled ones.
     pub psi: Vec<f32>,
+    /// `[1 + M]` E[r(Y_A) | x, y_B] of each future.
     pub e_cond: Vec<f32>,
+    /// E[r(Y_A) | x] as estimated.
     pub e_marg: f32,
     /// The futures of B in A's frame (`[1 + M][T]`; the logged one has its invalid steps at 0).
     pub futures_in_a: Vec<Vec<[f32; 2]>>,
 }
 
 /// How `E[r(Y_A) | x]`, the second term of ψ, is estimated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, Default, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum MarginalEstimate {
     /// The predictor's marginal mode (paper eq. 4).
     Direct,
@@ -112,6 +110,7 @@ pub enum MarginalEstimate {
 }
 
 impl MarginalEstimate {
+    /// The estimator of a name (`direct`, `conditional-average`).
     pub fn parse(text: &str) -> Option<Self> {
         match text {
             "direct" => Some(Self::Direct),
@@ -120,6 +119,7 @@ impl MarginalEstimate {
         }
     }
 
+    /// The estimator's name.
     pub fn name(self) -> &'static str {
         match self {
             Self::Direct => "direct",
@@ -130,10 +130,13 @@ impl MarginalEstimate {
 
 /// How to label: how many futures of B to sample, which reward, and how E[r(Y_A) | x] is
 /// estimated.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct LabelOptions {
+    /// Futures sampled from B's marginal prediction per pair role (M).
     pub samples: usize,
+    /// The reward r(y_A).
     pub reward: Reward,
+    /// How E[r(Y_A) | x] is estimated.
     pub marginal: MarginalEstimate,
     /// Scale of the Gaussian part of B's sampled futures (1 = samples of the mixture, 0 =
     /// mode means); see [`SampleMixture::sample`].
@@ -186,8 +189,7 @@ pub fn label_pair(
         }
     }
     let refs: Vec<&AgentSample> = (0..n).map(|_| a).collect();
-    let mut batch_rng = rand_pcg::Pcg64Mcg::new(0xbeef);
-    let batch = Batch::from_samples(&refs, &BatchAugment::default(), &mut batch_rng, device);
+    let batch = Batch::for_mode(&refs, Mode::Conditional, device);
     let condition = Tensor::<3>::from_data(TensorData::new(cond, [n, t, 3]), device);
     let e_cond: Vec<f32> = expected_reward(model, &batch, Some(condition), reward, 0.1)
         .into_data()
@@ -198,7 +200,7 @@ pub fn label_pair(
     } else {
         expected_reward(
             model,
-            &Batch::from_samples(&[a], &BatchAugment::default(), &mut batch_rng, device),
+            &Batch::for_mode(&[a], Mode::Conditional, device),
             None,
             reward,
             0.1,
@@ -213,4 +215,76 @@ pub fn label_pair(
         e_marg,
         futures_in_a: futures,
     }
+}
+
+/// One labelled pair role: A (whose expected reward counts) and B (whose futures are labelled)
+/// in one window of a prepared scene.
+#[derive(Debug, Clone)]
+pub struct LabelledRole {
+    /// The window's current step.
+    pub window_step: usize,
+    /// Track index of A in the prepared scene.
+    pub a_index: usize,
+    /// Track index of B.
+    pub b_index: usize,
+    /// Track id of A.
+    pub a_id: i64,
+    /// Track id of B.
+    pub b_id: i64,
+    /// A's standardised sample, conditioned on B's logged future.
+    pub a: AgentSample,
+    /// B's standardised marginal sample.
+    pub b: AgentSample,
+    /// ψ of B's logged and sampled futures.
+    pub labels: PairLabels,
+}
+
+/// The labelling stream of scene `index` under `seed` (the project's one seed mixer): every
+/// front end labels scene `i` with a generator seeded by this, so its labels do not depend on
+/// which command labels it, or which other scenes it labels.
+pub fn scene_seed(seed: u64, index: u64) -> u64 {
+    scbg_base::seed::mix(seed, index)
+}
+
+/// Labels every ordered pair role (both directions of every interacting pair of every window)
+/// of a prepared scene: the one labelling loop of the project. Roles whose samples cannot be
+/// built (e.g. B not valid at the current step) are skipped. Pass a predictor on a plain
+/// (non-autodiff) device: nothing here needs gradients.
+pub fn label_scene(
+    model: &Multipath,
+    scene: &PreparedScene,
+    stats: &FeatureStats,
+    features: &FeatureConfig,
+    options: LabelOptions,
+    rng: &mut impl Rng,
+    device: &Device,
+) -> Vec<LabelledRole> {
+    let mut out = Vec::new();
+    let mut builder = SampleBuilder::new(scene, features);
+    for (w, pairs) in scene.windows.iter().zip(&scene.pairs) {
+        for p in pairs {
+            for (ia, ib) in [(p.first, p.second), (p.second, p.first)] {
+                let (Ok(mut a), Ok(mut b)) =
+                    (builder.sample(w, ia, Some(ib)), builder.sample(w, ib, None))
+                else {
+                    continue;
+                };
+                stats.normalize(&mut a);
+                stats.normalize(&mut b);
+                let mixture = marginal_mixtures(model, &[&b], device).remove(0);
+                let labels = label_pair(model, &a, &b, &mixture, options, rng, device);
+                out.push(LabelledRole {
+                    window_step: w.current_step,
+                    a_index: ia,
+                    b_index: ib,
+                    a_id: scene.tracks[ia].id,
+                    b_id: scene.tracks[ib].id,
+                    a,
+                    b,
+                    labels,
+                });
+            }
+        }
+    }
+    out
 }

@@ -12,6 +12,8 @@
 //!
 //! **Architecture invariant:** tensors, samples and the model only; no files, no CLI.
 
+#![warn(missing_docs)]
+
 pub mod label;
 pub mod losses;
 mod reward;
@@ -45,21 +47,9 @@ pub fn expected_reward(
     reward: Reward,
     step_secs: f32,
 ) -> Tensor<1> {
-    let mut b = batch.clone();
-    let [n, _, _] = batch.condition.dims();
-    let device = batch.condition.device();
-    match condition {
-        Some(c) => {
-            b.condition = c;
-            b.condition_flag = Tensor::ones([n, 1], &device);
-        }
-        None => {
-            b.condition = b.condition.zeros_like();
-            b.condition_flag = Tensor::zeros([n, 1], &device);
-        }
-    }
+    let b = batch.clone().with_condition(condition);
     let out = model.forward(&b);
-    let [_, k, steps, _] = out.xy.dims();
+    let [n, k, steps, _] = out.xy.dims();
     let probs = softmax(out.logits, 1); // [n, k]
     let r = reward
         .evaluate(out.xy.reshape([n * k, steps, 2]), step_secs)

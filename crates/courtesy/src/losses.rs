@@ -23,7 +23,7 @@ pub fn huber_trajectory(
     (loss * v).sum() / count.clamp_min(1.0)
 }
 
-/// Pinball (quantile) loss for quantile τ (paper eq. 8), averaged over the batch:
+/// Pinball (quantile) loss for quantile τ (paper eq. 9, `L_τ`), averaged over the batch:
 /// `(τ − 1)(ψ − q)` when `ψ < q`, else `τ(ψ − q)`.
 ///
 /// # Shapes

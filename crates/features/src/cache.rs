@@ -11,8 +11,10 @@ use std::collections::BTreeMap;
 use std::io::{BufWriter, Write};
 use std::path::{Path, PathBuf};
 
+use scbg_base::atomic::AtomicFile;
 use serde::{Deserialize, Serialize};
 
+use crate::codec::DecodeError;
 use crate::prepared::PreparedScene;
 
 const MAGIC: &[u8; 8] = b"SCBGPS01";
@@ -21,21 +23,33 @@ const FOOTER_BYTES: usize = 8 + 8 + 8;
 /// An error reading or writing the cache.
 #[derive(Debug, thiserror::Error)]
 pub enum CacheError {
-    #[error("cache record is corrupt at field `{field}`")]
-    Corrupt { field: &'static str },
+    /// A record's bytes do not decode.
+    #[error(transparent)]
+    Corrupt(#[from] DecodeError),
+    /// Reading or writing a file failed.
     #[error("{error}: {}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The underlying I/O error.
         error: std::io::Error,
     },
+    /// The file lacks the shard magic or has an inconsistent footer or index.
+    #[allow(missing_docs)]
     #[error("not a scbg cache shard (bad magic or footer): {}", path.display())]
     NotAShard { path: PathBuf },
+    /// A record of a shard could not be read.
     #[error("record {index}: {error} in {}", path.display())]
     Record {
+        /// The shard file.
         path: PathBuf,
+        /// 0-based index of the record in the shard.
         index: usize,
+        /// Why (normally [`CacheError::Corrupt`]).
         error: Box<CacheError>,
     },
+    /// `manifest.json` is not valid JSON for a [`Manifest`].
+    #[allow(missing_docs)]
     #[error("manifest {}: {message}", path.display())]
     Manifest { path: PathBuf, message: String },
 }
@@ -44,22 +58,19 @@ pub enum CacheError {
 #[derive(Debug)]
 pub struct ShardWriter {
     path: PathBuf,
-    out: BufWriter<tempfile::NamedTempFile>,
+    out: BufWriter<AtomicFile>,
     index: Vec<(u64, u64)>,
     pos: u64,
 }
 
 impl ShardWriter {
+    /// Starts writing a shard at `path` (a temporary file until [`ShardWriter::finish`]).
     pub fn create(path: &Path) -> Result<Self, CacheError> {
         let io = |error| CacheError::Io {
             path: path.to_path_buf(),
             error,
         };
-        let dir = path
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        let mut out = BufWriter::new(tempfile::NamedTempFile::new_in(dir).map_err(io)?);
+        let mut out = BufWriter::new(AtomicFile::create(path).map_err(|e| io(e.into()))?);
         out.write_all(MAGIC).map_err(io)?;
         Ok(Self {
             path: path.to_path_buf(),
@@ -69,6 +80,7 @@ impl ShardWriter {
         })
     }
 
+    /// Appends one encoded scene; returns the record's size in bytes.
     pub fn append(&mut self, scene: &PreparedScene) -> Result<u64, CacheError> {
         let bytes = scene.encode();
         self.out.write_all(&bytes).map_err(|error| CacheError::Io {
@@ -98,9 +110,8 @@ impl ShardWriter {
             .write_all(&(self.index.len() as u64).to_le_bytes())
             .map_err(io)?;
         self.out.write_all(MAGIC).map_err(io)?;
-        let tmp = self.out.into_inner().map_err(|e| io(e.into_error()))?;
-        tmp.as_file().sync_all().map_err(io)?;
-        tmp.persist(&self.path).map_err(|e| io(e.error))?;
+        let file = self.out.into_inner().map_err(|e| io(e.into_error()))?;
+        file.commit().map_err(|e| io(e.into()))?;
         Ok(index_offset + self.index.len() as u64 * 16 + FOOTER_BYTES as u64)
     }
 }
@@ -114,6 +125,7 @@ pub struct Shard {
 }
 
 impl Shard {
+    /// Memory-maps a shard and checks its magic, footer and index.
     pub fn open(path: &Path) -> Result<Self, CacheError> {
         let io = |error| CacheError::Io {
             path: path.to_path_buf(),
@@ -163,14 +175,17 @@ impl Shard {
         })
     }
 
+    /// Number of records.
     pub fn len(&self) -> usize {
         self.index.len()
     }
 
+    /// True when the shard holds no records.
     pub fn is_empty(&self) -> bool {
         self.index.is_empty()
     }
 
+    /// The shard's path.
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -181,7 +196,7 @@ impl Shard {
         PreparedScene::decode(&self.map[o..o + l]).map_err(|e| CacheError::Record {
             path: self.path.clone(),
             index: i,
-            error: Box::new(e),
+            error: Box::new(e.into()),
         })
     }
 }
@@ -193,18 +208,24 @@ pub struct ShardSummary {
     pub file: String,
     /// Input files, as given.
     pub inputs: Vec<String>,
+    /// Scenes prepared (scenes with at least one window).
     pub scenarios: usize,
+    /// Windows over those scenes.
     pub windows: usize,
+    /// Interacting pairs over all windows.
     pub pairs: usize,
     /// Marginal-mode targets over all windows (valid vehicles with a future).
     pub targets: usize,
     /// Skipped records or files by reason.
     pub skipped: BTreeMap<String, usize>,
+    /// Total size of the input files, bytes.
     pub raw_bytes: u64,
+    /// Size of the shard file(s) written, bytes.
     pub bytes: u64,
 }
 
 impl ShardSummary {
+    /// Adds `other`'s counts (not its `file` or `inputs`) to these.
     pub fn add(&mut self, other: &ShardSummary) {
         self.scenarios += other.scenarios;
         self.windows += other.windows;
@@ -221,33 +242,21 @@ impl ShardSummary {
 /// The cache's table of contents, `manifest.json`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Manifest {
+    /// Version of the cache format (currently 1).
     pub format_version: u32,
     /// The preparation settings, as `key = value` strings, so a cache says how it was made.
     pub settings: BTreeMap<String, String>,
+    /// One summary per shard, in shard order.
     pub shards: Vec<ShardSummary>,
+    /// Sum of the shard summaries.
     pub total: ShardSummary,
 }
 
-/// Writes JSON atomically (temp file + rename).
-pub fn write_json_atomic<T: Serialize>(path: &Path, value: &T) -> Result<(), CacheError> {
-    let io = |error| CacheError::Io {
-        path: path.to_path_buf(),
-        error,
-    };
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-    serde_json::to_writer_pretty(&mut tmp, value).map_err(|e| io(e.into()))?;
-    tmp.write_all(b"\n").map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
-}
-
 impl Manifest {
+    /// File name of the manifest in the cache folder.
     pub const FILE: &'static str = "manifest.json";
 
+    /// Reads `dir/manifest.json`.
     pub fn read(dir: &Path) -> Result<Self, CacheError> {
         let path = dir.join(Self::FILE);
         let text = std::fs::read_to_string(&path).map_err(|error| CacheError::Io {
@@ -260,8 +269,13 @@ impl Manifest {
         })
     }
 
+    /// Writes `dir/manifest.json` atomically (pretty JSON plus a newline).
     pub fn write(&self, dir: &Path) -> Result<(), CacheError> {
-        write_json_atomic(&dir.join(Self::FILE), self)
+        let path = dir.join(Self::FILE);
+        scbg_base::atomic::write_json(&path, self).map_err(|e| CacheError::Io {
+            path,
+            error: e.into(),
+        })
     }
 }
 
@@ -276,6 +290,7 @@ pub fn finished_shard(dir: &Path, shard_file: &str, inputs: &[String]) -> Option
 /// All shards of a cache folder, opened, with a flat scene index.
 #[derive(Debug)]
 pub struct PreparedDataset {
+    /// The cache's manifest.
     pub manifest: Manifest,
     shards: Vec<Shard>,
     /// (shard, record) of every scene, in manifest order.
@@ -283,6 +298,7 @@ pub struct PreparedDataset {
 }
 
 impl PreparedDataset {
+    /// Reads the manifest of the cache folder `dir` and opens every shard it lists.
     pub fn open(dir: &Path) -> Result<Self, CacheError> {
         let manifest = Manifest::read(dir)?;
         let shards: Vec<Shard> = manifest
@@ -302,14 +318,17 @@ impl PreparedDataset {
         })
     }
 
+    /// Number of scenes over all shards.
     pub fn len(&self) -> usize {
         self.locations.len()
     }
 
+    /// True when the cache holds no scenes.
     pub fn is_empty(&self) -> bool {
         self.locations.is_empty()
     }
 
+    /// Decodes scene `i` (0-based, in manifest order). Panics if `i >= len()`.
     pub fn scene(&self, i: usize) -> Result<PreparedScene, CacheError> {
         let (s, r) = self.locations[i];
         self.shards[s].get(r)
@@ -319,83 +338,22 @@ impl PreparedDataset {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::pairs::{InteractingPair, PairSource};
-    use crate::prepared::{PreparedTrack, RoadKind, RoadPolyline};
-    use crate::window::Window;
-    use scbg_scene::ObjectType;
-
-    fn scene(id: &str) -> PreparedScene {
-        let n = 12;
-        let mut valid = vec![true; n];
-        valid[3] = false;
-        PreparedScene {
-            scenario_id: id.into(),
-            origin_xy_m: [1.5, -2.5],
-            num_steps: n,
-            step_secs: 0.1,
-            tracks: vec![
-                PreparedTrack {
-                    id: 5,
-                    object_type: ObjectType::Vehicle,
-                    is_sdc: true,
-                    length_m: 4.0,
-                    width_m: 2.0,
-                    x_m: (0..n)
-                        .map(|i| if valid[i] { i as f32 } else { 0.0 })
-                        .collect(),
-                    y_m: vec![0.0; n],
-                    heading_rad: vec![0.0; n],
-                    vx_mps: (0..n).map(|i| if valid[i] { 10.0 } else { 0.0 }).collect(),
-                    vy_mps: vec![0.0; n],
-                    valid,
-                },
-                PreparedTrack {
-                    id: 6,
-                    object_type: ObjectType::Cyclist,
-                    is_sdc: false,
-                    length_m: 2.0,
-                    width_m: 1.0,
-                    valid: vec![false; n],
-                    x_m: vec![0.0; n],
-                    y_m: vec![0.0; n],
-                    heading_rad: vec![0.0; n],
-                    vx_mps: vec![0.0; n],
-                    vy_mps: vec![0.0; n],
-                },
-            ],
-            road: vec![RoadPolyline {
-                kind: RoadKind::Crosswalk,
-                xy_m: vec![[0.0, 1.0], [2.0, 3.0]],
-            }],
-            windows: vec![Window { current_step: 4 }],
-            pairs: vec![vec![InteractingPair {
-                first: 0,
-                second: 1,
-                source: PairSource::Mined,
-            }]],
-        }
-    }
+    use crate::codec::tests::scene;
 
     #[test]
-    fn record_round_trip() {
-        let s = scene("abc");
-        assert_eq!(PreparedScene::decode(&s.encode()).unwrap(), s);
-    }
-
-    #[test]
-    fn truncated_or_garbled_records_are_errors_not_panics() {
+    fn a_corrupt_record_reads_as_before() {
+        let e = CacheError::from(DecodeError {
+            field: "track.valid",
+        });
+        assert_eq!(
+            e.to_string(),
+            "cache record is corrupt at field `track.valid`"
+        );
         let bytes = scene("abc").encode();
-        for cut in 0..bytes.len() {
-            assert!(PreparedScene::decode(&bytes[..cut]).is_err(), "cut {cut}");
-        }
-        let mut state = 7u32;
-        for _ in 0..2000 {
-            let mut b = bytes.clone();
-            state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
-            let i = (state as usize >> 8) % b.len();
-            b[i] = (state >> 3) as u8;
-            let _ = PreparedScene::decode(&b);
-        }
+        let e: CacheError = PreparedScene::decode(&bytes[..bytes.len() - 1])
+            .unwrap_err()
+            .into();
+        assert!(matches!(e, CacheError::Corrupt(_)), "{e:?}");
     }
 
     #[test]

@@ -15,12 +15,32 @@
 
 use scbg_scene::ObjectType;
 
-use crate::cache::CacheError;
-use crate::pairs::{InteractingPair, PairSource};
-use crate::prepared::{PreparedScene, PreparedTrack, RoadKind, RoadPolyline};
+use crate::prepared::{
+    InteractingPair, PairSource, PreparedScene, PreparedTrack, RoadKind, RoadPolyline,
+};
 use crate::window::Window;
 
-pub(crate) fn encode(s: &PreparedScene) -> Vec<u8> {
+/// A malformed cache record: names the first field that could not be read or is invalid.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("cache record is corrupt at field `{field}`")]
+pub struct DecodeError {
+    /// The field, as named in the layout above (e.g. `track.valid`, `pair.source`).
+    pub field: &'static str,
+}
+
+impl PreparedScene {
+    /// Encodes into the cache's binary record format.
+    pub fn encode(&self) -> Vec<u8> {
+        encode(self)
+    }
+
+    /// Decodes a cache record; errors say which field is malformed.
+    pub fn decode(bytes: &[u8]) -> Result<Self, DecodeError> {
+        decode(bytes)
+    }
+}
+
+fn encode(s: &PreparedScene) -> Vec<u8> {
     let mut out = Vec::with_capacity(1024);
     let u32_ = |out: &mut Vec<u8>, v: usize| out.extend_from_slice(&(v as u32).to_le_bytes());
     u32_(&mut out, s.scenario_id.len());
@@ -83,59 +103,58 @@ struct Reader<'a> {
 }
 
 impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize, field: &'static str) -> Result<&'a [u8], CacheError> {
+    fn take(&mut self, n: usize, field: &'static str) -> Result<&'a [u8], DecodeError> {
         let end = self
             .pos
             .checked_add(n)
             .filter(|&e| e <= self.bytes.len())
-            .ok_or(CacheError::Corrupt { field })?;
+            .ok_or(DecodeError { field })?;
         let out = &self.bytes[self.pos..end];
         self.pos = end;
         Ok(out)
     }
-    fn u8(&mut self, field: &'static str) -> Result<u8, CacheError> {
+    fn u8(&mut self, field: &'static str) -> Result<u8, DecodeError> {
         Ok(self.take(1, field)?[0])
     }
-    fn u32(&mut self, field: &'static str) -> Result<usize, CacheError> {
+    fn u32(&mut self, field: &'static str) -> Result<usize, DecodeError> {
         Ok(u32::from_le_bytes(self.take(4, field)?.try_into().expect("4")) as usize)
     }
-    fn f32(&mut self, field: &'static str) -> Result<f32, CacheError> {
+    fn f32(&mut self, field: &'static str) -> Result<f32, DecodeError> {
         Ok(f32::from_le_bytes(
             self.take(4, field)?.try_into().expect("4"),
         ))
     }
-    fn f64(&mut self, field: &'static str) -> Result<f64, CacheError> {
+    fn f64(&mut self, field: &'static str) -> Result<f64, DecodeError> {
         Ok(f64::from_le_bytes(
             self.take(8, field)?.try_into().expect("8"),
         ))
     }
-    fn i64(&mut self, field: &'static str) -> Result<i64, CacheError> {
+    fn i64(&mut self, field: &'static str) -> Result<i64, DecodeError> {
         Ok(i64::from_le_bytes(
             self.take(8, field)?.try_into().expect("8"),
         ))
     }
     /// A count, checked against the bytes left so that a corrupt count cannot allocate.
-    fn count(&mut self, min_item_bytes: usize, field: &'static str) -> Result<usize, CacheError> {
+    fn count(&mut self, min_item_bytes: usize, field: &'static str) -> Result<usize, DecodeError> {
         let n = self.u32(field)?;
         if n.saturating_mul(min_item_bytes) > self.bytes.len() - self.pos {
-            return Err(CacheError::Corrupt { field });
+            return Err(DecodeError { field });
         }
         Ok(n)
     }
 }
 
-pub(crate) fn decode(bytes: &[u8]) -> Result<PreparedScene, CacheError> {
+fn decode(bytes: &[u8]) -> Result<PreparedScene, DecodeError> {
     let mut r = Reader { bytes, pos: 0 };
     let id_len = r.count(1, "scenario_id")?;
-    let scenario_id = String::from_utf8(r.take(id_len, "scenario_id")?.to_vec()).map_err(|_| {
-        CacheError::Corrupt {
+    let scenario_id =
+        String::from_utf8(r.take(id_len, "scenario_id")?.to_vec()).map_err(|_| DecodeError {
             field: "scenario_id",
-        }
-    })?;
+        })?;
     let origin_xy_m = [r.f64("origin")?, r.f64("origin")?];
     let num_steps = r.count(0, "num_steps")?;
     if num_steps > 100_000 {
-        return Err(CacheError::Corrupt { field: "num_steps" });
+        return Err(DecodeError { field: "num_steps" });
     }
     let step_secs = r.f32("step_secs")?;
     let n_tracks = r.count(18, "tracks")?;
@@ -177,14 +196,14 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<PreparedScene, CacheError> {
     let n_road = r.count(5, "road")?;
     let mut road = Vec::with_capacity(n_road);
     for _ in 0..n_road {
-        let kind = RoadKind::from_index(r.u8("road.kind")?)
-            .ok_or(CacheError::Corrupt { field: "road.kind" })?;
+        let kind =
+            RoadKind::from_index(r.u8("road.kind")?).ok_or(DecodeError { field: "road.kind" })?;
         let n = r.count(8, "road.points")?;
         let xy_m = (0..n)
             .map(|_| Ok([r.f32("road.x")?, r.f32("road.y")?]))
-            .collect::<Result<Vec<_>, CacheError>>()?;
+            .collect::<Result<Vec<_>, DecodeError>>()?;
         if xy_m.is_empty() {
-            return Err(CacheError::Corrupt {
+            return Err(DecodeError {
                 field: "road.points",
             });
         }
@@ -204,13 +223,13 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<PreparedScene, CacheError> {
                 0 => PairSource::Labelled,
                 1 => PairSource::Mined,
                 _ => {
-                    return Err(CacheError::Corrupt {
+                    return Err(DecodeError {
                         field: "pair.source",
                     });
                 }
             };
             if first >= n_tracks || second >= n_tracks {
-                return Err(CacheError::Corrupt {
+                return Err(DecodeError {
                     field: "pair.track",
                 });
             }
@@ -221,7 +240,7 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<PreparedScene, CacheError> {
             });
         }
         if current_step >= num_steps {
-            return Err(CacheError::Corrupt {
+            return Err(DecodeError {
                 field: "window.current_step",
             });
         }
@@ -229,7 +248,7 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<PreparedScene, CacheError> {
         pairs.push(ps);
     }
     if r.pos != bytes.len() {
-        return Err(CacheError::Corrupt {
+        return Err(DecodeError {
             field: "trailing bytes",
         });
     }
@@ -243,4 +262,84 @@ pub(crate) fn decode(bytes: &[u8]) -> Result<PreparedScene, CacheError> {
         windows,
         pairs,
     })
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+
+    /// A small scene with an invalid step, an all-invalid track, a road polygon and a pair.
+    pub(crate) fn scene(id: &str) -> PreparedScene {
+        let n = 12;
+        let mut valid = vec![true; n];
+        valid[3] = false;
+        PreparedScene {
+            scenario_id: id.into(),
+            origin_xy_m: [1.5, -2.5],
+            num_steps: n,
+            step_secs: 0.1,
+            tracks: vec![
+                PreparedTrack {
+                    id: 5,
+                    object_type: ObjectType::Vehicle,
+                    is_sdc: true,
+                    length_m: 4.0,
+                    width_m: 2.0,
+                    x_m: (0..n)
+                        .map(|i| if valid[i] { i as f32 } else { 0.0 })
+                        .collect(),
+                    y_m: vec![0.0; n],
+                    heading_rad: vec![0.0; n],
+                    vx_mps: (0..n).map(|i| if valid[i] { 10.0 } else { 0.0 }).collect(),
+                    vy_mps: vec![0.0; n],
+                    valid,
+                },
+                PreparedTrack {
+                    id: 6,
+                    object_type: ObjectType::Cyclist,
+                    is_sdc: false,
+                    length_m: 2.0,
+                    width_m: 1.0,
+                    valid: vec![false; n],
+                    x_m: vec![0.0; n],
+                    y_m: vec![0.0; n],
+                    heading_rad: vec![0.0; n],
+                    vx_mps: vec![0.0; n],
+                    vy_mps: vec![0.0; n],
+                },
+            ],
+            road: vec![RoadPolyline {
+                kind: RoadKind::Crosswalk,
+                xy_m: vec![[0.0, 1.0], [2.0, 3.0]],
+            }],
+            windows: vec![Window { current_step: 4 }],
+            pairs: vec![vec![InteractingPair {
+                first: 0,
+                second: 1,
+                source: PairSource::Mined,
+            }]],
+        }
+    }
+
+    #[test]
+    fn record_round_trip() {
+        let s = scene("abc");
+        assert_eq!(PreparedScene::decode(&s.encode()).unwrap(), s);
+    }
+
+    #[test]
+    fn truncated_or_garbled_records_are_errors_not_panics() {
+        let bytes = scene("abc").encode();
+        for cut in 0..bytes.len() {
+            assert!(PreparedScene::decode(&bytes[..cut]).is_err(), "cut {cut}");
+        }
+        let mut state = 7u32;
+        for _ in 0..2000 {
+            let mut b = bytes.clone();
+            state = state.wrapping_mul(1_103_515_245).wrapping_add(12345);
+            let i = (state as usize >> 8) % b.len();
+            b[i] = (state >> 3) as u8;
+            let _ = PreparedScene::decode(&b);
+        }
+    }
 }

@@ -13,6 +13,9 @@
 //! plain `Vec<f32>` arrays with documented shapes and `valid` masks. No file formats other
 //! than the cache's own; protobuf/TFRecord are unknown to this crate.
 
+#![warn(missing_docs)]
+
+mod build;
 pub mod cache;
 mod codec;
 mod pairs;
@@ -21,8 +24,12 @@ mod sample;
 mod stats;
 mod window;
 
-pub use pairs::{InteractingPair, PairConfig, PairSource, select_pairs};
-pub use prepared::{PrepareError, PreparedScene, PreparedTrack, RoadKind, RoadPolyline};
+pub use build::PrepareError;
+pub use codec::DecodeError;
+pub use pairs::{PairConfig, select_pairs};
+pub use prepared::{
+    InteractingPair, PairSource, PreparedScene, PreparedTrack, RoadKind, RoadPolyline,
+};
 pub use sample::{
     AGENT_FEATURES, AgentSample, DIFF_FEATURES, FeatureConfig, ROAD_FEATURES, ROAD_TYPES,
     SampleBuilder, SampleError, extract_sample, marginal_targets,

@@ -13,33 +13,24 @@
 //!    `max_pairs` are kept. Both vehicles of a pair are interchangeable: consumers use both
 //!    directions (A, B) and (B, A).
 
-use crate::prepared::PreparedScene;
+use crate::prepared::{InteractingPair, PairSource, PreparedScene};
 use crate::window::{Window, WindowConfig};
 use scbg_scene::ObjectType;
-
-/// How pairs were found.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum PairSource {
-    Labelled = 0,
-    Mined = 1,
-}
-
-/// Two interacting vehicles, as indices into [`PreparedScene::tracks`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct InteractingPair {
-    pub first: usize,
-    pub second: usize,
-    pub source: PairSource,
-}
 
 /// Parameters of the pair-mining rule (see the module docs).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PairConfig {
+    /// Future paths must come this close, metres (default 3).
     pub max_path_distance_m: f32,
+    /// …at times at most this far apart, seconds (default 4).
     pub max_time_gap_s: f32,
+    /// At least one vehicle must travel more than this over the future, metres (default 5).
     pub min_travel_m: f32,
+    /// Valid future steps a vehicle needs to be a candidate (default 40).
     pub min_future_valid_steps: usize,
+    /// Steps between compared path points (default 5: 2 Hz at 10 Hz).
     pub path_stride_steps: usize,
+    /// Most mined pairs kept per window, closest approach first (default 4).
     pub max_pairs: usize,
 }
 

@@ -23,6 +23,7 @@ pub const ROAD_TYPES: usize = RoadKind::COUNT;
 pub struct FeatureConfig {
     /// History steps including the current one.
     pub history_steps: usize,
+    /// Future steps after the current one.
     pub future_steps: usize,
     /// Other agents kept, closest first (the paper-era model used up to 128).
     pub max_other_agents: usize,
@@ -47,8 +48,11 @@ impl Default for FeatureConfig {
 /// The features of one target agent in one window.
 #[derive(Debug, Clone, PartialEq)]
 pub struct AgentSample {
+    /// Scenario id of the scene.
     pub scenario_id: String,
+    /// The window the sample is taken from.
     pub window: Window,
+    /// Track id of the target agent.
     pub target_track_id: i64,
     /// The other agent of a pair whose future conditions the prediction, if any.
     pub condition_track_id: Option<i64>,
@@ -84,6 +88,7 @@ pub struct AgentSample {
 }
 
 impl AgentSample {
+    /// Whether the sample is conditioned on another agent's future.
     pub fn has_condition(&self) -> bool {
         self.condition_track_id.is_some()
     }
@@ -208,8 +213,11 @@ fn track_history(
 /// Why a sample cannot be built.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum SampleError {
+    /// The target or condition track index is out of range.
     #[error("track index {0} is out of range")]
     NoSuchTrack(usize),
+    /// The target track is not valid at the window's current step.
+    #[allow(missing_docs)]
     #[error("target track {track_id} is not valid at the current step {step}")]
     TargetInvalidNow { track_id: i64, step: usize },
 }
@@ -242,6 +250,7 @@ pub struct SampleBuilder<'a> {
 }
 
 impl<'a> SampleBuilder<'a> {
+    /// A builder for samples of `scene` with sizes from `config`.
     pub fn new(scene: &'a PreparedScene, config: &'a FeatureConfig) -> Self {
         let n: usize = scene
             .road

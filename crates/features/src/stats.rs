@@ -8,11 +8,17 @@ use crate::sample::{AGENT_FEATURES, AgentSample, DIFF_FEATURES, ROAD_FEATURES};
 /// Mean and standard deviation of each feature channel.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct FeatureStats {
+    /// `[AGENT_FEATURES]` mean of the per-step agent features.
     pub agent_mean: Vec<f32>,
+    /// `[AGENT_FEATURES]` standard deviation of the per-step agent features (≥ 1e-3).
     pub agent_std: Vec<f32>,
+    /// `[DIFF_FEATURES]` mean of the per-step difference features.
     pub diff_mean: Vec<f32>,
+    /// `[DIFF_FEATURES]` standard deviation of the difference features (≥ 1e-3).
     pub diff_std: Vec<f32>,
+    /// `[ROAD_FEATURES]` mean of the road-segment features.
     pub road_mean: Vec<f32>,
+    /// `[ROAD_FEATURES]` standard deviation of the road-segment features (≥ 1e-3).
     pub road_std: Vec<f32>,
 }
 

@@ -7,6 +7,7 @@ use scbg_scene::Scene;
 pub struct WindowConfig {
     /// History steps including the current one (WOMD: 10 past + 1 current).
     pub history_steps: usize,
+    /// Future steps after the current one (WOMD: 80, 8 s at 10 Hz).
     pub future_steps: usize,
     /// Steps between window starts in scenarios longer than one window.
     pub stride_steps: usize,
@@ -23,6 +24,7 @@ impl Default for WindowConfig {
 }
 
 impl WindowConfig {
+    /// Steps of one window: history (including the current step) + future.
     pub fn window_steps(&self) -> usize {
         self.history_steps + self.future_steps
     }
@@ -32,6 +34,7 @@ impl WindowConfig {
 /// `history_steps` ending there and its future the `future_steps` after it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Window {
+    /// The scene step that is "now" (last history step).
     pub current_step: usize,
 }
 

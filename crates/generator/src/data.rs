@@ -3,8 +3,8 @@
 
 use burn::tensor::Device;
 use rand::SeedableRng;
-use scbg_courtesy::label::{LabelOptions, change_frame, label_pair, marginal_mixtures};
-use scbg_features::{AgentSample, FeatureConfig, FeatureStats, PreparedScene, SampleBuilder};
+use scbg_courtesy::label::{LabelOptions, LabelledRole, change_frame, label_scene, scene_seed};
+use scbg_features::{AgentSample, FeatureConfig, FeatureStats, PreparedScene};
 use scbg_model::Multipath;
 
 /// One pair role with its labelled futures.
@@ -30,8 +30,38 @@ pub struct Example {
     pub b_embedding: Vec<f32>,
 }
 
-/// Labels every pair role of `scenes` (see `scbg label`) and keeps what training needs,
-/// including B's frozen embedding.
+impl Example {
+    /// The training example of a labelled pair role: B's futures moved into B's frame, the
+    /// B→A frame change and B's frozen embedding (computed here, on the plain device).
+    pub fn from_role(
+        scenario_id: String,
+        role: LabelledRole,
+        predictor: &Multipath,
+        device: &Device,
+    ) -> Self {
+        let LabelledRole { a, b, labels, .. } = role;
+        let futures_b = labels
+            .futures_in_a
+            .iter()
+            .map(|f| change_frame(f, &a.world_from_agent, &b.world_from_agent))
+            .collect();
+        Self {
+            scenario_id,
+            logged_valid: a.condition_future_valid.clone(),
+            a_from_b: a_from_b(&a, &b),
+            b_embedding: marginal_embedding(predictor, &b, device),
+            futures_b,
+            psi: labels.psi,
+            e_marg: labels.e_marg,
+            a,
+            b,
+        }
+    }
+}
+
+/// Labels every pair role of `scenes` through the one labelling path
+/// ([`scbg_courtesy::label::label_scene`], scene `i` on stream [`scene_seed`]`(seed, i)`) and
+/// keeps what training needs, including B's frozen embedding.
 ///
 /// Pass a predictor on a plain (non-autodiff) device: nothing here needs gradients, and burn's
 /// autodiff graph keeps the nodes of every forward that is never back-propagated.
@@ -46,42 +76,14 @@ pub fn build_examples(
 ) -> Vec<Example> {
     let mut out = Vec::new();
     for (i, scene) in scenes.iter().enumerate() {
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(
-            seed ^ (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15),
-        );
-        let mut builder = SampleBuilder::new(scene, features);
-        for (w, pairs) in scene.windows.iter().zip(&scene.pairs) {
-            for p in pairs {
-                for (ia, ib) in [(p.first, p.second), (p.second, p.first)] {
-                    let (Ok(mut a), Ok(mut b)) =
-                        (builder.sample(w, ia, Some(ib)), builder.sample(w, ib, None))
-                    else {
-                        continue;
-                    };
-                    stats.normalize(&mut a);
-                    stats.normalize(&mut b);
-                    let mixture = marginal_mixtures(predictor, &[&b], device).remove(0);
-                    let labels = label_pair(predictor, &a, &b, &mixture, options, &mut rng, device);
-                    let futures_b = labels
-                        .futures_in_a
-                        .iter()
-                        .map(|f| change_frame(f, &a.world_from_agent, &b.world_from_agent))
-                        .collect();
-                    let a_from_b = a_from_b(&a, &b);
-                    let b_embedding = marginal_embedding(predictor, &b, device);
-                    out.push(Example {
-                        scenario_id: scene.scenario_id.clone(),
-                        logged_valid: a.condition_future_valid.clone(),
-                        a,
-                        b,
-                        a_from_b,
-                        futures_b,
-                        psi: labels.psi,
-                        e_marg: labels.e_marg,
-                        b_embedding,
-                    });
-                }
-            }
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(scene_seed(seed, i as u64));
+        for role in label_scene(predictor, scene, stats, features, options, &mut rng, device) {
+            out.push(Example::from_role(
+                scene.scenario_id.clone(),
+                role,
+                predictor,
+                device,
+            ));
         }
     }
     out
@@ -104,12 +106,7 @@ pub fn marginal_embedding(
     sample: &AgentSample,
     device: &Device,
 ) -> Vec<f32> {
-    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
-    let marginal = scbg_model::BatchAugment {
-        condition_dropout: 1.0,
-        history_mask_prob: 0.0,
-    };
-    let batch = scbg_model::Batch::from_samples(&[sample], &marginal, &mut rng, device);
+    let batch = scbg_model::Batch::for_mode(&[sample], scbg_model::Mode::Marginal, device);
     predictor
         .encode(&batch)
         .into_data()

@@ -1,4 +1,4 @@
-//! The paper's evaluation of a generator (Sec. IV-C, Table II, Figs. 4–5): pure functions of
+//! The paper's evaluation of a generator (Sec. IV-D, Table II, Figs. 4–5): pure functions of
 //! examples, the frozen predictor, the generator and the range predictor.
 //!
 //! Definitions (per held-out example, i.e. one ordered pair (A, B) in one window):
@@ -126,11 +126,14 @@ pub fn predicted_ranges(
 /// Mean and standard deviation (population) of a set of values.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct MeanStd {
+    /// The mean.
     pub mean: f64,
+    /// The population standard deviation.
     pub std: f64,
 }
 
 impl MeanStd {
+    /// Mean and standard deviation of `values`; `None` when empty.
     pub fn of(values: &[f64]) -> Option<Self> {
         if values.is_empty() {
             return None;
@@ -148,6 +151,7 @@ impl MeanStd {
 /// Achieved courtesy at one input quantile (Figs. 4 and 5b).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct QuantilePoint {
+    /// The input quantile (one of [`EVAL_QUANTILES`]).
     pub quantile: f32,
     /// Requested ψ, mean over examples.
     pub target_psi_mean: f64,
@@ -160,17 +164,28 @@ pub struct QuantilePoint {
 /// One variant's row of Table II, with the per-quantile curve.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct VariantEval {
+    /// CourtesyMSE (paper eq. 10) with ψ = the label of B's logged future, (m/s)² for the
+    /// default reward; `None` without examples.
     pub courtesy_mse_data: Option<MeanStd>,
+    /// CourtesyMSE with ψ at the quantiles [`EVAL_QUANTILES`] of the predicted range.
     pub courtesy_mse_range: Option<MeanStd>,
+    /// CourtesyMSE with 9 evenly spaced ψ over the dataset's range
+    /// ([`EvalOptions::arbitrary_min`] to [`EvalOptions::arbitrary_max`]).
     pub courtesy_mse_arbitrary: Option<MeanStd>,
-    /// Metres.
+    /// TrajADE (paper eq. 11) of `g(x, ψ_data)` against B's logged future over its valid
+    /// steps, metres; mean ± std over examples.
     pub traj_ade: Option<MeanStd>,
+    /// Pearson correlation of input quantile and achieved ψ, pooled over all examples.
     pub corr_quantile: Option<f64>,
+    /// The same over the high-courtesy examples (logged |ψ| above
+    /// [`EvalOptions::high_threshold`]).
     pub corr_quantile_high: Option<f64>,
     /// Mean over examples of the Pearson correlation of quantile and achieved ψ within the
     /// example (the pooled correlations also count differences between scenes).
     pub corr_quantile_within: Option<f64>,
+    /// Number of examples evaluated.
     pub examples: usize,
+    /// Number of them with logged |ψ| above the high-courtesy threshold.
     pub high_examples: usize,
     /// Achieved ψ per quantile over all examples (empty without examples).
     pub per_quantile: Vec<QuantilePoint>,
@@ -181,11 +196,13 @@ pub struct VariantEval {
 /// What [`evaluate`] needs besides the models.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct EvalOptions {
-    /// Dataset ψ range for the *arbitrary* evaluation.
+    /// Lower end of the dataset's ψ range, for the *arbitrary* evaluation.
     pub arbitrary_min: f32,
+    /// Upper end of that range.
     pub arbitrary_max: f32,
     /// |ψ_logged| above this counts as high courtesy (corr_quantile_high).
     pub high_threshold: f32,
+    /// The reward r(y_A) of J_φ (as used for the labels).
     pub reward: Reward,
 }
 

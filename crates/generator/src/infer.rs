@@ -15,15 +15,30 @@ use serde::Serialize;
 use crate::data::{Example, a_from_b, marginal_embedding};
 use crate::eval::{generate_and_measure, predicted_ranges};
 use crate::model::Generator;
-use crate::range::{RangePredictor, psi_for_quantile};
+use crate::range::{RangePredictor, psi_for_quantile, quantile_for_psi};
+
+/// The courtesy asked of a generated future.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Courtesy {
+    /// A quantile in [0, 1] of the predicted range (0.1 and 0.9 are its ends).
+    Quantile(f32),
+    /// An explicit ψ (m/s for the default reward).
+    Psi(f32),
+}
 
 /// The trained models and the feature settings they were trained with, on one plain device.
 #[derive(Debug)]
 pub struct Scbg {
+    /// The frozen predictor (encoder and J_φ).
     pub predictor: Multipath,
+    /// g(x, ψ).
     pub generator: Generator,
+    /// The range predictor (ψ quantiles 0.1 and 0.9 of a scene and pair).
     pub range: RangePredictor,
+    /// Feature standardisation.
     pub stats: FeatureStats,
+    /// Feature settings.
     pub features: FeatureConfig,
     /// Reward, number of sampled futures of B and marginal estimator: as in training, so ψ
     /// means the same thing.
@@ -33,51 +48,76 @@ pub struct Scbg {
 /// Why a trajectory could not be generated.
 #[derive(Debug, thiserror::Error)]
 pub enum GenerateError {
+    /// No track with this id (`.0`) in the scenario (`.1`, its id).
     #[error("no track with id {0} in scenario {1}")]
     NoSuchTrack(i64, String),
+    /// A requested quantile outside `[0, 1]`.
     #[error("quantile {0} is outside [0, 1]")]
     Quantile(f32),
+    /// A requested ψ that is NaN or infinite.
+    #[error("ψ {0} is not a finite number")]
+    Psi(f32),
+    /// A and B are the same track (its id).
     #[error("A and B are the same track ({0})")]
     SameTrack(i64),
+    /// The sample of A or B could not be built (e.g. the track is not valid at the window's
+    /// current step).
     #[error("track {id}: {error}")]
-    Sample { id: i64, error: SampleError },
+    Sample {
+        /// The track id.
+        id: i64,
+        /// Why its sample could not be built.
+        error: SampleError,
+    },
 }
 
 /// One generated future of B.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Generated {
+    /// The quantile asked for, or the one an explicit ψ corresponds to (linear between the
+    /// predicted 0.1 and 0.9 quantiles, extended beyond them).
     pub quantile: f32,
     /// The ψ the quantile maps to (m/s for the default reward).
     pub psi: f32,
-    /// The predicted 0.1 and 0.9 quantiles of ψ for this scene and pair.
+    /// The predicted 0.1 quantile of ψ for this scene and pair.
     pub psi_low: f32,
+    /// The predicted 0.9 quantile.
     pub psi_high: f32,
     /// J_φ of the generated future: what the predictor expects it does to A.
     pub achieved_psi: f32,
-    /// E[r(Y_A) | x, ŷ_B] and E[r(Y_A) | x].
+    /// E[r(Y_A) | x, ŷ_B].
     pub a_expected_reward_conditional: f32,
+    /// E[r(Y_A) | x].
     pub a_expected_reward_marginal: f32,
     /// B's future, world frame, metres, at `step_secs` intervals after the current step.
     pub world_xy_m: Vec<[f64; 2]>,
+    /// Time between points, seconds.
     pub step_secs: f32,
 }
 
 impl Scbg {
-    /// B's futures for each quantile, for the pair (A = `a_id`, B = `b_id`) at `window`.
+    /// B's futures for each requested courtesy, for the pair (A = `a_id`, B = `b_id`) at
+    /// `window`.
     pub fn generate(
         &self,
         scene: &PreparedScene,
         window: &Window,
         a_id: i64,
         b_id: i64,
-        quantiles: &[f32],
+        courtesy: &[Courtesy],
         device: &Device,
     ) -> Result<Vec<Generated>, GenerateError> {
         if a_id == b_id {
             return Err(GenerateError::SameTrack(a_id));
         }
-        if let Some(&q) = quantiles.iter().find(|q| !(0.0..=1.0).contains(*q)) {
-            return Err(GenerateError::Quantile(q));
+        for c in courtesy {
+            match *c {
+                Courtesy::Quantile(q) if !(0.0..=1.0).contains(&q) => {
+                    return Err(GenerateError::Quantile(q));
+                }
+                Courtesy::Psi(p) if !p.is_finite() => return Err(GenerateError::Psi(p)),
+                _ => {}
+            }
         }
         let index = |id: i64| {
             scene
@@ -119,10 +159,13 @@ impl Scbg {
             b,
         };
         let (low, high) = predicted_ranges(&self.range, &[&example], device)[0];
-        let psi: Vec<f32> = quantiles
+        let (psi, quantiles): (Vec<f32>, Vec<f32>) = courtesy
             .iter()
-            .map(|&q| psi_for_quantile(q, low, high))
-            .collect();
+            .map(|c| match *c {
+                Courtesy::Quantile(q) => (psi_for_quantile(q, low, high), q),
+                Courtesy::Psi(p) => (p, quantile_for_psi(p, low, high)),
+            })
+            .unzip();
         let measured = generate_and_measure(
             &self.generator,
             &self.predictor,

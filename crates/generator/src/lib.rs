@@ -5,11 +5,14 @@
 //! variants ([`Variant`]).
 //!
 //! The scene encoder is the predictor's, frozen: the embedding of B (marginal mode) is computed
-//! once per example on a plain device and stored, so only the decoder learns. The decoder has no anchors: an
-//! MLP of `[embedding ‖ MLP(ψ)]` gives 80 per-step displacements, integrated into positions in
-//! B's frame.
+//! once per example on a plain device and stored, so only the decoder learns. The decoder has
+//! no anchors: an MLP of `[embedding ‖ MLP(ψ)]` gives one displacement per knot (every 5th of
+//! the 80 steps by default), summed into knot positions in B's frame and interpolated linearly
+//! to every step.
 //!
 //! **Architecture invariant:** no files or CLI; the predictor is passed in and never updated.
+
+#![warn(missing_docs)]
 
 mod data;
 pub mod eval;
@@ -19,10 +22,11 @@ mod range;
 mod train;
 
 pub use data::{Example, a_from_b, build_examples, marginal_embedding};
-pub use infer::{GenerateError, Generated, Scbg};
+pub use infer::{Courtesy, GenerateError, Generated, Scbg};
 pub use model::{Generator, GeneratorConfig};
 pub use range::{
-    HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, range_step, stored_embeddings,
+    HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,
+    stored_embeddings,
 };
 pub use train::{
     StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss, threshold_value,

@@ -14,6 +14,7 @@ pub struct GeneratorConfig {
     pub psi_width: usize,
     /// Hidden widths of the decoder MLP.
     pub hidden: Vec<usize>,
+    /// Generated future steps `T` (80 = 8 s at 10 Hz).
     pub future_steps: usize,
     /// ψ is divided by this before the network sees it (the spread of the training labels;
     /// ψ's scale depends on the data and the predictor, from ~0.03 to several m/s).
@@ -35,6 +36,8 @@ fn one_step() -> usize {
 }
 
 impl GeneratorConfig {
+    /// The default decoder for a predictor embedding of `embedding_width`: ψ width 32, hidden
+    /// widths 256, 256, 80 steps, `psi_scale` 1 (set it from the labels), 2 Hz knots.
     pub fn new(embedding_width: usize) -> Self {
         Self {
             embedding_width,
@@ -46,6 +49,7 @@ impl GeneratorConfig {
         }
     }
 
+    /// Builds the generator on `device` (seed the device first for reproducible weights).
     pub fn init(&self, device: &Device) -> Generator {
         let mut dims = vec![self.embedding_width + self.psi_width];
         dims.extend(&self.hidden);
@@ -81,15 +85,22 @@ impl GeneratorConfig {
 /// `g(x, ψ)`: one trajectory of B for a requested courtesy.
 #[derive(Module, Debug)]
 pub struct Generator {
+    /// MLP embedding the scaled ψ (`1 → psi_width → psi_width`).
     pub psi_mlp: Mlp,
+    /// MLP of `[embedding ‖ ψ embedding]` → `2 · knots` per-knot displacements (dx, dy).
     pub decoder: Mlp,
     /// `[T, knots]` fixed linear interpolation from knots to steps (not trained).
     pub interpolation: burn::module::Param<Tensor<2>>,
+    /// Generated future steps `T`.
     pub future_steps: usize,
+    /// ψ is divided by this before [`Self::psi_mlp`] (see [`GeneratorConfig::psi_scale`]).
     pub psi_scale: f32,
 }
 
 impl Generator {
+    /// `y_B = g(x, ψ)` (paper eq. 1): B's future for the requested courtesy ψ. The knot
+    /// displacements are summed into knot positions and interpolated to every step.
+    ///
     /// # Shapes
     /// `embedding: [batch, e]` (B's frozen scene embedding), `psi: [batch]`
     /// `-> [batch, T, 2]` positions in B's frame (metres)

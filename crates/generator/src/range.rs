@@ -9,24 +9,30 @@ use scbg_model::blocks::Mlp;
 
 use crate::data::Example;
 
-/// The quantiles the range predictor estimates.
+/// The lower quantile τ the range predictor estimates (paper Sec. III-E).
 pub const LOW_QUANTILE: f32 = 0.1;
+/// The upper quantile τ the range predictor estimates.
 pub const HIGH_QUANTILE: f32 = 0.9;
 
 /// Predicts the 0.1 and 0.9 quantiles of ψ for a scene from B's frozen embedding.
 /// `q_0.9 = q_0.1 + softplus(·)`, so the upper quantile is never below the lower one.
 #[derive(Module, Debug)]
 pub struct RangePredictor {
+    /// MLP `e → hidden → hidden → 2`: the lower quantile and the pre-softplus gap.
     pub head: Mlp,
 }
 
 impl RangePredictor {
+    /// A range predictor for embeddings of `embedding_width`, with two hidden layers of
+    /// `hidden`.
     pub fn init(embedding_width: usize, hidden: usize, device: &Device) -> Self {
         Self {
             head: Mlp::init(&[embedding_width, hidden, hidden, 2], device),
         }
     }
 
+    /// The predicted 0.1 and 0.9 quantiles of ψ, `q_high ≥ q_low`.
+    ///
     /// # Shapes
     /// `embedding: [batch, e]` `-> (q_low: [batch], q_high: [batch])`
     pub fn forward(&self, embedding: Tensor<2>) -> (Tensor<1>, Tensor<1>) {
@@ -46,6 +52,16 @@ pub fn psi_for_quantile(q: f32, q_low: f32, q_high: f32) -> f32 {
     q_low + (q - LOW_QUANTILE) / (HIGH_QUANTILE - LOW_QUANTILE) * (q_high - q_low)
 }
 
+/// The inverse of [`psi_for_quantile`]: the quantile a ψ corresponds to (0.5 when the
+/// predicted range is empty).
+pub fn quantile_for_psi(psi: f32, q_low: f32, q_high: f32) -> f32 {
+    let span = q_high - q_low;
+    if span.abs() < f32::EPSILON {
+        return 0.5;
+    }
+    LOW_QUANTILE + (HIGH_QUANTILE - LOW_QUANTILE) * (psi - q_low) / span
+}
+
 /// The examples' stored frozen embeddings of B as one tensor on `device`.
 ///
 /// # Shapes
@@ -60,8 +76,10 @@ pub fn stored_embeddings(examples: &[&Example], device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(flat, [n, e]), device)
 }
 
-/// One pinball-loss step on every ψ (logged and sampled) of the examples: each example's
-/// scene gets the losses of all its labels. Only the range predictor is updated.
+/// One pinball-loss step (paper eq. 9, τ = 0.1 and 0.9) on every ψ (logged and sampled) of
+/// the examples: each example's scene gets the losses of all its labels (the first as many as
+/// the example with the fewest has). Only the range predictor is updated. Returns it with the
+/// loss; a non-finite loss leaves it unchanged.
 ///
 /// # Shapes
 /// `embedding: [examples, e]` (see [`stored_embeddings`]), `psi: [examples][labels]`

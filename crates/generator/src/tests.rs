@@ -389,7 +389,14 @@ fn generate_maps_quantiles_and_reports_bad_requests() {
     };
     let window = &scene.windows[0];
     let out = scbg
-        .generate(scene, window, a_id, b_id, &[0.1, 0.5, 0.9], &device)
+        .generate(
+            scene,
+            window,
+            a_id,
+            b_id,
+            &[0.1, 0.5, 0.9].map(Courtesy::Quantile),
+            &device,
+        )
         .unwrap();
     assert_eq!(out.len(), 3);
     let (lo, hi) = (out[0].psi_low, out[0].psi_high);
@@ -410,15 +417,60 @@ fn generate_maps_quantiles_and_reports_bad_requests() {
         );
     }
     assert!(matches!(
-        scbg.generate(scene, window, a_id, 999_999, &[0.5], &device),
+        scbg.generate(
+            scene,
+            window,
+            a_id,
+            999_999,
+            &[Courtesy::Quantile(0.5)],
+            &device
+        ),
         Err(GenerateError::NoSuchTrack(999_999, _))
     ));
     assert!(matches!(
-        scbg.generate(scene, window, a_id, b_id, &[1.5], &device),
+        scbg.generate(
+            scene,
+            window,
+            a_id,
+            b_id,
+            &[Courtesy::Quantile(1.5)],
+            &device
+        ),
         Err(GenerateError::Quantile(_))
     ));
     assert!(matches!(
-        scbg.generate(scene, window, a_id, a_id, &[0.5], &device),
+        scbg.generate(
+            scene,
+            window,
+            a_id,
+            b_id,
+            &[Courtesy::Psi(f32::NAN)],
+            &device
+        ),
+        Err(GenerateError::Psi(_))
+    ));
+    // An explicit ψ gives the same future as the quantile it corresponds to.
+    let by_psi = scbg
+        .generate(
+            scene,
+            window,
+            a_id,
+            b_id,
+            &[Courtesy::Psi(out[2].psi)],
+            &device,
+        )
+        .unwrap();
+    assert!((by_psi[0].quantile - 0.9).abs() < 1e-4);
+    assert_eq!(by_psi[0].world_xy_m, out[2].world_xy_m);
+    assert!(matches!(
+        scbg.generate(
+            scene,
+            window,
+            a_id,
+            a_id,
+            &[Courtesy::Quantile(0.5)],
+            &device
+        ),
         Err(GenerateError::SameTrack(_))
     ));
 }

@@ -1,4 +1,5 @@
-//! One optimisation step of the generator (paper eqs. (5)–(7)).
+//! One optimisation step of the generator (paper eqs. (6)–(8), with J_φ of eq. (5)), its
+//! variants and the balanced batches of Sec. IV-D.
 
 use burn::optim::{GradientsParams, ModuleOptimizer};
 use burn::tensor::{Device, Tensor, TensorData};
@@ -14,23 +15,99 @@ use crate::model::Generator;
 use crate::range::stored_embeddings;
 
 /// The paper's three variants (Table II).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Variant {
     /// ① logged futures only, trajectory loss only.
+    #[serde(rename = "baseline")]
     Baseline,
     /// ① + ② sampled futures as extra targets (weight α).
+    #[serde(rename = "aug")]
+    #[cfg_attr(feature = "clap", value(name = "aug"))]
     Augmented,
     /// ① + ② + ③ the courtesy loss through the frozen J_φ (weight β).
+    #[serde(rename = "full")]
     Full,
 }
 
-/// Which examples count as "high courtesy" for the 50/50 batches.
-#[derive(Debug, Clone, Copy, PartialEq)]
+impl Variant {
+    /// The three variants in the paper's order.
+    pub const ALL: [Variant; 3] = [Variant::Baseline, Variant::Augmented, Variant::Full];
+
+    /// The variant's name (`baseline`, `aug`, `full`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Baseline => "baseline",
+            Self::Augmented => "aug",
+            Self::Full => "full",
+        }
+    }
+}
+
+impl std::str::FromStr for Variant {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|v| v.name() == s)
+            .ok_or_else(|| format!("unknown variant {s:?} (baseline, aug or full)"))
+    }
+}
+
+/// Which examples count as "high courtesy" for the 50/50 batches. Written `qX` (a quantile)
+/// or a number (m/s), also in `generator.json`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(into = "String", try_from = "String")]
 pub enum Threshold {
     /// |ψ| above this many m/s (the paper: 2).
     Absolute(f32),
     /// |ψ| above this quantile of the logged |ψ| (for data whose ψ scale differs from WOMD's).
     Quantile(f32),
+}
+
+impl std::fmt::Display for Threshold {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Absolute(v) => write!(f, "{v}"),
+            Self::Quantile(q) => write!(f, "q{q}"),
+        }
+    }
+}
+
+impl std::str::FromStr for Threshold {
+    type Err = String;
+    fn from_str(text: &str) -> Result<Self, String> {
+        match text.strip_prefix('q') {
+            Some(q) => {
+                let q: f32 = q
+                    .parse()
+                    .map_err(|_| format!("threshold {text:?}: expected qX with X in [0, 1]"))?;
+                if !(0.0..=1.0).contains(&q) {
+                    return Err(format!("threshold {text:?}: quantile outside [0, 1]"));
+                }
+                Ok(Self::Quantile(q))
+            }
+            None => text
+                .parse()
+                .ok()
+                .filter(|v: &f32| v.is_finite() && *v >= 0.0)
+                .map(Self::Absolute)
+                .ok_or_else(|| format!("threshold {text:?}: expected a number >= 0 (m/s) or qX")),
+        }
+    }
+}
+
+impl From<Threshold> for String {
+    fn from(t: Threshold) -> String {
+        t.to_string()
+    }
+}
+
+impl TryFrom<String> for Threshold {
+    type Error = String;
+    fn try_from(s: String) -> Result<Self, String> {
+        s.parse()
+    }
 }
 
 /// The |ψ| above which an example counts as high courtesy.
@@ -81,28 +158,36 @@ pub fn balanced_batches(
 /// Losses of one step (means over the batch).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StepLosses {
+    /// `L_traj` (paper eq. 6): logged-future Huber loss plus α times the sampled ones'.
     pub trajectory: f32,
+    /// `L_court` (paper eq. 7) in units of the generator's `psi_scale`; 0 unless
+    /// [`Variant::Full`].
     pub courtesy: f32,
+    /// `L = trajectory_weight · L_traj + β · L_court` (paper eq. 8).
     pub total: f32,
 }
 
 /// Hyper-parameters of a step.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StepOptions {
+    /// Which losses and futures the step uses.
     pub variant: Variant,
     /// Weight of the sampled futures' trajectory loss (α).
     pub alpha: f32,
     /// Weight of the courtesy loss (β).
     pub beta: f32,
+    /// Huber δ of the trajectory loss (metres).
     pub huber_delta: f32,
     /// Multiplies the whole trajectory loss (1 normally; 0 trains on the courtesy loss alone).
     pub trajectory_weight: f32,
+    /// The reward r(y_A) of J_φ (as used for the labels).
     pub reward: Reward,
+    /// Learning rate of the optimizer step.
     pub learning_rate: f64,
 }
 
 /// One step: `L = Huber(y⁰, ŷ⁰) + α Σ_m Huber(y^m, ŷ^m) + β Σ_m (ψ_m − J_φ(x, ŷ^m))²`
-/// (paper eqs. (5)–(7)). `predictor` lives on the autodiff device so that J_φ passes gradients
+/// (paper eqs. (6)–(8)). `predictor` lives on the autodiff device so that J_φ passes gradients
 /// to ŷ; only the generator's parameters are updated. Pass the predictor through
 /// `Module::no_grad` first: then the backward pass skips the predictor's own weights.
 pub fn train_step(

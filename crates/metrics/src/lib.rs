@@ -9,6 +9,8 @@
 //! **Architecture invariant:** no I/O, no tensors, no dataset formats; plain numbers in,
 //! plain numbers out.
 
+#![warn(missing_docs)]
+
 use std::collections::BTreeMap;
 use std::f32::consts::PI;
 
@@ -29,13 +31,19 @@ pub const MAX_PREDICTIONS: usize = 6;
 /// Ground truth of one object: current state and the 80 future steps.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GroundTruth {
+    /// Position at the current step, metres.
     pub current_xy_m: [f32; 2],
+    /// Heading at the current step, radians.
     pub current_heading_rad: f32,
+    /// Velocity at the current step, m/s (its norm sets the miss-threshold [`speed_scale`]).
     pub current_velocity_mps: [f32; 2],
     /// `[80]` positions, headings, velocities and validity of the future steps.
     pub future_xy_m: Vec<[f32; 2]>,
+    /// `[80]` headings, radians (the miss test rotates errors into these).
     pub future_heading_rad: Vec<f32>,
+    /// `[80]` velocities, m/s.
     pub future_velocity_mps: Vec<[f32; 2]>,
+    /// `[80]` validity; steps with `false` are ignored by every metric.
     pub future_valid: Vec<bool>,
 }
 
@@ -57,6 +65,7 @@ impl Prediction {
         (0..16).map(|p| (p + 1) * 5 - 1).collect()
     }
 
+    /// The 10 Hz step indices: `0..80`.
     pub fn steps_10hz() -> Vec<usize> {
         (0..FUTURE_STEPS).collect()
     }
@@ -65,16 +74,24 @@ impl Prediction {
 /// Trajectory buckets for mAP (RIGHT_U_TURN is merged into RIGHT_TURN).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize)]
 pub enum TrajectoryType {
+    /// Slow and barely moving.
     Stationary,
+    /// Heading about unchanged, small lateral offset.
     Straight,
+    /// Heading about unchanged, ending offset to the left.
     StraightLeft,
+    /// Heading about unchanged, ending offset to the right.
     StraightRight,
+    /// Turned left and ended behind the start (longitudinally).
     LeftUTurn,
+    /// Turned left.
     LeftTurn,
+    /// Turned right (including right U-turns).
     RightTurn,
 }
 
 impl TrajectoryType {
+    /// Every bucket, in order.
     pub const ALL: [TrajectoryType; 7] = [
         Self::Stationary,
         Self::Straight,
@@ -89,10 +106,15 @@ impl TrajectoryType {
 /// The thresholds of the trajectory classifier.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct ClassifierThresholds {
+    /// Stationary if the larger of the current and final speed is below this (m/s)…
     pub max_speed_stationary_mps: f32,
+    /// …and the displacement to the final valid step is below this (metres).
     pub max_displacement_stationary_m: f32,
+    /// Straight (rather than straight-left/right) if the final lateral offset is below this (m).
     pub max_lateral_straight_m: f32,
+    /// Straight-ish if the absolute heading change is below this (radians).
     pub max_abs_heading_diff_straight_rad: f32,
+    /// A left turn ending at a longitudinal offset below this (metres) is a left U-turn.
     pub min_longitudinal_u_turn_m: f32,
 }
 
@@ -225,11 +247,17 @@ type BucketSamples = (Vec<(f32, bool)>, Vec<(f32, bool)>, usize);
 /// Metrics at one measurement time (or their average); `None` where no object contributed.
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
 pub struct Metrics {
+    /// Mean displacement of the highest-scoring trajectory over its valid steps up to this time, m.
     pub ade: Option<f32>,
+    /// Minimum over the K trajectories of their average displacement error, metres.
     pub min_ade: Option<f32>,
+    /// Minimum over the K trajectories of the error at the measurement step, metres.
     pub min_fde: Option<f32>,
+    /// Fraction of objects where every trajectory misses at the measurement step.
     pub miss_rate: Option<f32>,
+    /// Mean over trajectory buckets of the average precision (later hits count as false positives).
     pub map: Option<f32>,
+    /// Like `map`, but hits after the first are dropped instead of counted as false positives.
     pub soft_map: Option<f32>,
 }
 
@@ -240,6 +268,7 @@ pub struct MetricTable {
     pub by_time: Vec<(u32, Metrics)>,
     /// The plain mean of the per-time values that exist.
     pub mean: Metrics,
+    /// Number of objects evaluated (including those that contributed to no metric).
     pub num_objects: usize,
 }
 

@@ -31,6 +31,17 @@ pub struct Batch {
     pub future_valid: Tensor<2>,
 }
 
+/// Inference mode of the predictor: the one way to ask for either distribution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Mode {
+    /// `p(y_A | x)`: the condition is switched off.
+    Marginal,
+    /// `p(y_A | x, y_B)`: the other agent's logged future is given (samples without one are
+    /// necessarily marginal).
+    Conditional,
+}
+
 /// Training-time randomisation applied while batching.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct BatchAugment {
@@ -127,6 +138,38 @@ impl Batch {
             future_xy: t3(fxy, [b, future, 2]),
             future_valid: t2(fv, [b, future]),
         }
+    }
+
+    /// Stacks samples for inference in `mode`, without training-time randomisation.
+    pub fn for_mode(samples: &[&AgentSample], mode: Mode, device: &Device) -> Self {
+        // Nothing is drawn with the default augmentation: the generator is a placeholder.
+        let mut rng = rand_pcg::Pcg64Mcg::new(0);
+        let batch = Self::from_samples(samples, &BatchAugment::default(), &mut rng, device);
+        match mode {
+            Mode::Marginal => batch.with_condition(None),
+            Mode::Conditional => batch,
+        }
+    }
+
+    /// The same batch with another condition: `Some(c)` = conditional on `c` (target frame:
+    /// x m, y m, valid), `None` = marginal (condition and flag zero).
+    ///
+    /// # Shapes
+    /// `condition: Option<[batch, future_steps, 3]>`
+    pub fn with_condition(mut self, condition: Option<Tensor<3>>) -> Self {
+        let [n, _, _] = self.condition.dims();
+        let device = self.condition.device();
+        match condition {
+            Some(c) => {
+                self.condition = c;
+                self.condition_flag = Tensor::ones([n, 1], &device);
+            }
+            None => {
+                self.condition = self.condition.zeros_like();
+                self.condition_flag = Tensor::zeros([n, 1], &device);
+            }
+        }
+        self
     }
 
     /// The batch `times` times over, block after block: row `k · batch + i` is sample `i`.

@@ -8,6 +8,7 @@ use burn::tensor::{Device, Tensor};
 /// A stack of linear layers with ReLU between them (not after the last).
 #[derive(Module, Debug)]
 pub struct Mlp {
+    /// The linear layers, input first.
     pub layers: Vec<Linear>,
 }
 
@@ -71,11 +72,15 @@ pub fn masked_max(x: Tensor<3>, mask: Tensor<2>) -> Tensor<2> {
 /// One context-gating block: `s' = MLP_s(s) ⊙ MLP_c(c)`, `c' = max over the set of s'`.
 #[derive(Module, Debug)]
 pub struct ContextGating {
+    /// Three-layer MLP applied to each set element (`d_in → d_out`).
     pub mlp_s: Mlp,
+    /// Three-layer MLP applied to the context, giving the gate (`d_context → d_out`).
     pub mlp_c: Mlp,
 }
 
 impl ContextGating {
+    /// A block mapping elements of width `d_in` and a context of width `d_context` to width
+    /// `d_out`.
     pub fn init(d_in: usize, d_context: usize, d_out: usize, device: &Device) -> Self {
         Self {
             mlp_s: Mlp::init(&[d_in, d_out, d_out, d_out], device),
@@ -83,6 +88,9 @@ impl ContextGating {
         }
     }
 
+    /// Gates each element by the context and max-pools the result over the valid elements;
+    /// invalid elements (`mask` 0) come out as zeros.
+    ///
     /// # Shapes
     /// `s: [batch, n, d_in]`, `c: [batch, d_context]`, `mask: [batch, n]`
     /// `-> (s': [batch, n, d_out], c': [batch, d_out])`
@@ -104,13 +112,17 @@ impl ContextGating {
 /// comments say mean; the mean keeps activations on one scale however deep the stack is).
 #[derive(Module, Debug)]
 pub struct Mcg {
+    /// The CG blocks, all of the MCG width (at least one).
     pub blocks: Vec<ContextGating>,
-    /// Projects the input elements and context to the block width when they differ.
+    /// Projects the input elements to the block width (`d_in → width`).
     pub input_s: Linear,
+    /// Projects the input context to the block width (`d_context → width`).
     pub input_c: Linear,
 }
 
 impl Mcg {
+    /// An MCG of `num_blocks` CG blocks (at least one) of width `width`, taking elements of
+    /// width `d_in` and a context of width `d_context`.
     pub fn init(
         d_in: usize,
         d_context: usize,
@@ -127,6 +139,9 @@ impl Mcg {
         }
     }
 
+    /// Runs the stack; returns the elements and the context after the last block (each the
+    /// running mean described on [`Mcg`]).
+    ///
     /// # Shapes
     /// `s: [batch, n, d_in]`, `c: [batch, d_context]`, `mask: [batch, n]`
     /// `-> (s: [batch, n, width], c: [batch, width])`
@@ -157,10 +172,12 @@ pub struct FusedLstm {
     pub input: Linear,
     /// `h → 4h`
     pub hidden: Linear,
+    /// Hidden (and cell) state width `h`.
     pub d_hidden: usize,
 }
 
 impl FusedLstm {
+    /// An LSTM from `d_input` features to a hidden state of width `d_hidden`.
     pub fn init(d_input: usize, d_hidden: usize, device: &Device) -> Self {
         Self {
             input: LinearConfig::new(d_input, 4 * d_hidden).init(device),
@@ -169,7 +186,8 @@ impl FusedLstm {
         }
     }
 
-    /// On a `flex` device this runs the fused kernel of [`crate::lstm_kernel`]; elsewhere the
+    /// Runs the LSTM from a zero state and returns its last hidden state. On a `flex` device
+    /// with `f32` inputs this runs the fused kernel of [`crate::lstm_kernel`]; elsewhere the
     /// tensor-op formulation [`Self::forward_ops`].
     ///
     /// # Shapes

@@ -2,11 +2,59 @@
 
 use serde::{Deserialize, Serialize};
 
+/// The named model sizes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Preset {
+    /// The paper's widths ([`MultipathConfig::paper`]).
+    #[serde(rename = "paper")]
+    #[cfg_attr(feature = "clap", value(name = "paper"))]
+    Paper,
+    /// Narrower layers and fewer MCG blocks for a CPU ([`MultipathConfig::cpu_small`]).
+    #[serde(rename = "cpu-small")]
+    #[cfg_attr(feature = "clap", value(name = "cpu-small"))]
+    CpuSmall,
+}
+
+impl Preset {
+    /// Every preset.
+    pub const ALL: [Preset; 2] = [Preset::CpuSmall, Preset::Paper];
+
+    /// The preset's name (`paper`, `cpu-small`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Paper => "paper",
+            Self::CpuSmall => "cpu-small",
+        }
+    }
+
+    /// Its configuration.
+    pub fn config(self) -> MultipathConfig {
+        match self {
+            Self::Paper => MultipathConfig::paper(),
+            Self::CpuSmall => MultipathConfig::cpu_small(),
+        }
+    }
+}
+
+impl std::str::FromStr for Preset {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| format!("unknown preset {s:?} (paper, cpu-small)"))
+    }
+}
+
 /// Multipath++ widths (`shared/spec/multipathpp.md`). `paper` is the full-size model;
 /// `cpu-small` keeps the structure with narrower layers and fewer MCG blocks.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct MultipathConfig {
+    /// History steps per agent, the current one included (11: the current step and 1 s before
+    /// it, at 10 Hz).
     pub history_steps: usize,
+    /// Predicted future steps (80 = 8 s at 10 Hz).
     pub future_steps: usize,
     /// Hidden width of each of the two history LSTMs.
     pub lstm_hidden: usize,
@@ -14,13 +62,17 @@ pub struct MultipathConfig {
     pub step_mlp: Vec<usize>,
     /// Target-agent MCG width (paper: 256; equals 2·lstm_hidden + history MCG width).
     pub target_width: usize,
+    /// Interaction MCG width over the other agents' history encodings (paper: 256).
     pub interaction_width: usize,
     /// Road MLP widths ending at the road MCG width (paper: 32, 64, 128).
     pub road_mlp: Vec<usize>,
     /// Hidden width of the road-context MLP (paper: 256).
     pub road_context_hidden: usize,
+    /// Width of the decoder MCG over the learned anchors (paper: 640).
     pub decoder_width: usize,
+    /// Hidden width of the decoder's output MLP (paper: 512).
     pub decoder_hidden: usize,
+    /// Number of mixture modes K, one learned anchor each (paper: 6).
     pub num_modes: usize,
     /// CG blocks per MCG (paper: 5).
     pub mcg_blocks: usize,
@@ -29,6 +81,7 @@ pub struct MultipathConfig {
 }
 
 impl MultipathConfig {
+    /// The full-size model of the paper (`paper` preset).
     pub fn paper() -> Self {
         Self {
             history_steps: 11,
@@ -47,6 +100,8 @@ impl MultipathConfig {
         }
     }
 
+    /// The same structure with narrower layers and 2 MCG blocks (`cpu-small` preset), small
+    /// enough to train on a CPU.
     pub fn cpu_small() -> Self {
         Self {
             history_steps: 11,
@@ -67,17 +122,22 @@ impl MultipathConfig {
 
     /// A preset by name: `paper` or `cpu-small`.
     pub fn preset(name: &str) -> Option<Self> {
-        match name {
-            "paper" => Some(Self::paper()),
-            "cpu-small" => Some(Self::cpu_small()),
-            _ => None,
-        }
+        name.parse::<Preset>().ok().map(Preset::config)
     }
 
+    /// Number of parameters of a model with this configuration.
+    pub fn num_params(&self) -> usize {
+        use burn::module::Module;
+        self.init(&crate::device::parameter_count_device())
+            .num_params()
+    }
+
+    /// Width of the history MCG (the last of [`Self::step_mlp`]).
     pub fn history_width(&self) -> usize {
         *self.step_mlp.last().expect("step_mlp is not empty")
     }
 
+    /// Width of the road MCG (the last of [`Self::road_mlp`]).
     pub fn road_width(&self) -> usize {
         *self.road_mlp.last().expect("road_mlp is not empty")
     }

@@ -2,7 +2,8 @@
 
 use burn::tensor::Device;
 
-/// Error for an unknown or not-compiled-in backend name.
+/// Error for an unknown or not-compiled-in backend name: `.0` is the requested name, `.1` the
+/// comma-separated list of [`available_backends`].
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("backend {0:?} is not available in this build (available: {1})")]
 pub struct UnknownBackend(pub String, pub String);
@@ -33,6 +34,11 @@ pub fn device(name: &str) -> Result<Device, UnknownBackend> {
             available_backends().join(", "),
         )),
     }
+}
+
+/// A CPU device on which to build a model only to count its parameters.
+pub fn parameter_count_device() -> Device {
+    Device::flex()
 }
 
 /// The training device (with autodiff) for a backend name.

@@ -9,6 +9,8 @@
 //! **Architecture invariant:** models know tensors and `AgentSample`s, never file formats or
 //! the CLI; the backend is chosen in [`device`] only.
 
+#![warn(missing_docs)]
+
 pub mod batch;
 pub mod blocks;
 pub mod config;
@@ -16,11 +18,13 @@ pub mod device;
 pub mod loss;
 pub mod lstm_kernel;
 pub mod model;
+pub mod output;
 
-pub use batch::{Batch, BatchAugment};
-pub use config::MultipathConfig;
+pub use batch::{Batch, BatchAugment, Mode};
+pub use config::{MultipathConfig, Preset};
 pub use loss::gmm_nll;
-pub use model::{GmmOutput, Mixture, Multipath};
+pub use model::Multipath;
+pub use output::{GmmOutput, Mixture};
 
 /// Tests that seed burn's process-global RNG hold this lock, so concurrent tests do not draw
 /// from the stream between `seed` and `init`.

@@ -3,15 +3,8 @@
 use burn::tensor::Tensor;
 use burn::tensor::activation::log_softmax;
 
-use crate::model::GmmOutput;
-
-/// Clamp ranges of the covariance parameters, guarding against the NaN/inf covariances the
-/// public Multipath++ code is known for. `c` is the log-scale (σ² ∝ e^c).
-/// With these bounds the smallest principal standard deviation is about 0.1 m and the largest
-/// about 400 m, so one outlier cannot blow a batch's loss up by orders of magnitude.
-pub const COV_A_RANGE: (f32, f32) = (-2.0, 2.0);
-pub const COV_B_RANGE: (f32, f32) = (-2.0, 2.0);
-pub const COV_C_RANGE: (f32, f32) = (-2.0, 8.0);
+use crate::output::GmmOutput;
+pub use crate::output::{COV_A_RANGE, COV_B_RANGE, COV_C_RANGE};
 
 fn logsumexp(x: Tensor<2>, dim: usize) -> Tensor<2> {
     let max = x.clone().max_dim(dim).detach();

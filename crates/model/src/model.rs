@@ -9,6 +9,7 @@ use scbg_features::{AGENT_FEATURES, DIFF_FEATURES, ROAD_FEATURES};
 use crate::batch::Batch;
 use crate::blocks::{FusedLstm, Mcg, Mlp};
 use crate::config::MultipathConfig;
+pub use crate::output::{GmmOutput, Mixture};
 
 /// Scale (metres) dividing the conditioning future's coordinates before the future encoder.
 pub const CONDITION_SCALE_M: f32 = 50.0;
@@ -23,14 +24,20 @@ const CONDITION_POINT_FEATURES: usize = 5;
 /// per-step MLP embeddings (features + one-hot time step).
 #[derive(Module, Debug)]
 pub struct HistoryEncoder {
+    /// LSTM over the per-step agent features (13 → `lstm_hidden`).
     pub lstm_steps: FusedLstm,
+    /// LSTM over the step-to-step differences (11 → `lstm_hidden`).
     pub lstm_diffs: FusedLstm,
+    /// Per-step MLP of `[features ‖ one-hot step]` (`13 + history_steps →` history width).
     pub step_mlp: Mlp,
+    /// MCG over the per-step embeddings (valid steps only, constant context), max-pooled.
     pub step_mcg: Mcg,
+    /// History steps the encoder was built for (size of the one-hot step index).
     pub history_steps: usize,
 }
 
 impl HistoryEncoder {
+    /// Builds the encoder for `config`'s widths.
     pub fn init(config: &MultipathConfig, device: &Device) -> Self {
         let h = config.history_steps;
         let mut dims = vec![AGENT_FEATURES + h];
@@ -45,8 +52,12 @@ impl HistoryEncoder {
         }
     }
 
+    /// Encodes `n` agent histories (standardised features; feature 6 is the validity flag)
+    /// into `[LSTM(history) ‖ LSTM(diffs) ‖ MCG summary]`.
+    ///
     /// # Shapes
-    /// `history: [n, steps, 13]`, `diffs: [n, steps - 1, 11]` `-> [n, 2·lstm_hidden + history_width]`
+    /// `history: [n, steps, 13]`, `diffs: [n, steps - 1, 11]`
+    /// `-> [n, 2·lstm_hidden + history_width]`
     pub fn forward(&self, history: Tensor<3>, diffs: Tensor<3>) -> Tensor<2> {
         let [n, steps, _] = history.dims();
         let device = history.device();
@@ -84,10 +95,13 @@ pub const CONDITION_STRIDE: usize = 5;
 /// whether A has to yield.
 #[derive(Module, Debug)]
 pub struct FutureEncoder {
+    /// MLP of `[flattened points ‖ target embedding]` (`16·5 + target_width → future_hidden`
+    /// for 80 future steps).
     pub mlp: Mlp,
 }
 
 impl FutureEncoder {
+    /// Builds the encoder for `config`'s widths (`future_steps / CONDITION_STRIDE` points).
     pub fn init(config: &MultipathConfig, device: &Device) -> Self {
         let h = config.future_hidden;
         let points = config.future_steps / CONDITION_STRIDE;
@@ -104,6 +118,10 @@ impl FutureEncoder {
         }
     }
 
+    /// Encodes the conditioning future of each of the `b` targets (`b` is the batch size), in
+    /// the target's frame, together with that target's embedding. Invalid points enter as
+    /// zeros with their validity flag; velocities are zero unless both points are valid.
+    ///
     /// # Shapes
     /// `condition: [batch, T, 3]` (x m, y m, valid), `target: [batch, target_width]`
     /// `-> [batch, future_hidden]`
@@ -134,92 +152,35 @@ impl FutureEncoder {
     }
 }
 
-/// Output of the model: a Gaussian mixture over future trajectories in the target frame.
-#[derive(Debug, Clone)]
-pub struct GmmOutput {
-    /// `[batch, modes, future_steps, 2]` positions in the target frame (metres).
-    pub xy: Tensor<4>,
-    /// `[batch, modes, future_steps, 3]`: (a, b, c) of Σ = e^c·[[e^a·cosh b, sinh b], [sinh b, e^−a·cosh b]].
-    pub cov_abc: Tensor<4>,
-    /// `[batch, modes]` unnormalised mode logits.
-    pub logits: Tensor<2>,
-}
-
-/// One agent's predicted mixture as plain arrays (for evaluation, labelling, serving).
-#[derive(Debug, Clone, PartialEq)]
-pub struct Mixture {
-    /// `[K][T]` mean positions (target frame, metres).
-    pub xy: Vec<Vec<[f32; 2]>>,
-    /// `[K][T]` covariance parameters (a, b, c), clamped to the ranges the loss uses.
-    pub abc: Vec<Vec<[f32; 3]>>,
-    /// `[K]` mode probabilities (softmax of the logits).
-    pub probs: Vec<f32>,
-}
-
-impl GmmOutput {
-    /// Reads the batch back into one [`Mixture`] per target.
-    pub fn into_mixtures(self) -> Vec<Mixture> {
-        use crate::loss::{COV_A_RANGE, COV_B_RANGE, COV_C_RANGE};
-        let [b, k, t, _] = self.xy.dims();
-        let xy: Vec<f32> = self.xy.into_data().try_to_vec::<f32>().expect("f32 tensor");
-        let abc: Vec<f32> = self
-            .cov_abc
-            .into_data()
-            .try_to_vec::<f32>()
-            .expect("f32 tensor");
-        let probs: Vec<f32> = burn::tensor::activation::softmax(self.logits, 1)
-            .into_data()
-            .try_to_vec::<f32>()
-            .expect("f32 tensor");
-        (0..b)
-            .map(|i| Mixture {
-                xy: (0..k)
-                    .map(|m| {
-                        (0..t)
-                            .map(|s| {
-                                let o = ((i * k + m) * t + s) * 2;
-                                [xy[o], xy[o + 1]]
-                            })
-                            .collect()
-                    })
-                    .collect(),
-                abc: (0..k)
-                    .map(|m| {
-                        (0..t)
-                            .map(|s| {
-                                let o = ((i * k + m) * t + s) * 3;
-                                [
-                                    abc[o].clamp(COV_A_RANGE.0, COV_A_RANGE.1),
-                                    abc[o + 1].clamp(COV_B_RANGE.0, COV_B_RANGE.1),
-                                    abc[o + 2].clamp(COV_C_RANGE.0, COV_C_RANGE.1),
-                                ]
-                            })
-                            .collect()
-                    })
-                    .collect(),
-                probs: probs[i * k..(i + 1) * k].to_vec(),
-            })
-            .collect()
-    }
-}
-
 /// Multipath++ with a conditional future encoder (marginal when the condition flag is 0).
 #[derive(Module, Debug)]
 pub struct Multipath {
+    /// History encoder, shared by the target and the other agents.
     pub history: HistoryEncoder,
+    /// MCG over the target's history encoding → target embedding (`target_width`).
     pub target_mcg: Mcg,
+    /// MCG over the other agents' history encodings with the target embedding as context,
+    /// max-pooled → interaction embedding (`interaction_width`).
     pub interaction_mcg: Mcg,
+    /// Per-segment road MLP (27 features → road width).
     pub road_mlp: Mlp,
+    /// MLP of `[target ‖ interaction]` → the road MCG's context.
     pub road_context: Mlp,
+    /// MCG over the valid road segments, max-pooled → road embedding (road width).
     pub road_mcg: Mcg,
+    /// Encoder of the other agent's future (the conditional mode).
     pub future_encoder: FutureEncoder,
     /// Fuses `[scene ‖ condition·flag ‖ flag]` back to the embedding width (added to the scene).
     pub fuse: Linear,
+    /// Learned anchor embeddings, one per mode: `[num_modes, embedding_width]`.
     pub anchors: Param<Tensor<2>>,
+    /// MCG over the anchors with the scene embedding as context (`decoder_width`).
     pub decoder_mcg: Mcg,
+    /// Per-mode MLP → `5T + 1` outputs: `T` (dx, dy) displacements, `T` (a, b, c) and a logit.
     pub decoder_mlp: Mlp,
     /// A direct path from the embedding to the mode logits (added to the decoder's).
     pub mode_logits: Linear,
+    /// Predicted future steps `T`.
     pub future_steps: usize,
 }
 
@@ -322,10 +283,13 @@ impl Multipath {
         scene + self.fuse.forward(fused)
     }
 
-    /// Decodes K trajectories from an embedding.
+    /// Decodes K trajectories from an embedding: positions (metres, target frame) are the
+    /// cumulative sums of the predicted per-step displacements; `cov_abc` is unclamped (the
+    /// loss and [`GmmOutput::into_mixtures`] clamp it).
     ///
     /// # Shapes
-    /// `embedding: [batch, e]` `-> GmmOutput { xy: [batch, K, T, 2], cov_abc: [batch, K, T, 3], logits: [batch, K] }`
+    /// `embedding: [batch, e]`
+    /// `-> GmmOutput { xy: [batch, K, T, 2], cov_abc: [batch, K, T, 3], logits: [batch, K] }`
     pub fn decode(&self, embedding: Tensor<2>) -> GmmOutput {
         let [b, e] = embedding.dims();
         let device = embedding.device();
@@ -353,6 +317,9 @@ impl Multipath {
         }
     }
 
+    /// Predicts each target's future as a Gaussian mixture in its frame: [`Self::encode`] then
+    /// [`Self::decode`]. Marginal or conditional per row, as the batch's `condition_flag` says.
+    ///
     /// # Shapes
     /// batch tensors (see [`Batch`]) `-> GmmOutput`
     pub fn forward(&self, batch: &Batch) -> GmmOutput {

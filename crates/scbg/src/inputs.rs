@@ -2,7 +2,9 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
+
+use crate::ensure_request;
 
 /// Expands each argument: an existing file is taken as is, a folder gives every file in it
 /// (sorted, hidden files and `*.json`/`*.md` side files left out), anything else is a glob
@@ -33,16 +35,12 @@ pub fn expand(args: &[String]) -> anyhow::Result<Vec<PathBuf>> {
                 .filter_map(Result::ok)
                 .filter(|p| p.is_file())
                 .collect();
-            if matches.is_empty() {
-                bail!("no file matches {arg:?}");
-            }
+            ensure_request!(!matches.is_empty(), "no file matches {arg:?}");
             out.extend(matches);
         }
     }
     out.sort();
     out.dedup();
-    if out.is_empty() {
-        bail!("no input files in {args:?}");
-    }
+    ensure_request!(!out.is_empty(), "no input files in {args:?}");
     Ok(out)
 }

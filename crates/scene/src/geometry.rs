@@ -20,12 +20,16 @@ pub fn wrap_angle_rad(angle_rad: f64) -> f64 {
 /// heading; [`Pose2::world_from_agent`] is its inverse.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Pose2 {
+    /// Position x, world frame, metres.
     pub x_m: f64,
+    /// Position y, world frame, metres.
     pub y_m: f64,
+    /// Heading, radians, world frame (direction of the agent frame's x axis).
     pub heading_rad: f64,
 }
 
 impl Pose2 {
+    /// A pose from its position (metres) and heading (radians).
     pub fn new(x_m: f64, y_m: f64, heading_rad: f64) -> Self {
         Self {
             x_m,

@@ -11,6 +11,8 @@
 //! dependencies beyond `thiserror`. Every per-step quantity carries a `valid` flag; sentinel
 //! values such as `-1` are never interpreted.
 
+#![warn(missing_docs)]
+
 mod geometry;
 mod map;
 mod scene;

@@ -3,8 +3,11 @@
 /// A map point in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct MapPoint {
+    /// x, world frame, metres.
     pub x_m: f64,
+    /// y, world frame, metres.
     pub y_m: f64,
+    /// z (elevation), world frame, metres.
     pub z_m: f64,
 }
 
@@ -17,7 +20,10 @@ macro_rules! int_enum {
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
         pub enum $name {
             #[default]
-            $($variant = $value),+
+            $(
+                #[doc = concat!("`", stringify!($variant), "` (WOMD code ", stringify!($value), ").")]
+                $variant = $value
+            ),+
         }
         impl $name {
             /// Every variant, in code order.
@@ -63,94 +69,136 @@ int_enum!(
 /// Part of a lane bounded by a road line or edge (`LaneCenter.left/right_boundaries`).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct BoundarySegment {
+    /// Index into the lane's polyline where this segment starts.
     pub lane_start_index: i32,
+    /// Index into the lane's polyline where this segment ends.
     pub lane_end_index: i32,
+    /// Id of the road line or road edge that bounds the lane here.
     pub boundary_feature_id: i64,
+    /// Type of the bounding road line.
     pub boundary_type: RoadLineType,
 }
 
 /// A neighbouring lane over an index range of this lane (`LaneCenter.left/right_neighbors`).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct LaneNeighbor {
+    /// Id of the neighbouring lane.
     pub feature_id: i64,
+    /// Index into this lane's polyline where the neighbouring segment starts.
     pub self_start_index: i32,
+    /// Index into this lane's polyline where the neighbouring segment ends.
     pub self_end_index: i32,
+    /// Index into the neighbour's polyline where the shared segment starts.
     pub neighbor_start_index: i32,
+    /// Index into the neighbour's polyline where the shared segment ends.
     pub neighbor_end_index: i32,
+    /// Boundaries between the two lanes within the shared segment.
     pub boundaries: Vec<BoundarySegment>,
 }
 
 /// A lane centreline.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Lane {
+    /// Map feature id.
     pub id: i64,
+    /// Lane type.
     pub lane_type: LaneType,
     /// Speed limit, when the map gives one.
     pub speed_limit_mph: Option<f64>,
+    /// True if the lane interpolates between two other lanes (e.g. inside an intersection).
     pub interpolating: bool,
+    /// Centreline points, world frame, in driving direction.
     pub polyline: Vec<MapPoint>,
+    /// Ids of lanes this lane may be entered from.
     pub entry_lanes: Vec<i64>,
+    /// Ids of lanes this lane may exit to.
     pub exit_lanes: Vec<i64>,
+    /// Lanes to the left, each over an index range of this lane.
     pub left_neighbors: Vec<LaneNeighbor>,
+    /// Lanes to the right, each over an index range of this lane.
     pub right_neighbors: Vec<LaneNeighbor>,
+    /// Road lines / edges bounding the lane on the left.
     pub left_boundaries: Vec<BoundarySegment>,
+    /// Road lines / edges bounding the lane on the right.
     pub right_boundaries: Vec<BoundarySegment>,
 }
 
 /// A painted road line.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct RoadLine {
+    /// Map feature id.
     pub id: i64,
+    /// Paint type.
     pub line_type: RoadLineType,
+    /// Line points, world frame.
     pub polyline: Vec<MapPoint>,
 }
 
 /// A road edge (kerb, median).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct RoadEdge {
+    /// Map feature id.
     pub id: i64,
+    /// Edge type.
     pub edge_type: RoadEdgeType,
+    /// Edge points, world frame.
     pub polyline: Vec<MapPoint>,
 }
 
 /// A stop sign controlling the listed lanes.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct StopSign {
+    /// Map feature id.
     pub id: i64,
+    /// Ids of the lanes the sign controls.
     pub lanes: Vec<i64>,
+    /// Position of the sign, world frame.
     pub position: MapPoint,
 }
 
 /// A crosswalk polygon.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Crosswalk {
+    /// Map feature id.
     pub id: i64,
+    /// Outline, world frame.
     pub polygon: Polygon,
 }
 
 /// A speed-bump polygon.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct SpeedBump {
+    /// Map feature id.
     pub id: i64,
+    /// Outline, world frame.
     pub polygon: Polygon,
 }
 
 /// A driveway polygon.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Driveway {
+    /// Map feature id.
     pub id: i64,
+    /// Outline, world frame.
     pub polygon: Polygon,
 }
 
 /// All static map features of a scene, grouped by kind (each kind keeps its file order).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Map {
+    /// Lane centrelines.
     pub lanes: Vec<Lane>,
+    /// Painted road lines.
     pub road_lines: Vec<RoadLine>,
+    /// Road edges.
     pub road_edges: Vec<RoadEdge>,
+    /// Stop signs.
     pub stop_signs: Vec<StopSign>,
+    /// Crosswalk polygons.
     pub crosswalks: Vec<Crosswalk>,
+    /// Speed-bump polygons.
     pub speed_bumps: Vec<SpeedBump>,
+    /// Driveway polygons.
     pub driveways: Vec<Driveway>,
 }
 

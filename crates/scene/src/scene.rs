@@ -5,11 +5,16 @@ use crate::map::{Map, MapPoint};
 /// WOMD `Track.ObjectType`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
 pub enum ObjectType {
+    /// Type not set (also what unknown codes map to).
     #[default]
     Unset = 0,
+    /// A motor vehicle.
     Vehicle = 1,
+    /// A pedestrian.
     Pedestrian = 2,
+    /// A cyclist.
     Cyclist = 3,
+    /// Any other object.
     Other = 4,
 }
 
@@ -25,6 +30,7 @@ impl ObjectType {
         }
     }
 
+    /// The protobuf enum code (inverse of [`ObjectType::from_code`]).
     pub fn code(self) -> i32 {
         self as i32
     }
@@ -46,15 +52,25 @@ impl ObjectType {
 /// When `valid` is false the other fields carry no meaning (WOMD writes −1 there).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct AgentState {
+    /// Centre x, world frame, metres.
     pub x_m: f64,
+    /// Centre y, world frame, metres.
     pub y_m: f64,
+    /// Centre z (elevation), world frame, metres.
     pub z_m: f64,
+    /// Bounding-box length (along the heading), metres.
     pub length_m: f32,
+    /// Bounding-box width, metres.
     pub width_m: f32,
+    /// Bounding-box height, metres.
     pub height_m: f32,
+    /// Heading of the box's length axis, radians, world frame (counter-clockwise from +x).
     pub heading_rad: f32,
+    /// Velocity x component, world frame, m/s.
     pub velocity_x_mps: f32,
+    /// Velocity y component, world frame, m/s.
     pub velocity_y_mps: f32,
+    /// Whether the object was observed at this step; if false, ignore every other field.
     pub valid: bool,
 }
 
@@ -69,8 +85,11 @@ impl AgentState {
 /// One object's states over every time step of the scene (`states.len() == scene.num_steps()`).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Track {
+    /// Object id, unique within the scene (referenced by [`Scene::objects_of_interest`]).
     pub id: i64,
+    /// What kind of object this is.
     pub object_type: ObjectType,
+    /// `[num_steps]` states, one per time step of the scene (check each state's `valid`).
     pub states: Vec<AgentState>,
 }
 
@@ -84,13 +103,17 @@ impl Track {
 /// WOMD `RequiredPrediction.DifficultyLevel`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum PredictionDifficulty {
+    /// No difficulty given (also what unknown codes map to).
     #[default]
     None = 0,
+    /// WOMD difficulty level 1.
     Level1 = 1,
+    /// WOMD difficulty level 2.
     Level2 = 2,
 }
 
 impl PredictionDifficulty {
+    /// The variant for a protobuf code; unknown codes map to `None`.
     pub fn from_code(code: i32) -> Self {
         match code {
             1 => Self::Level1,
@@ -105,25 +128,36 @@ impl PredictionDifficulty {
 pub struct PredictionTarget {
     /// Index into [`Scene::tracks`].
     pub track_index: usize,
+    /// Difficulty level the benchmark assigns to this target.
     pub difficulty: PredictionDifficulty,
 }
 
 /// WOMD `TrafficSignalLaneState.State`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum SignalState {
+    /// State unknown (also what unknown codes map to).
     #[default]
     Unknown = 0,
+    /// Red arrow.
     ArrowStop = 1,
+    /// Yellow arrow.
     ArrowCaution = 2,
+    /// Green arrow.
     ArrowGo = 3,
+    /// Red light.
     Stop = 4,
+    /// Yellow light.
     Caution = 5,
+    /// Green light.
     Go = 6,
+    /// Flashing red.
     FlashingStop = 7,
+    /// Flashing yellow.
     FlashingCaution = 8,
 }
 
 impl SignalState {
+    /// The variant for a protobuf code; unknown codes map to `Unknown`.
     pub fn from_code(code: i32) -> Self {
         match code {
             1 => Self::ArrowStop,
@@ -142,14 +176,18 @@ impl SignalState {
 /// The state of the signal controlling one lane at one step.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct SignalLaneState {
+    /// Id of the controlled lane ([`Lane::id`](crate::Lane::id)).
     pub lane_id: i64,
+    /// The signal's state at this step.
     pub state: SignalState,
+    /// Where vehicles in that lane must stop, world frame, when given.
     pub stop_point: Option<MapPoint>,
 }
 
 /// One traffic scenario: tracks over time, which of them matter, the map and the signals.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct Scene {
+    /// Scenario id from the dataset (or the generator), used to name and look up the scene.
     pub scenario_id: String,
     /// One timestamp per step, seconds (10 Hz in WOMD).
     pub timestamps_secs: Vec<f64>,
@@ -157,10 +195,13 @@ pub struct Scene {
     pub current_step: usize,
     /// Index of the self-driving car's track, when known.
     pub sdc_track_index: Option<usize>,
+    /// Every object of the scene, each with one state per step.
     pub tracks: Vec<Track>,
     /// Track *ids* (not indices) of objects labelled as interacting.
     pub objects_of_interest: Vec<i64>,
+    /// Tracks the benchmark asks to predict (by index into [`Scene::tracks`]).
     pub tracks_to_predict: Vec<PredictionTarget>,
+    /// Static map features (world frame).
     pub map: Map,
     /// Signal states per step (`signals_per_step.len() == num_steps` when present, else empty).
     pub signals_per_step: Vec<Vec<SignalLaneState>>,
@@ -169,40 +210,63 @@ pub struct Scene {
 /// A scene that breaks an invariant of [`Scene`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SceneError {
+    /// `timestamps_secs` is empty.
     #[error("scene has no time steps")]
     NoSteps,
+    /// `current_step` is not below the number of steps.
     #[error("current step {current_step} is outside the {num_steps} steps")]
     CurrentStepOutOfRange {
+        /// The offending `current_step`.
         current_step: usize,
+        /// Number of steps of the scene.
         num_steps: usize,
     },
+    /// A track's `states` length differs from the number of steps.
     #[error("track {track_id} has {got} states but the scene has {num_steps} steps")]
     TrackLength {
+        /// Id of the track.
         track_id: i64,
+        /// Number of states it has.
         got: usize,
+        /// Number of steps of the scene.
         num_steps: usize,
     },
+    /// A valid state has a NaN or infinite field.
     #[error("track {track_id} step {step}: field `{field}` is not finite in a valid state")]
     NonFiniteState {
+        /// Id of the track.
         track_id: i64,
+        /// Step of the state.
         step: usize,
+        /// Name of the non-finite field (e.g. `center_x`).
         field: &'static str,
     },
+    /// A map point is NaN or infinite.
+    #[allow(missing_docs)]
     #[error("map feature {feature_id}: a point is not finite")]
     NonFiniteMapPoint { feature_id: i64 },
+    /// A timestamp is NaN or infinite.
+    #[allow(missing_docs)]
     #[error("timestamp at step {step} is not finite")]
     NonFiniteTimestamp { step: usize },
+    /// An SDC or prediction-target track index is out of range.
     #[error("{what} index {index} is outside the {num_tracks} tracks")]
     TrackIndexOutOfRange {
+        /// Which index: `sdc_track` or `tracks_to_predict`.
         what: &'static str,
+        /// The out-of-range index.
         index: usize,
+        /// Number of tracks of the scene.
         num_tracks: usize,
     },
+    /// `signals_per_step` is non-empty but its length differs from the number of steps.
+    #[allow(missing_docs)]
     #[error("signals cover {got} steps but the scene has {num_steps}")]
     SignalLength { got: usize, num_steps: usize },
 }
 
 impl Scene {
+    /// Number of time steps (`timestamps_secs.len()`).
     pub fn num_steps(&self) -> usize {
         self.timestamps_secs.len()
     }

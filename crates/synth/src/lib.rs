@@ -11,6 +11,8 @@
 //! **Architecture invariant:** produces `Scene` values only; writing them as WOMD files is the
 //! caller's business (this crate does not know protobuf or TFRecord).
 
+#![warn(missing_docs)]
+
 pub mod families;
 mod path;
 mod sim;
@@ -28,7 +30,11 @@ use families::{A_ID, B_ID, NUM_STEPS, Run};
 pub const CURRENT_STEP: usize = 10;
 
 /// The scene families.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Family {
     /// On-ramp merge into A's highway lane.
     Merge,
@@ -39,8 +45,10 @@ pub enum Family {
 }
 
 impl Family {
+    /// Every family.
     pub const ALL: [Family; 3] = [Family::Merge, Family::Crossing, Family::Cutin];
 
+    /// The family's name (`merge`, `crossing`, `cutin`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Merge => "merge",
@@ -49,6 +57,7 @@ impl Family {
         }
     }
 
+    /// The family of a name.
     pub fn parse(name: &str) -> Result<Self, UnknownFamily> {
         Self::ALL
             .into_iter()
@@ -57,16 +66,22 @@ impl Family {
     }
 }
 
+/// A family name that is not `merge`, `crossing` or `cutin` (holds the name given).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("unknown scene family {0:?} (expected merge, crossing or cutin)")]
 pub struct UnknownFamily(pub String);
 
-/// What the generator knows about a scenario and a model has to discover.
-#[derive(Debug, Clone, PartialEq)]
+/// What the generator knows about a scenario and a model has to discover: one line of the
+/// `ground_truth.jsonl` sidecar.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct GroundTruth {
+    /// Id of the generated scene (`synth-<seed hex>-<index>`).
     pub scenario_id: String,
+    /// The scene's family.
     pub family: Family,
+    /// Track id of vehicle A (the SDC).
     pub a_id: i64,
+    /// Track id of vehicle B (the one with the latent courtesy).
     pub b_id: i64,
     /// B's latent courtesy.
     pub courtesy: f64,
@@ -81,19 +96,10 @@ pub struct GroundTruth {
 /// One generated scenario.
 #[derive(Debug, Clone)]
 pub struct Generated {
+    /// The scene (91 steps at 10 Hz, current step 10).
     pub scene: Scene,
+    /// What the generator knows about it.
     pub truth: GroundTruth,
-}
-
-fn mix(seed: u64, index: u64) -> u64 {
-    // SplitMix64 finaliser over the pair, so neighbouring indices get unrelated streams.
-    let mut z = seed
-        ^ index
-            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-            .wrapping_add(0x632B_E59B_D9B4_E019);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 fn run(family: Family, rng: &mut Pcg64Mcg, courtesy: f64) -> (Run, Run) {
@@ -133,7 +139,7 @@ fn a_future_speed(track: &scbg_scene::Track) -> f64 {
 /// If `families` is empty.
 pub fn generate(seed: u64, index: u64, families: &[Family]) -> Generated {
     assert!(!families.is_empty(), "at least one family");
-    let mut rng = Pcg64Mcg::seed_from_u64(mix(seed, index));
+    let mut rng = Pcg64Mcg::seed_from_u64(scbg_base::seed::mix(seed, index));
     let family = families[rng.random_range(0..families.len())];
     let courtesy: f64 = rng.random();
     let (with_b, alone) = run(family, &mut rng, courtesy);

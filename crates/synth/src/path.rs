@@ -35,6 +35,7 @@ impl RefPath {
         Self::from_fn(length_m, 1.0, |t| (x0 + c * t, y0 + s * t))
     }
 
+    /// Arclength of the path, metres.
     pub fn length_m(&self) -> f64 {
         (self.x.len() - 1) as f64 * self.ds_m
     }

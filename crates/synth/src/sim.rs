@@ -4,6 +4,7 @@ use scbg_scene::{AgentState, ObjectType, Track};
 
 use crate::path::RefPath;
 
+/// Seconds per simulation (and scene) step: 10 Hz.
 pub const STEP_SECS: f64 = 0.1;
 /// Physical limits every agent obeys.
 pub const MAX_BRAKE_MPS2: f64 = 7.5;

@@ -7,59 +7,106 @@ use std::path::{Path, PathBuf};
 use burn::module::Module;
 use burn::optim::ModuleOptimizer;
 use burn::tensor::Device;
+use scbg_base::atomic::AtomicFile;
 use scbg_features::FeatureStats;
 use scbg_model::{Multipath, MultipathConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::config::TrainConfig;
 
+/// Name of the checkpoint description inside a checkpoint folder.
 pub const CHECKPOINT_FILE: &str = "checkpoint.json";
+/// `kind` of a predictor checkpoint's `checkpoint.json`.
+pub const CHECKPOINT_KIND: &str = "scbg-predictor";
+/// The format of `checkpoint.json` this build reads and writes.
+pub const CHECKPOINT_FORMAT_VERSION: u32 = 2;
 
 /// Where training stands after a completed epoch.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrainState {
     /// Epochs completed.
     pub epoch: usize,
+    /// Optimizer steps taken (batches, skipped ones included); seeds the batch augmentation.
     pub step: u64,
+    /// Base learning rate after plateau reductions and divergence halvings (the cosine
+    /// schedule's factor is applied on top).
     pub learning_rate: f64,
+    /// Best validation NLL so far (`None` before the first validation).
     pub best_val_loss: Option<f64>,
+    /// Consecutive epochs whose validation loss did not beat `best_val_loss`.
     pub epochs_without_improvement: usize,
 }
 
 /// One epoch's numbers.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EpochReport {
+    /// The epoch, 0-based.
     pub epoch: usize,
+    /// Mean training loss of the finite batches (NaN when none was).
     pub train_loss: f64,
+    /// Mean conditional-mode GMM NLL on the validation set (nats per sample); `None` without
+    /// validation samples.
     pub val_loss: Option<f64>,
+    /// Marginal minADE at 8 s (metres) on up to 512 validation samples.
     pub val_min_ade_8s: Option<f32>,
+    /// Learning rate at the epoch's last step (schedule applied).
     pub learning_rate: f64,
+    /// Batches skipped for a non-finite loss.
     pub skipped_batches: usize,
+    /// Wall-clock time of the epoch, validation included (seconds).
     pub seconds: f64,
 }
 
+/// A predictor checkpoint as described by `checkpoint.json`: everything needed to rebuild the
+/// model (configs, feature statistics) and to resume training (state, optimizer file).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Checkpoint {
+    /// Always [`CHECKPOINT_KIND`]: tells a predictor folder from other scbg artefacts.
+    pub kind: String,
+    /// [`CHECKPOINT_FORMAT_VERSION`] when written by this build.
+    pub format_version: u32,
+    /// The training configuration (`--resume` requires the same one).
     pub train_config: TrainConfig,
+    /// The model widths the weights belong to.
     pub model_config: MultipathConfig,
+    /// Feature standardisation statistics fitted on the training samples; inputs must be
+    /// standardised with them before inference.
     pub stats: FeatureStats,
+    /// Training state after the last completed epoch.
     pub state: TrainState,
+    /// One report per completed epoch.
     pub history: Vec<EpochReport>,
+    /// Model weights file in the checkpoint folder (`model-NNNN.bpk`, NNNN = epochs done).
     pub model_file: String,
+    /// Optimizer state file in the checkpoint folder (`optimizer-NNNN.bpk`).
     pub optimizer_file: String,
 }
 
+/// Why a checkpoint could not be read or written.
 #[derive(Debug, thiserror::Error)]
 pub enum CheckpointError {
+    /// A file-system error.
     #[error("{error}: {}", path.display())]
     Io {
+        /// The file or folder concerned.
         path: PathBuf,
+        /// The underlying error.
         error: std::io::Error,
     },
+    /// Not a (current-format) predictor checkpoint, or a record that failed to save or load.
     #[error("{message}: {}", path.display())]
-    Format { path: PathBuf, message: String },
+    Format {
+        /// The file or folder concerned.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The model's weights are not all finite; nothing was written.
     #[error("refusing to save non-finite weights (epoch {epoch})")]
-    NonFinite { epoch: usize },
+    NonFinite {
+        /// Epochs completed by the state being saved.
+        epoch: usize,
+    },
 }
 
 fn io(path: &Path) -> impl Fn(std::io::Error) -> CheckpointError + '_ {
@@ -89,29 +136,26 @@ pub fn weights_finite(model: &Multipath) -> bool {
 }
 
 /// Saves one record file atomically: `save` writes to a temporary name in `dir`, which is
-/// renamed to `name` when complete.
+/// renamed to `name` when complete (and removed when `save` fails).
 pub fn save_record(
     dir: &Path,
     name: &str,
     save: impl FnOnce(&Path) -> Result<(), String>,
 ) -> Result<(), CheckpointError> {
-    let tmp = dir.join(format!(".{name}.tmp"));
     let path = dir.join(name);
-    save(&tmp).map_err(|message| CheckpointError::Format {
-        path: tmp.clone(),
+    let file = AtomicFile::create(&path).map_err(|e| io(&path)(e.into()))?;
+    // The temporary name has an extension, so burnpack does not add its own.
+    save(file.temp_path()).map_err(|message| CheckpointError::Format {
+        path: path.clone(),
         message,
     })?;
-    // burnpack may add its own extension to the name it is given.
-    let written = if tmp.exists() {
-        tmp.clone()
-    } else {
-        tmp.with_extension("tmp.bpk")
-    };
-    std::fs::rename(&written, &path).map_err(io(&path))
+    file.commit().map_err(|e| io(&path)(e.into()))
 }
 
 impl Checkpoint {
-    /// Saves the model, the optimizer and this description into `dir`.
+    /// Saves the model, the optimizer and this description into `dir` (as
+    /// `model-NNNN.bpk`, `optimizer-NNNN.bpk` for NNNN = `state.epoch`, then
+    /// `checkpoint.json`), and removes the previous checkpoint's record files.
     pub fn save(
         mut self,
         dir: &Path,
@@ -134,15 +178,11 @@ impl Checkpoint {
             optimizer.save(p).map_err(|e| format!("{e:?}"))
         })?;
         let path = dir.join(CHECKPOINT_FILE);
-        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io(dir))?;
-        serde_json::to_writer_pretty(&mut tmp, &self).map_err(|e| CheckpointError::Format {
+        let json = serde_json::to_vec_pretty(&self).map_err(|e| CheckpointError::Format {
             path: path.clone(),
             message: e.to_string(),
         })?;
-        tmp.persist(&path).map_err(|e| CheckpointError::Io {
-            path: path.clone(),
-            error: e.error,
-        })?;
+        scbg_base::atomic::write(&path, json).map_err(|e| io(&path)(e.into()))?;
         if let Some(prev) = previous {
             for f in [prev.model_file, prev.optimizer_file] {
                 if f != self.model_file && f != self.optimizer_file {
@@ -153,10 +193,50 @@ impl Checkpoint {
         Ok(())
     }
 
+    /// Reads `dir/checkpoint.json`; a folder without one, an old format or another kind of
+    /// artefact is a [`CheckpointError::Format`] that says which.
     pub fn read(dir: &Path) -> Result<Self, CheckpointError> {
         let path = dir.join(CHECKPOINT_FILE);
-        let text = std::fs::read_to_string(&path).map_err(io(&path))?;
-        serde_json::from_str(&text).map_err(|e| CheckpointError::Format {
+        let text = std::fs::read_to_string(&path).map_err(|error| {
+            if error.kind() == std::io::ErrorKind::NotFound {
+                CheckpointError::Format {
+                    path: dir.to_path_buf(),
+                    message: format!("not a predictor checkpoint folder (no {CHECKPOINT_FILE})"),
+                }
+            } else {
+                io(&path)(error)
+            }
+        })?;
+        let value: serde_json::Value =
+            serde_json::from_str(&text).map_err(|e| CheckpointError::Format {
+                path: path.clone(),
+                message: e.to_string(),
+            })?;
+        let kind = value.get("kind").and_then(|k| k.as_str());
+        let version = value.get("format_version").and_then(|v| v.as_u64());
+        let refuse = |message: String| CheckpointError::Format {
+            path: path.clone(),
+            message,
+        };
+        match (kind, version) {
+            (Some(CHECKPOINT_KIND), Some(v)) if v == u64::from(CHECKPOINT_FORMAT_VERSION) => {}
+            (Some(CHECKPOINT_KIND), Some(v)) => {
+                return Err(refuse(format!(
+                    "predictor checkpoint format {v}, this build reads format {CHECKPOINT_FORMAT_VERSION}: retrain with `scbg train predictor`"
+                )));
+            }
+            (None, None) if value.get("train_config").is_some() => {
+                return Err(refuse(
+                    "written by an older scbg (before format versions): retrain with `scbg train predictor`".into(),
+                ));
+            }
+            _ => {
+                return Err(refuse(format!(
+                    "not a scbg predictor checkpoint (kind {kind:?})"
+                )));
+            }
+        }
+        serde_json::from_value(value).map_err(|e| CheckpointError::Format {
             path,
             message: e.to_string(),
         })
@@ -174,6 +254,7 @@ impl Checkpoint {
             })
     }
 
+    /// The optimizer state from [`Self::optimizer_file`], loaded into `optimizer`.
     pub fn load_optimizer(
         &self,
         dir: &Path,

@@ -12,24 +12,32 @@ pub struct TrainConfig {
     pub preset: String,
     /// Explicit model widths (overrides `preset`).
     pub model: Option<MultipathConfig>,
+    /// Seed of the weight initialisation, the data order and the batch augmentation.
     pub seed: u64,
+    /// Number of passes over the training samples.
     pub epochs: usize,
+    /// Samples per batch (training and evaluation).
     pub batch_size: usize,
+    /// Initial (Adam) learning rate.
     pub learning_rate: f64,
     /// Multiply the learning rate by this after `plateau_patience` epochs without a better
     /// validation loss.
     pub plateau_factor: f64,
+    /// Epochs without a better validation loss before the `plateau` schedule lowers the rate.
     pub plateau_patience: usize,
     /// Gradient-norm clipping (Multipath++: 0.4).
     pub grad_clip_norm: f32,
     /// Probability of dropping the condition of a pair sample (trains both modes at once).
     pub condition_dropout: f64,
+    /// Probability of masking each past history step of the target (Multipath++: 0.15).
     pub history_mask_prob: f64,
     /// Fraction of scenarios (by id hash) held out for validation.
     pub validation_fraction: f64,
     /// Targets need at least this many valid future steps.
     pub min_future_valid_steps: usize,
+    /// Other agents kept per sample (the closest; see `FeatureConfig`).
     pub max_other_agents: usize,
+    /// Road segments kept per sample (the closest; see `FeatureConfig`).
     pub max_road_segments: usize,
     /// Cap on marginal samples per window (all vehicles when 0).
     pub max_targets_per_window: usize,
@@ -73,21 +81,27 @@ impl Default for TrainConfig {
 /// A configuration that cannot be used.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum ConfigError {
+    /// `preset` names no preset (and no explicit `model` was given).
     #[error("unknown model preset {0:?} (expected cpu-small or paper)")]
     UnknownPreset(String),
+    /// A value out of range; the message says which.
     #[error("{0}")]
     Invalid(String),
+    /// The TOML did not parse into a [`TrainConfig`] (syntax, types or unknown fields).
     #[error("config: {0}")]
     Parse(String),
 }
 
 impl TrainConfig {
+    /// Parses a TOML configuration (absent fields take their defaults) and validates it.
     pub fn from_toml(text: &str) -> Result<Self, ConfigError> {
         let config: Self = toml::from_str(text).map_err(|e| ConfigError::Parse(e.to_string()))?;
         config.validate()?;
         Ok(config)
     }
 
+    /// Checks the preset, positive `batch_size` and `epochs`, `validation_fraction` in
+    /// `[0, 1)`, a known `lr_schedule` and a finite, non-negative `classification_weight`.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.model_config()?;
         if self.batch_size == 0 || self.epochs == 0 {
@@ -114,6 +128,7 @@ impl TrainConfig {
         Ok(())
     }
 
+    /// The model widths: `model` if given, else the `preset`.
     pub fn model_config(&self) -> Result<MultipathConfig, ConfigError> {
         match &self.model {
             Some(m) => Ok(m.clone()),
@@ -122,6 +137,7 @@ impl TrainConfig {
         }
     }
 
+    /// The feature extraction settings (agent and road caps; other settings default).
     pub fn feature_config(&self) -> FeatureConfig {
         FeatureConfig {
             max_other_agents: self.max_other_agents,

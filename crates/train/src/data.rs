@@ -10,11 +10,15 @@ use crate::config::TrainConfig;
 /// Which part of the data a scenario belongs to.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Split {
+    /// Used for training.
     Train,
+    /// Held out for validation.
     Validation,
 }
 
-/// FNV-1a (then SplitMix-mixed) of the scenario id: a stable split that does not depend on file order.
+/// The split of a scenario: [`Split::Validation`] for about `validation_fraction` of the ids.
+/// FNV-1a (then SplitMix-mixed) of the scenario id: a stable split that does not depend on file
+/// order.
 pub fn split_of(scenario_id: &str, validation_fraction: f64) -> Split {
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for b in scenario_id.bytes() {
@@ -22,7 +26,7 @@ pub fn split_of(scenario_id: &str, validation_fraction: f64) -> Split {
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
     }
     // FNV's high bits are poorly mixed for short, similar ids: finish with SplitMix64's mixer.
-    let h = crate::trainer::mix(h, 0);
+    let h = scbg_base::seed::mix(h, 0);
     if ((h >> 11) as f64 / (1u64 << 53) as f64) < validation_fraction {
         Split::Validation
     } else {
@@ -30,17 +34,20 @@ pub fn split_of(scenario_id: &str, validation_fraction: f64) -> Split {
     }
 }
 
-/// Samples of one split, standardised, plus the ids of the pair samples.
+/// Samples of one split: marginal samples and both directions of each pair (conditional).
 #[derive(Debug, Default)]
 pub struct SampleSet {
+    /// The samples, in cache order (standardised once [`standardise`] has run).
     pub samples: Vec<AgentSample>,
 }
 
 impl SampleSet {
+    /// Number of samples.
     pub fn len(&self) -> usize {
         self.samples.len()
     }
 
+    /// Whether there are no samples.
     pub fn is_empty(&self) -> bool {
         self.samples.is_empty()
     }

@@ -4,33 +4,11 @@
 //! frame as long as predictions and ground truth share it).
 
 use burn::tensor::Device;
-use rand::SeedableRng;
 use scbg_features::{AGENT_FEATURES, AgentSample};
 use scbg_metrics::{ClassifierThresholds, GroundTruth, MetricTable, Prediction};
-use scbg_model::{Batch, BatchAugment, Multipath};
+use scbg_model::{Batch, Multipath};
 
-/// Inference mode of the predictor.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Mode {
-    /// `p(y_A | x)`: the condition is switched off.
-    Marginal,
-    /// `p(y_A | x, y_B)`: the other agent's logged future is given (samples without one are
-    /// necessarily marginal).
-    Conditional,
-}
-
-impl Mode {
-    /// The batching that realises this mode (no training-time randomisation).
-    pub fn augment(self) -> BatchAugment {
-        match self {
-            Mode::Marginal => BatchAugment {
-                condition_dropout: 1.0,
-                history_mask_prob: 0.0,
-            },
-            Mode::Conditional => BatchAugment::default(),
-        }
-    }
-}
+pub use scbg_model::Mode;
 
 /// K trajectories with probabilities, target frame.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,10 +28,8 @@ pub fn predict(
     device: &Device,
 ) -> Vec<Modes> {
     let mut out = Vec::with_capacity(samples.len());
-    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
-    let augment = mode.augment();
     for chunk in samples.chunks(batch_size.max(1)) {
-        let batch = Batch::from_samples(chunk, &augment, &mut rng, device);
+        let batch = Batch::for_mode(chunk, mode, device);
         out.extend(
             model
                 .forward(&batch)
@@ -176,11 +152,9 @@ pub fn mean_nll(
     batch_size: usize,
     device: &Device,
 ) -> Option<f64> {
-    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
-    let augment = mode.augment();
     let (mut sum, mut n) = (0.0f64, 0usize);
     for chunk in samples.chunks(batch_size.max(1)) {
-        let batch = Batch::from_samples(chunk, &augment, &mut rng, device);
+        let batch = Batch::for_mode(chunk, mode, device);
         let loss: f32 = scbg_model::gmm_nll(
             &model.forward(&batch),
             batch.future_xy.clone(),

@@ -7,6 +7,8 @@
 //! **Architecture invariant:** reads the prepared cache only (never WOMD files) and writes
 //! checkpoints; knows nothing about the CLI or figures.
 
+#![warn(missing_docs)]
+
 pub mod checkpoint;
 pub mod config;
 pub mod data;

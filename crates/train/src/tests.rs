@@ -124,6 +124,18 @@ fn resume_gives_the_same_weights_as_an_uninterrupted_run() {
         2,
         "{files:?}"
     );
+    // No temporary file is left behind, and the files have `File::create`'s permissions.
+    assert_eq!(files.len(), 3, "{files:?}");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode();
+        let reference = dir.path().join("reference");
+        std::fs::File::create(&reference).unwrap();
+        for f in &files {
+            assert_eq!(mode(&resumed.join(f)), mode(&reference), "{f}");
+        }
+    }
 }
 
 #[test]

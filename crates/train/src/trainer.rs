@@ -18,26 +18,40 @@ use crate::config::{ConfigError, TrainConfig};
 use crate::data::{load_samples, standardise};
 use crate::eval::{Mode, mean_nll, predict, score};
 
+/// Re-export of [`scbg_base::seed::mix`] (SplitMix64 of a `(seed, counter)` pair), kept for
+/// callers outside this crate that name it here.
+pub use scbg_base::seed::mix;
+
+/// Why [`train`] failed.
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
+    /// The configuration is invalid.
     #[error(transparent)]
     Config(#[from] ConfigError),
+    /// The prepared cache could not be read.
     #[error(transparent)]
     Cache(#[from] CacheError),
+    /// A checkpoint could not be read (`--resume`) or written.
     #[error(transparent)]
     Checkpoint(#[from] CheckpointError),
+    /// The configured backend is not available in this build.
     #[error(transparent)]
     Backend(#[from] scbg_model::device::UnknownBackend),
+    /// The prepared data gave no training samples.
     #[error("no training samples in the prepared data")]
     NoSamples,
+    /// `--resume` found a checkpoint (folder given) whose training configuration differs.
     #[error("--resume: the checkpoint in {0} was made with a different configuration")]
     ConfigMismatch(String),
 }
 
 /// Progress callbacks (the CLI draws a bar; tests pass [`NoProgress`]).
 pub trait Progress {
+    /// An epoch (0-based) of `_batches` batches begins.
     fn epoch_start(&self, _epoch: usize, _batches: usize) {}
+    /// A batch was trained on, with this (finite) loss; skipped batches are not reported.
     fn batch_done(&self, _loss: f64) {}
+    /// An epoch ended (after validation, before its checkpoint is saved).
     fn epoch_end(&self, _report: &EpochReport) {}
     /// Asked after each epoch's checkpoint is saved: `true` ends training there, as an
     /// interruption would (`--resume` continues from that checkpoint).
@@ -46,20 +60,10 @@ pub trait Progress {
     }
 }
 
+/// A [`Progress`] that ignores every callback.
 #[derive(Debug)]
 pub struct NoProgress;
 impl Progress for NoProgress {}
-
-/// SplitMix64 of a pair: independent, reproducible streams per (seed, counter).
-pub fn mix(seed: u64, counter: u64) -> u64 {
-    let mut z = seed
-        ^ counter
-            .wrapping_mul(0x9E37_79B9_7F4A_7C15)
-            .wrapping_add(0x632B_E59B_D9B4_E019);
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
 
 fn optimizer(config: &TrainConfig) -> ModuleOptimizer {
     AdamConfig::new()
@@ -233,6 +237,8 @@ pub fn train(
         progress.epoch_end(&report);
         history.push(report);
         let ckpt = Checkpoint {
+            kind: crate::checkpoint::CHECKPOINT_KIND.into(),
+            format_version: crate::checkpoint::CHECKPOINT_FORMAT_VERSION,
             train_config: config.clone(),
             model_config: model_config.clone(),
             stats: stats.clone(),

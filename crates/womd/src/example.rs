@@ -30,22 +30,34 @@ const STEP_SECS: f64 = 0.1;
 /// A tf.Example that does not have the WOMD motion layout.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ExampleError {
+    /// A required feature key is absent.
+    #[allow(missing_docs)]
     #[error("feature `{key}` is missing")]
     Missing { key: String },
+    /// A feature holds a different list kind than expected.
     #[error("feature `{key}` is a {got} list, expected a {expected} list")]
     WrongKind {
+        /// Feature key.
         key: String,
+        /// List kind found (`bytes`, `float`, `int64` or `empty`).
         got: &'static str,
+        /// List kind expected.
         expected: &'static str,
     },
+    /// A feature has the wrong number of values.
     #[error("feature `{key}` has {got} values, expected {expected}")]
     WrongLength {
+        /// Feature key.
         key: String,
+        /// Number of values found.
         got: usize,
+        /// Number of values expected.
         expected: usize,
     },
+    /// `scenario/id` is not valid UTF-8.
     #[error("feature `scenario/id` is not UTF-8")]
     BadScenarioId,
+    /// The converted scene fails [`Scene::validate`].
     #[error(transparent)]
     Scene(#[from] scbg_scene::SceneError),
 }
@@ -368,9 +380,4 @@ pub fn scene_from_example(example: &proto::Example) -> Result<Scene, ExampleErro
     };
     scene.validate()?;
     Ok(scene)
-}
-
-pub(crate) fn decode_scene(bytes: &[u8]) -> Result<Scene, crate::DecodeError> {
-    let example = proto::Example::decode(bytes)?;
-    Ok(scene_from_example(&example)?)
 }

@@ -9,11 +9,14 @@
 //! tf.Example. Everything downstream sees [`Scene`] only. It knows nothing about features,
 //! models or training.
 
+#![warn(missing_docs)]
+
 use std::fmt;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use prost::Message;
+use scbg_base::atomic::AtomicFile;
 use scbg_scene::Scene;
 
 pub mod example;
@@ -46,12 +49,17 @@ impl fmt::Display for Format {
 /// Why one record could not be decoded into a [`Scene`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum DecodeError {
+    /// The record is not valid protobuf for the detected message type.
     #[error("protobuf: {0}")]
     Proto(prost::DecodeError),
+    /// A decoded `Scenario` does not make a valid [`Scene`].
     #[error("scenario: {0}")]
     Scenario(scenario::ScenarioError),
+    /// A decoded tf.Example does not have the motion layout or does not make a valid [`Scene`].
     #[error("tf.Example: {0}")]
     Example(example::ExampleError),
+    /// Format detection found neither message type.
+    #[allow(missing_docs)]
     #[error("record is neither a WOMD Scenario nor a WOMD motion tf.Example ({detail})")]
     NotWomd { detail: String },
 }
@@ -77,26 +85,42 @@ impl From<example::ExampleError> for DecodeError {
 /// An error reading or writing a WOMD file. The message ends with the file's path.
 #[derive(Debug, thiserror::Error)]
 pub enum WomdError {
+    /// Opening, mapping or writing the file failed.
     #[error("{error}: {}", path.display())]
     Io {
+        /// The file.
         path: PathBuf,
+        /// The underlying I/O error.
         error: std::io::Error,
     },
+    /// The file has zero bytes.
+    #[allow(missing_docs)]
     #[error("file is empty (no TFRecord records): {}", path.display())]
     EmptyFile { path: PathBuf },
+    /// Bad TFRecord framing (truncation or CRC mismatch) at the given record.
+    #[allow(missing_docs)]
     #[error("{error} in {}", path.display())]
     Framing { path: PathBuf, error: RecordAt },
+    /// A well-framed record could not be decoded into a [`Scene`].
     #[error("record {index} at byte {offset}: {error} in {}", path.display())]
     Decode {
+        /// The file.
         path: PathBuf,
+        /// 0-based index of the record in the file.
         index: usize,
+        /// Byte offset of the record's length field in the file.
         offset: u64,
+        /// Why decoding failed.
         error: DecodeError,
     },
+    /// A scene could not be encoded as a `Scenario` (see [`write_scenes`]).
     #[error("scenario {scenario_id}: {error} (writing {})", path.display())]
     Encode {
+        /// The file being written.
         path: PathBuf,
+        /// Id of the scene that failed.
         scenario_id: String,
+        /// Why it failed.
         error: TrackIdOverflow,
     },
 }
@@ -192,6 +216,7 @@ impl WomdFile {
         })
     }
 
+    /// The file's path (or the label given to [`WomdFile::from_bytes`]).
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -269,8 +294,14 @@ pub fn detect_record_format(data: &[u8]) -> Result<Format, DecodeError> {
 /// Decodes one serialized record of a known format into a validated [`Scene`].
 pub fn decode_record(data: &[u8], format: Format) -> Result<Scene, DecodeError> {
     match format {
-        Format::Scenario => scenario::decode_scene(data),
-        Format::TfExample => example::decode_scene(data),
+        Format::Scenario => {
+            let scenario = proto::Scenario::decode(data)?;
+            Ok(scenario::scene_from_scenario(&scenario)?)
+        }
+        Format::TfExample => {
+            let example = proto::Example::decode(data)?;
+            Ok(example::scene_from_example(&example)?)
+        }
     }
 }
 
@@ -285,12 +316,8 @@ pub fn write_scenes<'a>(
         path: path.to_path_buf(),
         error,
     };
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .unwrap_or(Path::new("."));
-    let tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-    let mut writer = RecordWriter::new(BufWriter::new(tmp));
+    let mut file = AtomicFile::create(path).map_err(|e| io(e.into()))?;
+    let mut writer = RecordWriter::new(BufWriter::new(&mut file));
     for scene in scenes {
         let bytes = encode_scene(scene).map_err(|error| WomdError::Encode {
             path: path.to_path_buf(),
@@ -300,12 +327,11 @@ pub fn write_scenes<'a>(
         writer.write_record(&bytes).map_err(io)?;
     }
     let n = writer.records_written();
-    let tmp = writer
+    writer
         .into_inner()
         .into_inner()
         .map_err(|e| io(e.into_error()))?;
-    tmp.as_file().sync_all().map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
+    file.commit().map_err(|e| io(e.into()))?;
     Ok(n)
 }
 

@@ -12,16 +12,23 @@ use crate::proto;
 /// Why a decoded `Scenario` could not become a [`Scene`] (before [`Scene::validate`]).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum ScenarioError {
+    /// `scenario_id` is absent.
     #[error("field `scenario_id` is missing: not a WOMD Scenario")]
     MissingScenarioId,
+    /// `timestamps_seconds` is empty.
     #[error("field `timestamps_seconds` is empty: not a WOMD Scenario")]
     NoTimestamps,
+    /// `current_time_index` is negative (the value given).
     #[error("field `current_time_index` is {0}, must be >= 0")]
     NegativeCurrentIndex(i32),
+    /// A `tracks_to_predict` entry has a negative track index (the value given).
     #[error("field `tracks_to_predict.track_index` is {0}, must be >= 0")]
     NegativeTrackIndex(i32),
+    /// `dynamic_map_states` is neither empty nor one entry per timestamp.
+    #[allow(missing_docs)]
     #[error("field `dynamic_map_states` has {got} steps, expected 0 or {num_steps}")]
     SignalSteps { got: usize, num_steps: usize },
+    /// The converted scene fails [`Scene::validate`].
     #[error(transparent)]
     Scene(#[from] scbg_scene::SceneError),
 }
@@ -201,12 +208,6 @@ pub fn scene_from_scenario(s: &proto::Scenario) -> Result<Scene, ScenarioError> 
     };
     scene.validate()?;
     Ok(scene)
-}
-
-/// Decodes a serialized `Scenario` into a validated [`Scene`].
-pub(crate) fn decode_scene(bytes: &[u8]) -> Result<Scene, crate::DecodeError> {
-    let scenario = proto::Scenario::decode(bytes)?;
-    Ok(scene_from_scenario(&scenario)?)
 }
 
 fn proto_point(p: &MapPoint) -> proto::MapPoint {

@@ -24,18 +24,27 @@ pub struct Record<'a> {
     pub index: usize,
     /// Byte offset of the record's length field in the file.
     pub offset: u64,
+    /// The record's payload (without framing), borrowed from the file bytes.
     pub data: &'a [u8],
 }
 
 /// What is wrong with one record's framing.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum RecordError {
+    /// Fewer than the 12 header bytes are left.
+    #[allow(missing_docs)]
     #[error("truncated header: {available} bytes left, a record header needs 12")]
     TruncatedHeader { available: u64 },
+    /// The length field's CRC does not match.
+    #[allow(missing_docs)]
     #[error("length CRC mismatch (stored {stored:#010x}, computed {computed:#010x})")]
     LengthCrc { stored: u32, computed: u32 },
+    /// The length runs past the end of the file.
+    #[allow(missing_docs)]
     #[error("record length {length} exceeds the {available} bytes left in the file")]
     TruncatedData { length: u64, available: u64 },
+    /// The data's CRC does not match (resumable: the framing is intact).
+    #[allow(missing_docs)]
     #[error("data CRC mismatch (stored {stored:#010x}, computed {computed:#010x})")]
     DataCrc { stored: u32, computed: u32 },
 }
@@ -52,8 +61,11 @@ impl RecordError {
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error("record {index} at byte {offset}: {kind}")]
 pub struct RecordAt {
+    /// 0-based index of the bad record in the file.
     pub index: usize,
+    /// Byte offset of the bad record's length field in the file.
     pub offset: u64,
+    /// What is wrong with it.
     pub kind: RecordError,
 }
 
@@ -70,6 +82,7 @@ pub struct RecordIter<'a> {
 }
 
 impl<'a> RecordIter<'a> {
+    /// Iterates the records of `bytes`, from its start.
     pub fn new(bytes: &'a [u8]) -> Self {
         Self {
             bytes,
@@ -149,6 +162,7 @@ pub struct RecordWriter<W: Write> {
 }
 
 impl<W: Write> RecordWriter<W> {
+    /// A writer that frames records into `inner`.
     pub fn new(inner: W) -> Self {
         Self {
             inner,
@@ -156,6 +170,7 @@ impl<W: Write> RecordWriter<W> {
         }
     }
 
+    /// Writes one record: length, length CRC, `data`, data CRC.
     pub fn write_record(&mut self, data: &[u8]) -> std::io::Result<()> {
         let length = (data.len() as u64).to_le_bytes();
         self.inner.write_all(&length)?;
@@ -167,10 +182,12 @@ impl<W: Write> RecordWriter<W> {
         Ok(())
     }
 
+    /// Number of records written so far.
     pub fn records_written(&self) -> usize {
         self.records_written
     }
 
+    /// Returns the inner writer. Nothing is buffered here; flushing `inner` is the caller's job.
     pub fn into_inner(self) -> W {
         self.inner
     }

@@ -13,6 +13,7 @@ use crate::sim::{Agent, Idm};
 
 // --------------------------------------------------------------------------------- crossing
 
+/// The random draws of one crossing scene (geometry, A and B, other traffic, noise).
 #[derive(Debug, Clone)]
 pub struct CrossingParams {
     curvature: f64,
@@ -27,6 +28,7 @@ pub struct CrossingParams {
     noise: Vec<Vec<f64>>,
 }
 
+/// Draws the parameters of a crossing scene.
 pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
     let a_v_des = rng.random_range(12.5..14.0);
     let a_v0 = a_v_des * rng.random_range(0.95..1.0);
@@ -86,6 +88,7 @@ pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
     }
 }
 
+/// Simulates a crossing scene with B's courtesy `c ∈ [0, 1]`; without B when `with_b` is false.
 pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
     let w = p.lane_width_m;
     let a_path = arc_path(0.0, 0.0, 0.0, p.curvature, 400.0);

@@ -12,6 +12,7 @@ const MAKE_WAY_LOOKBACK_M: f64 = 200.0;
 
 // ------------------------------------------------------------------------------------ cut-in
 
+/// The random draws of one cut-in / make-way scene (geometry, A and B, slow vehicle, noise).
 #[derive(Debug, Clone)]
 pub struct CutinParams {
     curvature: f64,
@@ -28,6 +29,7 @@ pub struct CutinParams {
     noise: Vec<Vec<f64>>,
 }
 
+/// Draws the parameters of a cut-in / make-way scene (either variant with probability ½).
 pub fn cutin_params(rng: &mut Pcg64Mcg) -> CutinParams {
     let cut_in = rng.random_bool(0.5);
     let a_v_des = rng.random_range(23.0..26.0);
@@ -83,6 +85,7 @@ pub fn cutin_params(rng: &mut Pcg64Mcg) -> CutinParams {
     }
 }
 
+/// Simulates a cut-in scene with B's courtesy `c ∈ [0, 1]`; without B when `with_b` is false.
 pub fn simulate_cutin(p: &CutinParams, c: f64, with_b: bool) -> Run {
     let w = p.lane_width_m;
     let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);

@@ -12,6 +12,7 @@ const RAMP_BLEND_M: f64 = 90.0;
 
 // ------------------------------------------------------------------------------------ merge
 
+/// The random draws of one merge scene (geometry, A and B, background traffic, noise).
 #[derive(Debug, Clone)]
 pub struct MergeParams {
     curvature: f64,
@@ -26,6 +27,7 @@ pub struct MergeParams {
     noise: Vec<Vec<f64>>,
 }
 
+/// Draws the parameters of a merge scene.
 pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
     let lane_width_m = rng.random_range(3.4..3.9);
     let merge_end_s = rng.random_range(260.0..300.0);
@@ -116,6 +118,7 @@ impl MergeParams {
     }
 }
 
+/// Simulates a merge scene with B's courtesy `c ∈ [0, 1]`; without B when `with_b` is false.
 pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
     let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);
     let mut b_idm = p.pair.b_idm;

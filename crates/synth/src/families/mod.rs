@@ -20,15 +20,21 @@ use scbg_scene::{Map, MapPoint, ObjectType};
 use crate::path::RefPath;
 use crate::sim::{Agent, Idm};
 
+/// Steps of a generated scene: 11 history (including current) + 80 future, at 10 Hz.
 pub const NUM_STEPS: usize = 91;
+/// Track id of vehicle A (the SDC).
 pub const A_ID: i64 = 101;
+/// Track id of vehicle B.
 pub const B_ID: i64 = 202;
 
 /// The output of one simulation run.
 #[derive(Debug)]
 pub struct Run {
+    /// Reference paths the agents move along (path 0 is A's).
     pub paths: Vec<RefPath>,
+    /// Simulated agents with their whole history: A first, then B (when simulated), then others.
     pub agents: Vec<Agent>,
+    /// The scene's map.
     pub map: Map,
 }
 

@@ -1,109 +1,135 @@
-//! `scbg data inspect | render | prepare`.
+//! WOMD files in, the prepared feature cache out: inspect, render and prepare.
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::Mutex;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use rayon::prelude::*;
 use scbg_features::cache::{Manifest, ShardSummary, ShardWriter, finished_shard};
 use scbg_features::{PairConfig, PreparedScene, WindowConfig, marginal_targets};
 use scbg_scene::{ObjectType, Scene};
 use scbg_womd::WomdFile;
-use serde_json::json;
+use serde::Serialize;
 
-use crate::cli::{InspectArgs, PrepareArgs, RenderArgs};
-use crate::{inputs, progress};
+use crate::{Progress, ROAD_SUBSAMPLE, ensure_request, inputs};
 
-/// Road polylines keep every 4th point (Multipath++).
-pub const ROAD_SUBSAMPLE: usize = 4;
-
-fn scene_json(scene: &Scene, file: &Path, format: scbg_womd::Format) -> serde_json::Value {
-    let count = |t: ObjectType| scene.tracks.iter().filter(|tr| tr.object_type == t).count();
-    let m = &scene.map;
-    json!({
-        "file": file.display().to_string(),
-        "format": format.to_string(),
-        "scenario_id": scene.scenario_id,
-        "num_steps": scene.num_steps(),
-        "current_time_index": scene.current_step,
-        "sdc_track_index": scene.sdc_track_index,
-        "num_tracks": scene.tracks.len(),
-        "tracks_by_type": {
-            "vehicle": count(ObjectType::Vehicle),
-            "pedestrian": count(ObjectType::Pedestrian),
-            "cyclist": count(ObjectType::Cyclist),
-            "other": count(ObjectType::Other),
-            "unset": count(ObjectType::Unset),
-        },
-        "num_map_features": m.num_features(),
-        "map_features_by_type": {
-            "lane": m.lanes.len(),
-            "road_line": m.road_lines.len(),
-            "road_edge": m.road_edges.len(),
-            "stop_sign": m.stop_signs.len(),
-            "crosswalk": m.crosswalks.len(),
-            "speed_bump": m.speed_bumps.len(),
-            "driveway": m.driveways.len(),
-        },
-        "signal_steps": scene.signals_per_step.iter().filter(|s| !s.is_empty()).count(),
-        "objects_of_interest": scene.objects_of_interest,
-        "objects_of_interest_types": scene.objects_of_interest.iter()
-            .map(|id| scene.track_index(*id).map_or("missing", |i| scene.tracks[i].object_type.name()))
-            .collect::<Vec<_>>(),
-        "tracks_to_predict": scene.tracks_to_predict.iter().map(|t| t.track_index).collect::<Vec<_>>(),
-    })
+/// Tracks of a scene by object type.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[allow(missing_docs)]
+pub struct TracksByType {
+    pub vehicle: usize,
+    pub pedestrian: usize,
+    pub cyclist: usize,
+    pub other: usize,
+    pub unset: usize,
 }
 
-pub fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
-    let mut failed = 0usize;
-    let mut out = std::io::stdout().lock();
-    for path in &args.files {
-        let result = (|| -> anyhow::Result<()> {
-            let file = WomdFile::open(path)?;
-            let format = file.detect_format()?;
-            for scene in file.scenes() {
-                let scene = scene?;
-                if args.json {
-                    writeln!(out, "{}", scene_json(&scene, path, format))?;
-                } else {
-                    let c = |t| scene.tracks.iter().filter(|tr| tr.object_type == t).count();
-                    writeln!(
-                        out,
-                        "{}  {}  [{format}]  steps {} (now {})  tracks {} (veh {} ped {} cyc {} other {})  map {} (lanes {})  interest {:?}  predict {}",
-                        path.display(),
-                        scene.scenario_id,
-                        scene.num_steps(),
-                        scene.current_step,
-                        scene.tracks.len(),
-                        c(ObjectType::Vehicle),
-                        c(ObjectType::Pedestrian),
-                        c(ObjectType::Cyclist),
-                        c(ObjectType::Other),
-                        scene.map.num_features(),
-                        scene.map.lanes.len(),
-                        scene.objects_of_interest,
-                        scene.tracks_to_predict.len(),
-                    )?;
-                }
-            }
-            Ok(())
-        })();
-        if let Err(e) = result {
-            if e.downcast_ref::<std::io::Error>()
-                .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
-            {
-                return Err(e);
-            }
-            eprintln!("error: {e:#}");
-            failed += 1;
-        }
+/// Map features of a scene by kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[allow(missing_docs)]
+pub struct MapFeaturesByType {
+    pub lane: usize,
+    pub road_line: usize,
+    pub road_edge: usize,
+    pub stop_sign: usize,
+    pub crosswalk: usize,
+    pub speed_bump: usize,
+    pub driveway: usize,
+}
+
+/// What `scbg data inspect` says of one scenario (one JSON object per line with `--json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SceneSummary {
+    /// The file the scenario was read from.
+    pub file: String,
+    /// `scenario` or `tf.Example`.
+    pub format: String,
+    /// The scenario id.
+    pub scenario_id: String,
+    /// Time steps (91 in WOMD's training scenarios).
+    pub num_steps: usize,
+    /// Index of the current step (10 in WOMD).
+    pub current_time_index: usize,
+    /// Track index of the autonomous vehicle, if any.
+    pub sdc_track_index: Option<usize>,
+    /// Number of tracks.
+    pub num_tracks: usize,
+    /// Tracks by object type.
+    pub tracks_by_type: TracksByType,
+    /// Number of map features.
+    pub num_map_features: usize,
+    /// Map features by kind.
+    pub map_features_by_type: MapFeaturesByType,
+    /// Steps that carry traffic-signal states.
+    pub signal_steps: usize,
+    /// Track ids of the objects of interest (the labelled interacting pair in WOMD).
+    pub objects_of_interest: Vec<i64>,
+    /// Object type of each object of interest (`missing` when no track has the id).
+    pub objects_of_interest_types: Vec<&'static str>,
+    /// Track indices to predict.
+    pub tracks_to_predict: Vec<usize>,
+}
+
+/// Summaries of every scenario of a WOMD file (Scenario or tf.Example TFRecords).
+pub fn inspect(path: &Path) -> anyhow::Result<Vec<SceneSummary>> {
+    let file = WomdFile::open(path)?;
+    let format = file.detect_format()?;
+    file.scenes()
+        .map(|scene| Ok(summarize(&scene?, path, format)))
+        .collect()
+}
+
+/// The summary of one scene.
+pub fn summarize(scene: &Scene, file: &Path, format: scbg_womd::Format) -> SceneSummary {
+    let count = |t: ObjectType| scene.tracks.iter().filter(|tr| tr.object_type == t).count();
+    let m = &scene.map;
+    SceneSummary {
+        file: file.display().to_string(),
+        format: format.to_string(),
+        scenario_id: scene.scenario_id.clone(),
+        num_steps: scene.num_steps(),
+        current_time_index: scene.current_step,
+        sdc_track_index: scene.sdc_track_index,
+        num_tracks: scene.tracks.len(),
+        tracks_by_type: TracksByType {
+            vehicle: count(ObjectType::Vehicle),
+            pedestrian: count(ObjectType::Pedestrian),
+            cyclist: count(ObjectType::Cyclist),
+            other: count(ObjectType::Other),
+            unset: count(ObjectType::Unset),
+        },
+        num_map_features: m.num_features(),
+        map_features_by_type: MapFeaturesByType {
+            lane: m.lanes.len(),
+            road_line: m.road_lines.len(),
+            road_edge: m.road_edges.len(),
+            stop_sign: m.stop_signs.len(),
+            crosswalk: m.crosswalks.len(),
+            speed_bump: m.speed_bumps.len(),
+            driveway: m.driveways.len(),
+        },
+        signal_steps: scene
+            .signals_per_step
+            .iter()
+            .filter(|s| !s.is_empty())
+            .count(),
+        objects_of_interest: scene.objects_of_interest.clone(),
+        objects_of_interest_types: scene
+            .objects_of_interest
+            .iter()
+            .map(|id| {
+                scene
+                    .track_index(*id)
+                    .map_or("missing", |i| scene.tracks[i].object_type.name())
+            })
+            .collect(),
+        tracks_to_predict: scene
+            .tracks_to_predict
+            .iter()
+            .map(|t| t.track_index)
+            .collect(),
     }
-    if failed > 0 {
-        bail!("{failed} of {} file(s) could not be read", args.files.len());
-    }
-    Ok(())
 }
 
 /// The interacting pair of a scene as scene track indices: the labelled pair, else the first
@@ -129,33 +155,70 @@ pub fn interacting_pair(scene: &Scene) -> Option<(usize, usize)> {
     })
 }
 
-pub fn render(args: &RenderArgs) -> anyhow::Result<()> {
-    let file = WomdFile::open(&args.file)?;
-    let scene = file.scenes().nth(args.index).with_context(|| {
-        format!(
-            "{} has no scenario at index {}",
-            args.file.display(),
-            args.index
-        )
+/// Draws scenario `index` of `file` as a bird's-eye PNG at `out` (interacting pair
+/// highlighted); returns the scenario id and the pair drawn.
+pub fn render(
+    file: &Path,
+    index: usize,
+    size_px: u32,
+    out: &Path,
+) -> anyhow::Result<(String, Option<(usize, usize)>)> {
+    let womd = WomdFile::open(file)?;
+    let scene = womd.scenes().nth(index).ok_or_else(|| {
+        anyhow::Error::new(crate::InvalidRequest(format!(
+            "{} has no scenario at index {index}",
+            file.display()
+        )))
     })??;
     let pair = interacting_pair(&scene);
     let options = scbg_plot::RenderOptions {
-        size_px: args.size_px,
+        size_px,
         pair,
         ..Default::default()
     };
-    scbg_plot::render_scene(&scene, &args.out, &options)?;
-    eprintln!(
-        "wrote {} (scenario {}, pair {:?})",
-        args.out.display(),
-        scene.scenario_id,
-        pair
-    );
-    Ok(())
+    scbg_plot::render_scene(&scene, out, &options)?;
+    Ok((scene.scenario_id, pair))
+}
+
+/// How `prepare` builds the cache (the `scbg data prepare` flags).
+#[derive(Debug, Clone, PartialEq)]
+pub struct PrepareOptions {
+    /// Input files: glob patterns, folders or paths.
+    pub inputs: Vec<String>,
+    /// Output folder for shards and the manifest.
+    pub out: PathBuf,
+    /// Prepare only the shards with `shard % num_shards == shard_index` (several machines).
+    pub shard_index: usize,
+    /// Number of workers sharing the input.
+    pub num_shards: usize,
+    /// Input files per shard.
+    pub files_per_shard: usize,
+    /// Window stride in steps for scenarios longer than one window.
+    pub stride_steps: usize,
+    /// Pair mining: maximum distance between the two future paths, metres.
+    pub pair_distance_m: f64,
+    /// Pair mining: maximum difference of arrival times at the conflict point, seconds.
+    pub pair_time_gap_s: f64,
+}
+
+impl PrepareOptions {
+    /// The defaults of `scbg data prepare` for these inputs and output folder.
+    pub fn new(inputs: Vec<String>, out: PathBuf) -> Self {
+        Self {
+            inputs,
+            out,
+            shard_index: 0,
+            num_shards: 1,
+            files_per_shard: 16,
+            stride_steps: 10,
+            pair_distance_m: 3.0,
+            pair_time_gap_s: 4.0,
+        }
+    }
 }
 
 fn settings(
-    args: &PrepareArgs,
+    args: &PrepareOptions,
     window: &WindowConfig,
     pair: &PairConfig,
 ) -> BTreeMap<String, String> {
@@ -235,23 +298,20 @@ fn prepare_shard(
         on_file_done();
     }
     summary.bytes = writer.finish()?;
-    scbg_features::cache::write_json_atomic(
-        &out.join(shard_file).with_extension("json"),
-        &summary,
-    )?;
+    scbg_base::atomic::write_json(out.join(shard_file).with_extension("json"), &summary)?;
     Ok(summary)
 }
 
-/// `scbg data prepare`: returns the manifest it wrote.
-pub fn prepare(args: &PrepareArgs) -> anyhow::Result<Manifest> {
-    if args.num_shards == 0 || args.shard_index >= args.num_shards {
-        bail!(
-            "--shard-index {} must be below --num-shards {}",
-            args.shard_index,
-            args.num_shards
-        );
-    }
-    let files = inputs::expand(&args.input)?;
+/// Prepares the cache (resumable: finished shards are kept) and returns the manifest it wrote,
+/// which lists every finished shard of the whole input, whoever made it.
+pub fn prepare(args: &PrepareOptions, progress: &dyn Progress) -> anyhow::Result<Manifest> {
+    ensure_request!(
+        args.num_shards > 0 && args.shard_index < args.num_shards,
+        "--shard-index {} must be below --num-shards {}",
+        args.shard_index,
+        args.num_shards
+    );
+    let files = inputs::expand(&args.inputs)?;
     std::fs::create_dir_all(&args.out)
         .with_context(|| format!("creating {}", args.out.display()))?;
     let window = WindowConfig {
@@ -274,7 +334,7 @@ pub fn prepare(args: &PrepareArgs) -> anyhow::Result<Manifest> {
         .filter(|(i, _)| i % args.num_shards == args.shard_index)
         .map(|(_, g)| g)
         .collect();
-    let pb = progress::bar(mine.iter().map(|g| g.1.len() as u64).sum(), "prepare");
+    let pb = progress.bar("prepare", mine.iter().map(|g| g.1.len() as u64).sum());
     let resumed = Mutex::new(0usize);
     let started = std::time::Instant::now();
     mine.par_iter()
@@ -288,7 +348,7 @@ pub fn prepare(args: &PrepareArgs) -> anyhow::Result<Manifest> {
             prepare_shard(&args.out, name, group, &window, &pair, || pb.inc(1))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    pb.finish_and_clear();
+    drop(pb);
     // The manifest lists every finished shard of the whole input, whoever made it.
     let shards: Vec<ShardSummary> = groups
         .iter()
@@ -318,7 +378,7 @@ pub fn prepare(args: &PrepareArgs) -> anyhow::Result<Manifest> {
     };
     manifest.write(&args.out)?;
     let t = &manifest.total;
-    eprintln!(
+    progress.note(&format!(
         "prepared {} of {} shard(s) ({} resumed) in {:.1}s: {} scenarios, {} windows, {} pairs, {} targets; skipped {:?}; {} raw bytes -> {} cache bytes ({:.3} B/B)",
         manifest.shards.len(),
         groups.len(),
@@ -332,6 +392,6 @@ pub fn prepare(args: &PrepareArgs) -> anyhow::Result<Manifest> {
         t.raw_bytes,
         t.bytes,
         t.bytes as f64 / t.raw_bytes.max(1) as f64,
-    );
+    ));
     Ok(manifest)
 }

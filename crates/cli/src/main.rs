@@ -1,9 +1,8 @@
-//! `scbg`: command-line glue over the scbg crates. Parses arguments, wires the crates together,
-//! shows progress, and turns library errors into one message and exit code 2.
+//! `scbg`: the command line over the `scbg` library. Parses arguments, calls the library,
+//! shows progress, prints results, and turns errors into one message and exit code 2.
 
 mod cli;
 mod cmd;
-mod inputs;
 mod progress;
 
 use clap::Parser;

@@ -3,6 +3,8 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
+use scbg::choices::{Family, MarginalEstimate, Preset, Reward, Threshold, Variant};
+use scbg::predictor::{ModeSelection, SplitSelection};
 
 /// Socially-controllable behavior generation for interactive traffic simulation.
 #[derive(Debug, Parser)]
@@ -39,7 +41,7 @@ pub enum Command {
     Bench(BenchCommand),
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct DemoArgs {
     /// Output folder (data, cache, checkpoints, figures, report.md, report.json).
     #[arg(long, default_value = "out/demo")]
@@ -72,15 +74,15 @@ pub struct EstimatorArgs {
     /// How E[r(Y_A) | x] is estimated: `conditional-average` (mean of the conditional
     /// expectations over the sampled futures of B; removes the per-scene offset between the two
     /// modes) or `direct` (the marginal mode, as in the paper).
-    #[arg(long, default_value = "conditional-average")]
-    pub marginal: String,
+    #[arg(long, value_enum, default_value_t = MarginalEstimate::ConditionalAverage)]
+    pub marginal: MarginalEstimate,
     /// Scale of the Gaussian part of B's sampled futures: 1 samples the predicted mixture,
     /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
     #[arg(long, default_value_t = 1.0)]
     pub sample_noise: f32,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct LabelArgs {
     /// Predictor checkpoint folder.
     #[arg(long)]
@@ -94,9 +96,9 @@ pub struct LabelArgs {
     /// Trajectories sampled from B's marginal prediction per pair and role (augmentation).
     #[arg(long, default_value_t = 8)]
     pub samples: usize,
-    /// Reward r(y_A): average_speed or progress.
-    #[arg(long, default_value = "average_speed")]
-    pub reward: String,
+    /// Reward r(y_A).
+    #[arg(long, value_enum, default_value_t = Reward::AverageSpeed)]
+    pub reward: Reward,
     #[command(flatten)]
     pub estimator: EstimatorArgs,
 
@@ -115,7 +117,7 @@ pub enum TrainCommand {
     Generator(TrainGeneratorArgs),
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct TrainGeneratorArgs {
     /// Trained predictor checkpoint (its encoder is frozen; it also provides J_φ).
     #[arg(long)]
@@ -127,8 +129,8 @@ pub struct TrainGeneratorArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// baseline (①), aug (① + ②) or full (① + ② + ③ courtesy loss).
-    #[arg(long, value_parser = ["baseline", "aug", "full"], default_value = "full")]
-    pub variant: String,
+    #[arg(long, value_enum, default_value_t = Variant::Full)]
+    pub variant: Variant,
     #[arg(long, default_value_t = 10)]
     pub epochs: usize,
     /// Futures sampled from B's marginal prediction per pair role.
@@ -148,7 +150,7 @@ pub struct TrainGeneratorArgs {
     /// High-courtesy threshold for 50/50 batches: a number (m/s, the paper uses 2) or `qX`
     /// for a quantile of the logged |ψ| (default q0.8, since ψ's scale depends on the data).
     #[arg(long, default_value = "q0.8")]
-    pub threshold: String,
+    pub threshold: Threshold,
     #[arg(long, default_value_t = 1e-3)]
     pub learning_rate: f64,
     /// Range-predictor optimisation steps (full batch).
@@ -158,7 +160,7 @@ pub struct TrainGeneratorArgs {
     pub seed: u64,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct TrainPredictorArgs {
     /// TOML training config (defaults are used for missing keys; no file = all defaults).
     #[arg(long)]
@@ -185,7 +187,7 @@ pub enum EvalCommand {
     Scbg(EvalScbgArgs),
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct EvalScbgArgs {
     /// Generator folders (`scbg train generator --out`), one per variant; they must share one
     /// predictor.
@@ -198,8 +200,8 @@ pub struct EvalScbgArgs {
     #[arg(long)]
     pub predictor: Option<PathBuf>,
     /// Evaluate on the validation split (by scenario id) or on every pair.
-    #[arg(long, value_parser = ["validation", "all"], default_value = "validation")]
-    pub split: String,
+    #[arg(long, value_enum, default_value_t = SplitSelection::Validation)]
+    pub split: SplitSelection,
     /// Folder for the figures (fig4_quantile_courtesy.png, fig5a_*.png, fig5b_*.png).
     #[arg(long)]
     pub figures: Option<PathBuf>,
@@ -209,7 +211,7 @@ pub struct EvalScbgArgs {
     pub json: bool,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct GenerateArgs {
     /// Generator folder (`scbg train generator --out`).
     #[arg(long)]
@@ -230,8 +232,11 @@ pub struct GenerateArgs {
     #[arg(long)]
     pub b: i64,
     /// Courtesy quantiles in [0, 1] (0.1 and 0.9 are the predicted range's ends).
-    #[arg(long, required = true, num_args = 1..)]
+    #[arg(long, num_args = 1.., required_unless_present = "psi")]
     pub quantile: Vec<f32>,
+    /// Explicit courtesy values ψ (m/s for the default reward) instead of quantiles.
+    #[arg(long, num_args = 1.., allow_negative_numbers = true, conflicts_with = "quantile")]
+    pub psi: Vec<f32>,
     /// Write the trajectories as JSON here instead of stdout.
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -240,7 +245,7 @@ pub struct GenerateArgs {
     pub render: Option<PathBuf>,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct EvalPredictorArgs {
     /// Checkpoint folder.
     #[arg(long)]
@@ -249,11 +254,11 @@ pub struct EvalPredictorArgs {
     #[arg(long)]
     pub data: PathBuf,
     /// Which mode to report (both by default).
-    #[arg(long, value_parser = ["marginal", "conditional", "both"], default_value = "both")]
-    pub mode: String,
+    #[arg(long, value_enum, default_value_t = ModeSelection::Both)]
+    pub mode: ModeSelection,
     /// Evaluate on the validation split (by scenario id, as in training) or on everything.
-    #[arg(long, value_parser = ["validation", "all"], default_value = "validation")]
-    pub split: String,
+    #[arg(long, value_enum, default_value_t = SplitSelection::Validation)]
+    pub split: SplitSelection,
     /// Use the current Waymo trajectory-classifier thresholds instead of the pre-2024 ones.
     #[arg(long)]
     pub current_thresholds: bool,
@@ -261,7 +266,7 @@ pub struct EvalPredictorArgs {
     pub json: bool,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct EvalMetricsArgs {
     /// Scenario files (globs or paths).
     #[arg(long, required = true, num_args = 1..)]
@@ -285,7 +290,7 @@ pub enum DataCommand {
     Prepare(PrepareArgs),
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct InspectArgs {
     /// Files to inspect.
     #[arg(required = true)]
@@ -295,7 +300,7 @@ pub struct InspectArgs {
     pub json: bool,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct RenderArgs {
     /// File holding the scenario.
     pub file: PathBuf,
@@ -310,7 +315,7 @@ pub struct RenderArgs {
     pub size_px: u32,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct PrepareArgs {
     /// Input files: glob patterns or paths.
     #[arg(long, required = true, num_args = 1..)]
@@ -337,7 +342,7 @@ pub struct PrepareArgs {
     pub pair_time_gap_s: f64,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct SynthArgs {
     /// Number of scenarios to generate.
     #[arg(long, default_value_t = 1000)]
@@ -348,9 +353,14 @@ pub struct SynthArgs {
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
-    /// Scene families to draw from (comma-separated): merge, crossing, cutin.
-    #[arg(long, value_delimiter = ',', default_value = "merge,crossing,cutin")]
-    pub families: Vec<String>,
+    /// Scene families to draw from (comma-separated).
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "merge,crossing,cutin"
+    )]
+    pub families: Vec<Family>,
     /// Scenarios per output TFRecord file.
     #[arg(long, default_value_t = 250)]
     pub scenarios_per_file: usize,
@@ -366,11 +376,19 @@ pub enum BenchCommand {
     Train(BenchTrainArgs),
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct BenchTrainArgs {
     /// Model presets to measure.
-    #[arg(long, value_delimiter = ',', default_value = "cpu-small,paper")]
-    pub presets: Vec<String>,
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "cpu-small,paper"
+    )]
+    pub presets: Vec<Preset>,
+    /// Backend to measure (`flex`; `tch`, `cuda`, `vulkan` when built with them).
+    #[arg(long, default_value = "flex")]
+    pub backend: String,
     #[arg(long, default_value_t = 32)]
     pub batch: usize,
     /// Timed training steps per preset (after one warm-up step).
@@ -378,7 +396,7 @@ pub struct BenchTrainArgs {
     pub steps: usize,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct BenchIngestArgs {
     /// Input files (default: every file under the shared real-data folder).
     #[arg(long, num_args = 1..)]
@@ -388,7 +406,7 @@ pub struct BenchIngestArgs {
     pub repeat: usize,
 }
 
-#[derive(Debug, Args)]
+#[derive(Debug, Clone, Args)]
 pub struct BenchSynthArgs {
     #[arg(long, default_value_t = 4000)]
     pub scenarios: usize,

@@ -1,4 +1,5 @@
-//! `scbg bench ingest | synth`: throughput measurements recorded in BENCHMARKS.md.
+//! Throughput measurements (`scbg bench ingest | synth | train`), recorded in BENCHMARKS.md.
+//! Each returns its measurements; `to_text` gives the table the command prints.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -10,12 +11,10 @@ use scbg_features::{
 };
 use scbg_womd::WomdFile;
 
-use super::data::ROAD_SUBSAMPLE;
-use crate::cli::{BenchIngestArgs, BenchSynthArgs};
-use crate::inputs;
+use crate::{ROAD_SUBSAMPLE, inputs};
 
 /// Peak resident memory of this process (Linux `VmHWM`), in MiB.
-fn peak_rss_mib() -> Option<f64> {
+pub fn peak_rss_mib() -> Option<f64> {
     let status = std::fs::read_to_string("/proc/self/status").ok()?;
     let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
@@ -75,8 +74,80 @@ fn run_in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> anyhow:
     Ok(pool.install(f))
 }
 
-pub fn ingest(args: &BenchIngestArgs) -> anyhow::Result<()> {
-    let files = if args.input.is_empty() {
+/// One row of the ingest benchmark.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IngestRow {
+    /// `decode` or `decode+features`.
+    pub stage: &'static str,
+    /// Rayon threads.
+    pub threads: usize,
+    /// Scenarios per second.
+    pub scenarios_per_s: f64,
+    /// Feature samples per second (`decode+features` only).
+    pub samples_per_s: Option<f64>,
+    /// Raw input megabytes per second.
+    pub raw_mb_per_s: f64,
+}
+
+/// `scbg bench ingest`'s measurements.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IngestBench {
+    /// Distinct input files.
+    pub files: usize,
+    /// Their total size.
+    pub raw_bytes: u64,
+    /// How often the file list was repeated.
+    pub repeat: usize,
+    /// Rows at 1 thread and at every thread.
+    pub rows: Vec<IngestRow>,
+    /// Bytes of the prepared records of one pass.
+    pub prepared_bytes: u64,
+    /// Peak resident memory, MiB.
+    pub peak_rss_mib: Option<f64>,
+}
+
+impl IngestBench {
+    /// The table `scbg bench ingest` prints.
+    pub fn to_text(&self) -> String {
+        let all = self.rows.last().map_or(1, |r| r.threads);
+        let mut s = format!(
+            "bench ingest: {} files ({} raw bytes) x {} repeats; threads: 1 and {all}\n{:<24} {:>8} {:>12} {:>14} {:>14}\n",
+            self.files,
+            self.raw_bytes,
+            self.repeat,
+            "stage",
+            "threads",
+            "scenarios/s",
+            "samples/s",
+            "MB/s (raw)"
+        );
+        for r in &self.rows {
+            s += &format!(
+                "{:<24} {:>8} {:>12.1} {:>14} {:>14.1}\n",
+                r.stage,
+                r.threads,
+                r.scenarios_per_s,
+                r.samples_per_s.map_or("-".into(), |v| format!("{v:.0}")),
+                r.raw_mb_per_s
+            );
+        }
+        s += &format!(
+            "prepared cache bytes per raw byte: {:.3} ({} / {})\n",
+            self.prepared_bytes as f64 / self.raw_bytes.max(1) as f64,
+            self.prepared_bytes,
+            self.raw_bytes
+        );
+        if let Some(rss) = self.peak_rss_mib {
+            s += &format!("peak RSS: {rss:.1} MiB\n");
+        }
+        s
+    }
+}
+
+/// Decode and decode + features throughput over `inputs` (default: every file of the shared
+/// real-data folder) repeated `repeat` times, at 1 thread and at every thread.
+pub fn ingest(inputs_given: &[String], repeat: usize) -> anyhow::Result<IngestBench> {
+    let files = if inputs_given.is_empty() {
         let dir = scbg_womd::fixtures::real_data_dir()
             .context("no --input and no shared real data folder")?;
         inputs::expand(&[
@@ -85,27 +156,24 @@ pub fn ingest(args: &BenchIngestArgs) -> anyhow::Result<()> {
             dir.join("nuscenes-reencoded").display().to_string(),
         ])?
     } else {
-        inputs::expand(&args.input)?
+        inputs::expand(inputs_given)?
     };
+    let repeat = repeat.max(1);
     let raw_bytes: u64 = files
         .iter()
         .map(|f| std::fs::metadata(f).map(|m| m.len()).unwrap_or(0))
         .sum();
-    let work: Vec<PathBuf> = (0..args.repeat.max(1))
-        .flat_map(|_| files.iter().cloned())
-        .collect();
+    let work: Vec<PathBuf> = (0..repeat).flat_map(|_| files.iter().cloned()).collect();
     let all = rayon::current_num_threads();
-    println!(
-        "bench ingest: {} files ({} raw bytes) x {} repeats; threads: 1 and {all}",
-        files.len(),
+    let mut out = IngestBench {
+        files: files.len(),
         raw_bytes,
-        args.repeat
-    );
-    println!(
-        "{:<24} {:>8} {:>12} {:>14} {:>14}",
-        "stage", "threads", "scenarios/s", "samples/s", "MB/s (raw)"
-    );
-    let mut prepared_bytes = 0u64;
+        repeat,
+        rows: Vec::new(),
+        prepared_bytes: 0,
+        peak_rss_mib: None,
+    };
+    let mb_per_s = |secs: f64| (raw_bytes * repeat as u64) as f64 / secs / 1e6;
     for threads in [1, all] {
         let t = Instant::now();
         let scenes: usize = run_in_pool(threads, || {
@@ -116,14 +184,13 @@ pub fn ingest(args: &BenchIngestArgs) -> anyhow::Result<()> {
         .iter()
         .sum();
         let secs = t.elapsed().as_secs_f64();
-        println!(
-            "{:<24} {:>8} {:>12.1} {:>14} {:>14.1}",
-            "decode",
+        out.rows.push(IngestRow {
+            stage: "decode",
             threads,
-            scenes as f64 / secs,
-            "-",
-            (raw_bytes * args.repeat as u64) as f64 / secs / 1e6
-        );
+            scenarios_per_s: scenes as f64 / secs,
+            samples_per_s: None,
+            raw_mb_per_s: mb_per_s(secs),
+        });
         let t = Instant::now();
         let results = run_in_pool(threads, || {
             work.par_iter()
@@ -134,33 +201,29 @@ pub fn ingest(args: &BenchIngestArgs) -> anyhow::Result<()> {
         let (scenes, samples): (usize, usize) = results
             .iter()
             .fold((0, 0), |acc, r| (acc.0 + r.0, acc.1 + r.1));
-        prepared_bytes = results.iter().map(|r| r.2).sum::<u64>() / args.repeat.max(1) as u64;
-        println!(
-            "{:<24} {:>8} {:>12.1} {:>14.0} {:>14.1}",
-            "decode+features",
+        out.prepared_bytes = results.iter().map(|r| r.2).sum::<u64>() / repeat as u64;
+        out.rows.push(IngestRow {
+            stage: "decode+features",
             threads,
-            scenes as f64 / secs,
-            samples as f64 / secs,
-            (raw_bytes * args.repeat as u64) as f64 / secs / 1e6
-        );
+            scenarios_per_s: scenes as f64 / secs,
+            samples_per_s: Some(samples as f64 / secs),
+            raw_mb_per_s: mb_per_s(secs),
+        });
     }
-    println!(
-        "prepared cache bytes per raw byte: {:.3} ({prepared_bytes} / {raw_bytes})",
-        prepared_bytes as f64 / raw_bytes.max(1) as f64
-    );
-    if let Some(rss) = peak_rss_mib() {
-        println!("peak RSS: {rss:.1} MiB");
-    }
-    Ok(())
+    out.peak_rss_mib = peak_rss_mib();
+    Ok(out)
 }
 
-pub fn synth(args: &BenchSynthArgs) -> anyhow::Result<()> {
+/// Synthetic generate + encode throughput of `scenarios` scenarios at 1 thread and at every
+/// thread: `(threads, scenarios/s, KB per scenario)` rows.
+pub fn synth(scenarios: usize) -> anyhow::Result<Vec<(usize, f64, f64)>> {
     let families = scbg_synth::Family::ALL;
     let all = rayon::current_num_threads();
+    let mut rows = Vec::new();
     for threads in [1, all] {
         let t = Instant::now();
         let bytes: usize = run_in_pool(threads, || {
-            (0..args.scenarios as u64)
+            (0..scenarios as u64)
                 .into_par_iter()
                 .map(|i| {
                     scbg_womd::encode_scene(&scbg_synth::generate(1, i, &families).scene)
@@ -171,21 +234,26 @@ pub fn synth(args: &BenchSynthArgs) -> anyhow::Result<()> {
         .iter()
         .sum();
         let secs = t.elapsed().as_secs_f64();
-        println!(
-            "synth generate+encode: {threads} thread(s): {:.0} scenarios/s ({:.1} KB/scenario)",
-            args.scenarios as f64 / secs,
-            bytes as f64 / args.scenarios as f64 / 1e3
-        );
+        rows.push((
+            threads,
+            scenarios as f64 / secs,
+            bytes as f64 / scenarios.max(1) as f64 / 1e3,
+        ));
     }
-    Ok(())
+    Ok(rows)
 }
 
 /// Training step time and inference throughput on synthetic samples of the default feature
 /// sizes, at the current rayon/backend thread count.
-pub fn train(args: &crate::cli::BenchTrainArgs) -> anyhow::Result<()> {
+pub fn train(
+    presets: &[scbg_model::Preset],
+    batch_size: usize,
+    steps: usize,
+    backend: &str,
+) -> anyhow::Result<TrainBench> {
     use burn::optim::{AdamConfig, GradientsParams};
     use rand::SeedableRng;
-    use scbg_model::{Batch, BatchAugment, MultipathConfig, gmm_nll};
+    use scbg_model::{Batch, BatchAugment, Mode, gmm_nll};
     let features = FeatureConfig {
         max_other_agents: 16,
         max_road_segments: 64,
@@ -193,7 +261,7 @@ pub fn train(args: &crate::cli::BenchTrainArgs) -> anyhow::Result<()> {
     };
     // Samples from real geometry: synthetic scenes through the feature pipeline.
     let mut samples = Vec::new();
-    for i in 0..args.batch as u64 {
+    for i in 0..batch_size as u64 {
         let g = scbg_synth::generate(9, i, &scbg_synth::Family::ALL);
         let p = PreparedScene::from_scene(
             &g.scene,
@@ -205,17 +273,17 @@ pub fn train(args: &crate::cli::BenchTrainArgs) -> anyhow::Result<()> {
         samples.push(SampleBuilder::new(&p, &features).sample(&w, 0, Some(1))?);
     }
     let refs: Vec<&scbg_features::AgentSample> = samples.iter().collect();
-    println!(
-        "bench train: batch {}, {} other agents, {} road segments, {} rayon threads",
-        args.batch,
-        features.max_other_agents,
-        features.max_road_segments,
-        rayon::current_num_threads()
-    );
-    for preset in &args.presets {
-        let config =
-            MultipathConfig::preset(preset).with_context(|| format!("unknown preset {preset}"))?;
-        let device = burn::tensor::Device::flex().autodiff();
+    let mut out = TrainBench {
+        batch: batch_size,
+        other_agents: features.max_other_agents,
+        road_segments: features.max_road_segments,
+        threads: rayon::current_num_threads(),
+        backend: backend.to_string(),
+        rows: Vec::new(),
+    };
+    for &preset in presets {
+        let config = preset.config();
+        let device = scbg_model::device::training_device(backend)?;
         device.seed(0);
         let mut model = config.init(&device);
         let params = {
@@ -247,28 +315,80 @@ pub fn train(args: &crate::cli::BenchTrainArgs) -> anyhow::Result<()> {
         };
         model = step(model); // warm-up
         let t = Instant::now();
-        for _ in 0..args.steps {
+        for _ in 0..steps {
             model = step(model);
         }
-        let ms = t.elapsed().as_secs_f64() * 1e3 / args.steps as f64;
-        let infer = burn::tensor::Device::flex();
+        let ms = t.elapsed().as_secs_f64() * 1e3 / steps as f64;
+        let infer = scbg_model::device::device(backend)?;
         let valid = {
             use burn::module::Module;
             model.valid()
         };
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(1);
-        let batch = Batch::from_samples(&refs, &BatchAugment::default(), &mut rng, &infer);
+        let batch = Batch::for_mode(&refs, Mode::Conditional, &infer);
         let _ = valid.forward(&batch).xy.into_data();
         // One batch, built once (as the PyTorch reference): this times the model alone.
         let t = Instant::now();
-        let reps = args.steps.max(3);
+        let reps = steps.max(3);
         for _ in 0..reps {
             let _ = valid.forward(&batch).xy.into_data();
         }
-        let per_s = (reps * args.batch) as f64 / t.elapsed().as_secs_f64();
-        println!(
-            "{preset:<10} {params:>10} params   train step {ms:>9.1} ms   inference {per_s:>8.1} samples/s"
-        );
+        let per_s = (reps * batch_size) as f64 / t.elapsed().as_secs_f64();
+        out.rows.push(TrainBenchRow {
+            preset,
+            params,
+            step_ms: ms,
+            inference_samples_per_s: per_s,
+        });
     }
-    Ok(())
+    Ok(out)
+}
+
+/// One preset's training step and inference throughput.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainBenchRow {
+    /// The model preset.
+    pub preset: scbg_model::Preset,
+    /// Its parameter count.
+    pub params: usize,
+    /// Mean training step (forward, backward, Adam with clipping), milliseconds.
+    pub step_ms: f64,
+    /// Inference throughput of the model alone.
+    pub inference_samples_per_s: f64,
+}
+
+/// `scbg bench train`'s measurements.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainBench {
+    /// Batch size.
+    pub batch: usize,
+    /// Other agents per sample.
+    pub other_agents: usize,
+    /// Road segments per sample.
+    pub road_segments: usize,
+    /// Rayon threads.
+    pub threads: usize,
+    /// The backend measured.
+    pub backend: String,
+    /// One row per preset.
+    pub rows: Vec<TrainBenchRow>,
+}
+
+impl TrainBench {
+    /// The table `scbg bench train` prints.
+    pub fn to_text(&self) -> String {
+        let mut s = format!(
+            "bench train: batch {}, {} other agents, {} road segments, {} rayon threads, backend {}\n",
+            self.batch, self.other_agents, self.road_segments, self.threads, self.backend
+        );
+        for r in &self.rows {
+            s += &format!(
+                "{:<10} {:>10} params   train step {:>9.1} ms   inference {:>8.1} samples/s\n",
+                r.preset.name(),
+                r.params,
+                r.step_ms,
+                r.inference_samples_per_s
+            );
+        }
+        s
+    }
 }

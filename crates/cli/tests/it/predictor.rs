@@ -3,29 +3,8 @@
 use crate::{real_dir, scbg, scbg_ok};
 use serde_json::{Value, json};
 
-const TINY_CONFIG: &str = r#"
-seed = 5
-epochs = 2
-batch_size = 16
-max_other_agents = 4
-max_road_segments = 16
-validation_fraction = 0.3
-
-[model]
-history_steps = 11
-future_steps = 80
-lstm_hidden = 8
-step_mlp = [8, 16]
-target_width = 16
-interaction_width = 16
-road_mlp = [8, 16]
-road_context_hidden = 16
-decoder_width = 32
-decoder_hidden = 32
-num_modes = 6
-mcg_blocks = 1
-future_hidden = 16
-"#;
+/// The tiny predictor config of the library's tests.
+const TINY_CONFIG: &str = include_str!("../../../scbg/tests/tiny_train.toml");
 
 /// synth → prepare → train (tiny config) in `dir`: `synth/`, `cache/`, `train.toml`, `model/`.
 fn tiny_trained_model(dir: &std::path::Path, scenarios: usize, seed: u64) {
@@ -228,6 +207,23 @@ fn demo_writes_a_report() {
         "fig5b_quantile_speed.png",
     ] {
         assert!(out.join("figures").join(f).is_file(), "{f}");
+    }
+    // Outputs get the usual permissions (what `File::create` gives under this umask), not a
+    // temporary file's owner-only 0600.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let probe = out.join("probe");
+        std::fs::File::create(&probe).unwrap();
+        let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        for f in [
+            "report.json",
+            "report.md",
+            "figures/fig4_quantile_courtesy.png",
+            "labels/labels-00000.parquet",
+        ] {
+            assert_eq!(mode(&out.join(f)), mode(&probe), "{f}");
+        }
     }
 }
 

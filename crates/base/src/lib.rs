@@ -1,0 +1,14 @@
+//! The small things every other scbg crate shares, in one place.
+//!
+//! - [`atomic`]: the project's one atomic file writer (temporary file in the destination's
+//!   folder, renamed into place when complete, removed on failure).
+//! - [`seed`]: the SplitMix64 mixer that derives independent, reproducible random streams
+//!   from a `(seed, stream)` pair.
+//!
+//! **Architecture invariant:** no knowledge of scenes, features, models or dataset formats;
+//! anything here must be useful to more than one crate.
+
+#![warn(missing_docs)]
+
+pub mod atomic;
+pub mod seed;

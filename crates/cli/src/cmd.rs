@@ -1,0 +1,269 @@
+//! Each command: arguments → one library call → printing.
+
+use std::io::Write;
+
+use anyhow::Context;
+use scbg::choices::{Courtesy, LabelOptions};
+use scbg::{Progress, labels, predictor};
+
+use crate::cli::{
+    BenchCommand, Command, DataCommand, EstimatorArgs, EvalCommand, GenerateArgs, InspectArgs,
+    TrainCommand,
+};
+use crate::progress::Terminal;
+
+/// Runs one command.
+pub fn run(command: Command) -> anyhow::Result<()> {
+    let progress = &Terminal;
+    match command {
+        Command::Demo(a) => {
+            // Checked before any work: a bad flag must not cost a predictor training.
+            let labels = label_options(&a.estimator, 8, scbg::choices::Reward::AverageSpeed)?;
+            scbg::demo::run_demo(
+                &scbg::demo::DemoOptions {
+                    out: a.out,
+                    data: a.data,
+                    scenarios: a.scenarios,
+                    epochs: a.epochs,
+                    generator_epochs: a.generator_epochs,
+                    beta: a.beta,
+                    labels,
+                    seed: a.seed,
+                },
+                progress,
+            )?;
+        }
+        Command::Label(a) => {
+            let options = label_options(&a.estimator, a.samples, a.reward)?;
+            labels::label_cache(
+                &labels::LabelRun {
+                    model: a.model,
+                    data: a.data,
+                    out: a.out,
+                    options,
+                    seed: a.seed,
+                    ground_truth: a.ground_truth,
+                },
+                progress,
+            )?;
+        }
+        Command::Data(DataCommand::Inspect(a)) => inspect(&a)?,
+        Command::Data(DataCommand::Render(a)) => {
+            let (id, pair) = scbg::data::render(&a.file, a.index, a.size_px, &a.out)?;
+            eprintln!("wrote {} (scenario {id}, pair {pair:?})", a.out.display());
+        }
+        Command::Data(DataCommand::Prepare(a)) => {
+            scbg::data::prepare(
+                &scbg::data::PrepareOptions {
+                    inputs: a.input,
+                    out: a.out,
+                    shard_index: a.shard_index,
+                    num_shards: a.num_shards,
+                    files_per_shard: a.files_per_shard,
+                    stride_steps: a.stride_steps,
+                    pair_distance_m: a.pair_distance_m,
+                    pair_time_gap_s: a.pair_time_gap_s,
+                },
+                progress,
+            )?;
+        }
+        Command::Synth(a) => {
+            scbg::synth::write_synthetic(
+                &scbg::synth::SynthOptions {
+                    scenarios: a.scenarios,
+                    seed: a.seed,
+                    out: a.out,
+                    families: a.families,
+                    scenarios_per_file: a.scenarios_per_file,
+                },
+                progress,
+            )?;
+        }
+        Command::Bench(BenchCommand::Ingest(a)) => {
+            print!("{}", scbg::bench::ingest(&a.input, a.repeat)?.to_text());
+        }
+        Command::Bench(BenchCommand::Synth(a)) => {
+            for (threads, per_s, kb) in scbg::bench::synth(a.scenarios)? {
+                println!(
+                    "synth generate+encode: {threads} thread(s): {per_s:.0} scenarios/s ({kb:.1} KB/scenario)"
+                );
+            }
+        }
+        Command::Bench(BenchCommand::Train(a)) => {
+            let bench = scbg::bench::train(&a.presets, a.batch, a.steps, &a.backend)?;
+            print!("{}", bench.to_text());
+        }
+        Command::Train(TrainCommand::Predictor(a)) => {
+            let config = predictor::load_train_config(a.config.as_deref())?;
+            predictor::train_predictor(&a.data, &a.out, &config, a.resume, progress)?;
+        }
+        Command::Train(TrainCommand::Generator(a)) => {
+            let labels =
+                label_options(&a.estimator, a.samples, scbg::choices::Reward::AverageSpeed)?;
+            scbg::generator::train_generator(
+                &a.predictor,
+                &a.data,
+                &a.out,
+                &scbg::generator::VariantSettings {
+                    variant: a.variant,
+                    epochs: a.epochs,
+                    batch_size: a.batch_size,
+                    alpha: a.alpha,
+                    beta: a.beta,
+                    threshold: a.threshold,
+                    learning_rate: a.learning_rate,
+                    range_steps: a.range_steps,
+                    seed: a.seed,
+                    labels,
+                },
+                progress,
+            )?;
+        }
+        Command::Generate(a) => generate(&a, progress)?,
+        Command::Eval(EvalCommand::Scbg(a)) => {
+            let result = scbg::scbg_eval::evaluate_scbg(
+                &a.model,
+                &a.data,
+                a.predictor.as_deref(),
+                a.split.split(),
+                a.seed,
+                a.figures.as_deref(),
+                progress,
+            )?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&result)?);
+            } else {
+                print!("{}", result.to_markdown());
+            }
+        }
+        Command::Eval(EvalCommand::Predictor(a)) => {
+            let eval = predictor::evaluate_predictor(
+                &a.model,
+                &a.data,
+                a.mode,
+                a.split,
+                &predictor::thresholds(a.current_thresholds),
+            )?;
+            if a.json {
+                println!("{}", serde_json::to_string(&eval)?);
+            } else {
+                print!("{}", predictor::table_text(&eval.rows));
+                for (mode, v) in &eval.nll_interacting {
+                    println!(
+                        "NLL of the interacting agents' futures, {mode} mode: {}",
+                        v.map_or("-".into(), |v| format!("{v:.2}"))
+                    );
+                }
+            }
+        }
+        Command::Eval(EvalCommand::Metrics(a)) => {
+            let table = predictor::evaluate_external(
+                &a.scenarios,
+                &a.predictions,
+                &predictor::thresholds(a.current_thresholds),
+            )?;
+            if a.json {
+                println!("{}", predictor::table_json(&table));
+            } else {
+                print!("{}", predictor::metrics_text(&table));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The labelling options of `--marginal` and `--sample-noise`.
+fn label_options(
+    estimator: &EstimatorArgs,
+    samples: usize,
+    reward: scbg::choices::Reward,
+) -> anyhow::Result<LabelOptions> {
+    labels::label_options(samples, reward, estimator.marginal, estimator.sample_noise)
+}
+
+/// `scbg data inspect`: one line (or JSON object) per scenario; a bad file is reported and
+/// the others still inspected.
+fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
+    let mut failed = 0usize;
+    let mut out = std::io::stdout().lock();
+    for path in &args.files {
+        let summaries = match scbg::data::inspect(path) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("error: {e:#}");
+                failed += 1;
+                continue;
+            }
+        };
+        for s in summaries {
+            if args.json {
+                writeln!(out, "{}", serde_json::to_string(&s)?)?;
+            } else {
+                let t = &s.tracks_by_type;
+                writeln!(
+                    out,
+                    "{}  {}  [{}]  steps {} (now {})  tracks {} (veh {} ped {} cyc {} other {})  map {} (lanes {})  interest {:?}  predict {}",
+                    s.file,
+                    s.scenario_id,
+                    s.format,
+                    s.num_steps,
+                    s.current_time_index,
+                    s.num_tracks,
+                    t.vehicle,
+                    t.pedestrian,
+                    t.cyclist,
+                    t.other,
+                    s.num_map_features,
+                    s.map_features_by_type.lane,
+                    s.objects_of_interest,
+                    s.tracks_to_predict.len(),
+                )?;
+            }
+        }
+    }
+    anyhow::ensure!(
+        failed == 0,
+        "{failed} of {} file(s) could not be read",
+        args.files.len()
+    );
+    Ok(())
+}
+
+/// `scbg generate`.
+fn generate(args: &GenerateArgs, progress: &dyn Progress) -> anyhow::Result<()> {
+    let model = scbg::generator::load_scbg(&args.model, args.predictor.as_deref())?;
+    let (index, scene) =
+        scbg::generate::find_scene(&args.scenario, args.scenario_id.as_deref(), args.a, args.b)?;
+    let courtesy: Vec<Courtesy> = if args.psi.is_empty() {
+        args.quantile
+            .iter()
+            .map(|&q| Courtesy::Quantile(q))
+            .collect()
+    } else {
+        args.psi.iter().map(|&p| Courtesy::Psi(p)).collect()
+    };
+    let generation = scbg::generate::generate(&model, &scene, args.a, args.b, &courtesy)
+        .with_context(|| format!("{} (record {index})", args.scenario.display()))?;
+    let text = serde_json::to_string_pretty(&generation)?;
+    match &args.out {
+        Some(path) => scbg::write_atomic(path, &text)?,
+        None => println!("{text}"),
+    }
+    for g in &generation.trajectories {
+        progress.note(&format!(
+            "quantile {:.2} → ψ {:+.4} (range {:+.4} … {:+.4}); achieved ψ {:+.4}; A's expected speed {:.2} m/s (marginal {:.2})",
+            g.quantile,
+            g.psi,
+            g.psi_low,
+            g.psi_high,
+            g.achieved_psi,
+            g.a_expected_reward_conditional,
+            g.a_expected_reward_marginal
+        ));
+    }
+    if let Some(png) = &args.render {
+        scbg::generate::render_generation(&scene, &generation, png)?;
+        progress.note(&format!("rendered {}", png.display()));
+    }
+    Ok(())
+}

@@ -1,0 +1,124 @@
+//! Generation (paper Sec. III-E): B's future in the world frame for a pair (A, B) of a WOMD
+//! scenario, at a courtesy quantile or an explicit ψ.
+
+use std::path::Path;
+
+use scbg_generator::{Courtesy, Generated};
+use scbg_scene::Scene;
+use serde::Serialize;
+
+use crate::generator::LoadedScbg;
+use crate::{InvalidRequest, ROAD_SUBSAMPLE};
+
+/// B's generated futures for one pair of one scenario (the `scbg generate` JSON).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Generation {
+    /// The scenario.
+    pub scenario_id: String,
+    /// Track id of A.
+    pub a_id: i64,
+    /// Track id of B.
+    pub b_id: i64,
+    /// The step the futures start after.
+    pub current_step: usize,
+    /// The generator variant.
+    pub variant: scbg_generator::Variant,
+    /// One future per requested courtesy, in the order asked.
+    pub trajectories: Vec<Generated>,
+}
+
+/// The first scenario of `file` with id `scenario_id`, or (without an id) the first that has
+/// both tracks `a` and `b`: `(record index, scene)`.
+pub fn find_scene(
+    file: &Path,
+    scenario_id: Option<&str>,
+    a: i64,
+    b: i64,
+) -> anyhow::Result<(usize, Scene)> {
+    let womd = scbg_womd::WomdFile::open(file)?;
+    for (index, scene) in womd.scenes().enumerate() {
+        let scene = scene?;
+        let wanted = match scenario_id {
+            Some(id) => scene.scenario_id == id,
+            None => scene.track_index(a).is_some() && scene.track_index(b).is_some(),
+        };
+        if wanted {
+            return Ok((index, scene));
+        }
+    }
+    Err(anyhow::Error::new(InvalidRequest(match scenario_id {
+        Some(id) => format!("{}: no scenario {id:?}", file.display()),
+        None => format!(
+            "{}: no scenario has both track {a} and track {b}",
+            file.display()
+        ),
+    })))
+}
+
+/// B's futures for each requested courtesy (a quantile in [0, 1] of the predicted range, or
+/// an explicit ψ), starting at the scene's current step, in the world frame.
+pub fn generate(
+    model: &LoadedScbg,
+    scene: &Scene,
+    a: i64,
+    b: i64,
+    courtesy: &[Courtesy],
+) -> anyhow::Result<Generation> {
+    let prepared = scbg_features::PreparedScene::for_inference(
+        scene,
+        &scbg_features::WindowConfig::default(),
+        ROAD_SUBSAMPLE,
+    );
+    let window = prepared.windows.first().ok_or_else(|| {
+        anyhow::Error::new(InvalidRequest(format!(
+            "scenario {}: too short for one window (11 history steps)",
+            scene.scenario_id
+        )))
+    })?;
+    let trajectories = model
+        .scbg
+        .generate(&prepared, window, a, b, courtesy, &model.device)
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
+    Ok(Generation {
+        scenario_id: scene.scenario_id.clone(),
+        a_id: a,
+        b_id: b,
+        current_step: scene.current_step,
+        variant: model.checkpoint.variant,
+        trajectories,
+    })
+}
+
+/// Draws the scene with B's generated futures (A and B highlighted) as a PNG.
+pub fn render_generation(scene: &Scene, generation: &Generation, png: &Path) -> anyhow::Result<()> {
+    let index = |id: i64| {
+        scene.track_index(id).ok_or_else(|| {
+            anyhow::Error::new(InvalidRequest(format!(
+                "no track {id} in scenario {}",
+                scene.scenario_id
+            )))
+        })
+    };
+    let pair = (index(generation.a_id)?, index(generation.b_id)?);
+    let overlays = generation
+        .trajectories
+        .iter()
+        .map(|g| {
+            (
+                format!("B q={:.1}", g.quantile),
+                g.world_xy_m.iter().map(|p| (p[0], p[1])).collect(),
+            )
+        })
+        .collect();
+    scbg_plot::render_scene(
+        scene,
+        png,
+        &scbg_plot::RenderOptions {
+            size_px: 900,
+            pair: Some(pair),
+            overlays,
+            title: format!("{}: B generated at quantiles", scene.scenario_id),
+        },
+    )?;
+    Ok(())
+}

@@ -1,0 +1,485 @@
+//! The SCBG generator artefact (paper eq. (1), Sec. III-D): training the generator variants
+//! and the range predictor on labelled pair roles, saving and loading the generator folder
+//! (`generator.json` beside `generator.bpk` and `range.bpk`).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use burn::module::Module;
+use burn::tensor::Device;
+use rand::SeedableRng;
+use scbg_courtesy::Reward;
+use scbg_courtesy::label::{LabelOptions, MarginalEstimate};
+use scbg_features::cache::PreparedDataset;
+use scbg_generator::{
+    Example, GeneratorConfig, RangePredictor, Scbg, StepOptions, Threshold, Variant,
+};
+use scbg_model::Multipath;
+use scbg_train::Checkpoint;
+use scbg_train::data::{Split, split_of};
+use serde::{Deserialize, Serialize};
+
+use crate::labels::{SceneLabels, label_scenes};
+use crate::{Progress, ensure_request};
+
+/// The generator folder's description file.
+pub const GENERATOR_JSON: &str = "generator.json";
+/// The generator weights in a generator folder.
+pub const GENERATOR_WEIGHTS: &str = "generator.bpk";
+/// The range-predictor weights in a generator folder.
+pub const RANGE_WEIGHTS: &str = "range.bpk";
+/// `kind` of a generator folder's `generator.json`.
+pub const GENERATOR_KIND: &str = "scbg-generator";
+/// The format of `generator.json` this build reads and writes.
+pub const GENERATOR_FORMAT_VERSION: u32 = 2;
+
+/// Weights of the generator and the range predictor, and what they were trained with
+/// (`generator.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GeneratorCheckpoint {
+    /// Always [`GENERATOR_KIND`]: tells a generator folder from a predictor folder.
+    pub kind: String,
+    /// [`GENERATOR_FORMAT_VERSION`] when written by this build.
+    pub format_version: u32,
+    /// Which of the paper's three training variants.
+    pub variant: Variant,
+    /// The predictor checkpoint folder (its encoder is frozen in the generator; it is J_φ).
+    pub predictor: String,
+    /// The generator's architecture.
+    pub generator: GeneratorConfig,
+    /// Hidden width of the range predictor.
+    pub range_hidden: usize,
+    /// How the training labels were made (futures sampled per pair role, reward, estimator of
+    /// E[r(Y_A) | x], noise scale of the samples): inference labels the same way.
+    pub labels: LabelOptions,
+    /// Weight α of the sampled futures' trajectory loss.
+    pub alpha: f32,
+    /// Weight β of the courtesy loss.
+    pub beta: f32,
+    /// The high-courtesy threshold of the 50/50 batches as given (`q0.8` or m/s).
+    pub threshold: Threshold,
+    /// That threshold in ψ units: |ψ| above it counted as high courtesy in training.
+    pub threshold_psi: f32,
+    /// Smallest ψ label in training (the *arbitrary* range of the evaluation starts here).
+    pub psi_min: f32,
+    /// Largest ψ label in training.
+    pub psi_max: f32,
+    /// Seed of initialisation, batches and labels.
+    pub seed: u64,
+    /// Mean total / trajectory / courtesy loss per epoch.
+    pub history: Vec<[f32; 3]>,
+    /// Final pinball loss of the range predictor.
+    pub range_loss: f32,
+    /// Training examples (pair roles).
+    pub examples: usize,
+    /// Training time, seconds.
+    pub seconds: f64,
+}
+
+impl GeneratorCheckpoint {
+    /// Reads `dir/generator.json`; an old, foreign or unreadable file is an error that says
+    /// which and what to do.
+    pub fn read(dir: &Path) -> anyhow::Result<Self> {
+        let json = dir.join(GENERATOR_JSON);
+        if !json.is_file() {
+            let hint = if dir.join(scbg_train::checkpoint::CHECKPOINT_FILE).is_file() {
+                " (it is a predictor checkpoint; pass a folder from `scbg train generator`)"
+            } else {
+                ""
+            };
+            return Err(anyhow::Error::new(crate::InvalidRequest(format!(
+                "{} is not a generator folder: no {GENERATOR_JSON}{hint}",
+                dir.display()
+            ))));
+        }
+        let text = std::fs::read_to_string(&json)
+            .with_context(|| format!("reading {}", json.display()))?;
+        let value: serde_json::Value =
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", json.display()))?;
+        let kind = value.get("kind").and_then(|k| k.as_str());
+        let version = value.get("format_version").and_then(|v| v.as_u64());
+        match (kind, version) {
+            (Some(GENERATOR_KIND), Some(v)) if v == u64::from(GENERATOR_FORMAT_VERSION) => {}
+            (Some(GENERATOR_KIND), Some(v)) => anyhow::bail!(
+                "{}: generator format {v}, this build reads format {GENERATOR_FORMAT_VERSION}: retrain with `scbg train generator`",
+                json.display()
+            ),
+            (None, None) if value.get("variant").is_some() => anyhow::bail!(
+                "{}: written by an older scbg (before format versions): retrain with `scbg train generator`",
+                json.display()
+            ),
+            _ => anyhow::bail!(
+                "{}: not a scbg generator description (kind {kind:?})",
+                json.display()
+            ),
+        }
+        serde_json::from_value(value).with_context(|| format!("parsing {}", json.display()))
+    }
+
+    /// Writes `dir/generator.json` atomically.
+    pub fn write(&self, dir: &Path) -> anyhow::Result<()> {
+        scbg_base::atomic::write_json(dir.join(GENERATOR_JSON), self)?;
+        Ok(())
+    }
+}
+
+/// The trained predictor twice: frozen on the autodiff device (J_φ passes gradients to ŷ) and
+/// on the plain device (labels, embeddings, evaluation).
+#[derive(Debug)]
+pub struct Predictors {
+    /// The checkpoint folder.
+    pub dir: PathBuf,
+    /// Its description.
+    pub ckpt: Checkpoint,
+    /// The training device (with autodiff).
+    pub device: Device,
+    /// The predictor on `device`, frozen.
+    pub frozen: Multipath,
+    /// The plain device.
+    pub plain_device: Device,
+    /// The predictor on `plain_device`.
+    pub plain: Multipath,
+}
+
+/// Loads a predictor checkpoint folder for generator training.
+pub fn load_predictors(dir: &Path) -> anyhow::Result<Predictors> {
+    let ckpt = Checkpoint::read(dir)?;
+    let device = scbg_model::device::training_device(&ckpt.train_config.backend)?;
+    let frozen = ckpt.load_model(dir, &device)?.no_grad();
+    let plain_device = scbg_model::device::device(&ckpt.train_config.backend)?;
+    let plain = ckpt.load_model(dir, &plain_device)?;
+    Ok(Predictors {
+        dir: dir.to_path_buf(),
+        ckpt,
+        device,
+        frozen,
+        plain_device,
+        plain,
+    })
+}
+
+/// Generator examples (with B's frozen embedding) of labelled scenes.
+pub fn examples_of(
+    predictor: &Multipath,
+    device: &Device,
+    labelled: Vec<SceneLabels>,
+) -> Vec<Example> {
+    labelled
+        .into_iter()
+        .flat_map(|s| {
+            let id = s.scenario_id;
+            s.roles.into_iter().map(move |role| (id.clone(), role))
+        })
+        .map(|(id, role)| Example::from_role(id, role, predictor, device))
+        .collect()
+}
+
+/// Labelled examples of every pair role in one split of a prepared cache (the split by
+/// scenario id that the predictor was trained with; `None` = every scene), through the one
+/// labelling path ([`label_scenes`]). Runs on the plain device.
+#[allow(clippy::too_many_arguments)]
+pub fn examples_for_split(
+    predictor: &Multipath,
+    ckpt: &Checkpoint,
+    device: &Device,
+    data: &Path,
+    split: Option<Split>,
+    labels: LabelOptions,
+    seed: u64,
+    progress: &dyn Progress,
+) -> anyhow::Result<Vec<Example>> {
+    let dataset = PreparedDataset::open(data)?;
+    let vf = ckpt.train_config.validation_fraction;
+    let keep = |scene: &scbg_features::PreparedScene| {
+        split.is_none_or(|split| split_of(&scene.scenario_id, vf) == split)
+    };
+    let labelled = label_scenes(
+        predictor,
+        ckpt,
+        device,
+        &dataset,
+        0..dataset.len(),
+        &keep,
+        labels,
+        seed,
+        progress,
+    )?;
+    Ok(examples_of(predictor, device, labelled))
+}
+
+/// Training settings of one variant.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VariantSettings {
+    /// Which variant.
+    pub variant: Variant,
+    /// Epochs.
+    pub epochs: usize,
+    /// Batch size.
+    pub batch_size: usize,
+    /// Weight α of the sampled futures' trajectory loss.
+    pub alpha: f32,
+    /// Weight β of the courtesy loss.
+    pub beta: f32,
+    /// High-courtesy threshold of the 50/50 batches.
+    pub threshold: Threshold,
+    /// Adam's learning rate.
+    pub learning_rate: f64,
+    /// Range-predictor optimisation steps (full batch).
+    pub range_steps: usize,
+    /// Seed of initialisation and batches.
+    pub seed: u64,
+    /// How the examples were labelled (recorded in generator.json).
+    pub labels: LabelOptions,
+}
+
+impl VariantSettings {
+    /// The `scbg train generator` defaults for a variant.
+    pub fn new(variant: Variant, labels: LabelOptions) -> Self {
+        Self {
+            variant,
+            epochs: 10,
+            batch_size: 32,
+            alpha: 0.5,
+            beta: 1.0,
+            threshold: Threshold::Quantile(0.8),
+            learning_rate: 1e-3,
+            range_steps: 300,
+            seed: 0,
+            labels,
+        }
+    }
+}
+
+/// Spread of the labels (population std over every ψ, logged and sampled); the generator's
+/// `psi_scale`.
+fn psi_spread(examples: &[Example]) -> f32 {
+    let all: Vec<f64> = examples
+        .iter()
+        .flat_map(|e| e.psi.iter().map(|&v| f64::from(v)))
+        .collect();
+    scbg_generator::eval::MeanStd::of(&all).map_or(1.0, |m| m.std.max(1e-6) as f32)
+}
+
+/// Trains one generator variant and the range predictor on `examples` and saves them in `out`.
+pub fn train_variant(
+    p: &Predictors,
+    examples: &[Example],
+    s: &VariantSettings,
+    out: &Path,
+    progress: &dyn Progress,
+) -> anyhow::Result<GeneratorCheckpoint> {
+    let started = std::time::Instant::now();
+    ensure_request!(!examples.is_empty(), "no labelled pairs to train on");
+    let device = &p.device;
+    device.seed(s.seed);
+    let mut gen_config = GeneratorConfig::new(p.ckpt.model_config.embedding_width());
+    gen_config.psi_scale = psi_spread(examples);
+    let mut generator = gen_config.init(device);
+    let mut optim = burn::optim::AdamConfig::new().init();
+    let options = StepOptions {
+        variant: s.variant,
+        alpha: s.alpha,
+        beta: s.beta,
+        huber_delta: 1.0,
+        trajectory_weight: 1.0,
+        reward: s.labels.reward,
+        learning_rate: s.learning_rate,
+    };
+    let name = s.variant.name();
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(s.seed);
+    let per_epoch = examples.len().div_ceil(s.batch_size.max(1));
+    let mut history = Vec::new();
+    for epoch in 0..s.epochs {
+        let pb = progress.bar(&format!("{name} {epoch}"), per_epoch as u64);
+        let mut sums = [0.0f32; 3];
+        let mut skipped = 0usize;
+        for batch in scbg_generator::balanced_batches(
+            examples,
+            s.threshold,
+            s.batch_size,
+            per_epoch,
+            &mut rng,
+        ) {
+            let refs: Vec<&Example> = batch.iter().map(|&i| &examples[i]).collect();
+            let (g, l) = scbg_generator::train_step(
+                generator, &mut optim, &p.frozen, &refs, &options, device,
+            );
+            generator = g;
+            if l.total.is_finite() {
+                for (acc, v) in sums.iter_mut().zip([l.total, l.trajectory, l.courtesy]) {
+                    *acc += v / per_epoch as f32;
+                }
+            } else {
+                skipped += 1;
+            }
+            pb.set_message(format!("loss {:.3}", l.total));
+            pb.inc(1);
+        }
+        drop(pb);
+        progress.note(&format!(
+            "{name} epoch {epoch:>3}: loss {:.4} (trajectory {:.4}, courtesy {:.4}){}",
+            sums[0],
+            sums[1],
+            sums[2],
+            if skipped > 0 {
+                format!(", {skipped} non-finite batches skipped")
+            } else {
+                String::new()
+            }
+        ));
+        history.push(sums);
+    }
+    let refs: Vec<&Example> = examples.iter().collect();
+    let embedding = scbg_generator::stored_embeddings(&refs, device);
+    let labels: Vec<&[f32]> = examples.iter().map(|e| e.psi.as_slice()).collect();
+    let range_hidden = 64;
+    let mut range =
+        RangePredictor::init(p.ckpt.model_config.embedding_width(), range_hidden, device);
+    let mut range_optim = burn::optim::AdamConfig::new().init();
+    let mut range_loss = f32::NAN;
+    for _ in 0..s.range_steps {
+        let (r, l) =
+            scbg_generator::range_step(range, &mut range_optim, embedding.clone(), &labels, 1e-2);
+        range = r;
+        range_loss = l;
+    }
+    progress.note(&format!(
+        "{name}: range predictor pinball loss {range_loss:.5} after {} steps",
+        s.range_steps
+    ));
+    let (psi_min, psi_max) = examples
+        .iter()
+        .flat_map(|e| e.psi.iter().copied())
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
+            (lo.min(v), hi.max(v))
+        });
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    scbg_train::checkpoint::save_record(out, GENERATOR_WEIGHTS, |path| {
+        generator
+            .clone()
+            .save_file(path)
+            .map_err(|e| format!("{e:?}"))
+    })?;
+    scbg_train::checkpoint::save_record(out, RANGE_WEIGHTS, |path| {
+        range.clone().save_file(path).map_err(|e| format!("{e:?}"))
+    })?;
+    let predictor = std::fs::canonicalize(&p.dir).unwrap_or_else(|_| p.dir.clone());
+    let saved = GeneratorCheckpoint {
+        kind: GENERATOR_KIND.into(),
+        format_version: GENERATOR_FORMAT_VERSION,
+        variant: s.variant,
+        predictor: predictor.display().to_string(),
+        generator: gen_config,
+        range_hidden,
+        labels: s.labels,
+        alpha: s.alpha,
+        beta: s.beta,
+        threshold: s.threshold,
+        threshold_psi: scbg_generator::threshold_value(examples, s.threshold),
+        psi_min,
+        psi_max,
+        seed: s.seed,
+        history,
+        range_loss,
+        examples: examples.len(),
+        seconds: started.elapsed().as_secs_f64(),
+    };
+    saved.write(out)?;
+    progress.note(&format!(
+        "generator ({name}) and range predictor saved in {} ({:.0} s)",
+        out.display(),
+        saved.seconds
+    ));
+    Ok(saved)
+}
+
+/// What `scbg train generator` does: labels the training split of `data` with the predictor
+/// in `predictor` and trains one variant into `out`.
+pub fn train_generator(
+    predictor: &Path,
+    data: &Path,
+    out: &Path,
+    settings: &VariantSettings,
+    progress: &dyn Progress,
+) -> anyhow::Result<GeneratorCheckpoint> {
+    let p = load_predictors(predictor)?;
+    progress.note(&format!(
+        "labelling the training split ({} futures of B per pair role)",
+        1 + settings.labels.samples
+    ));
+    let examples = examples_for_split(
+        &p.plain,
+        &p.ckpt,
+        &p.plain_device,
+        data,
+        Some(Split::Train),
+        settings.labels,
+        settings.seed,
+        progress,
+    )?;
+    ensure_request!(
+        !examples.is_empty(),
+        "no interacting pairs in the training split of {}",
+        data.display()
+    );
+    train_variant(&p, &examples, settings, out, progress)
+}
+
+/// A trained SCBG model folder, loaded on the plain device.
+#[derive(Debug)]
+pub struct LoadedScbg {
+    /// Predictor, generator and range predictor with their feature settings.
+    pub scbg: Scbg,
+    /// The generator folder's description.
+    pub checkpoint: GeneratorCheckpoint,
+    /// The predictor's description.
+    pub predictor: Checkpoint,
+    /// The device everything is on.
+    pub device: Device,
+}
+
+/// Loads `dir` (from `scbg train generator`) and its predictor (`predictor` overrides the
+/// folder recorded in generator.json).
+pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedScbg> {
+    let checkpoint = GeneratorCheckpoint::read(dir)?;
+    let predictor_dir =
+        predictor.map_or_else(|| PathBuf::from(&checkpoint.predictor), Path::to_path_buf);
+    let ckpt = Checkpoint::read(&predictor_dir)
+        .with_context(|| format!("predictor of {} (override with --predictor)", dir.display()))?;
+    let device = scbg_model::device::device(&ckpt.train_config.backend)?;
+    let model = ckpt.load_model(&predictor_dir, &device)?;
+    let load = |name: &str| dir.join(name);
+    let generator = checkpoint
+        .generator
+        .init(&device)
+        .try_load_file(load(GENERATOR_WEIGHTS))
+        .map_err(|e| anyhow::anyhow!("{}: {e:?}", load(GENERATOR_WEIGHTS).display()))?;
+    let range = RangePredictor::init(
+        ckpt.model_config.embedding_width(),
+        checkpoint.range_hidden,
+        &device,
+    )
+    .try_load_file(load(RANGE_WEIGHTS))
+    .map_err(|e| anyhow::anyhow!("{}: {e:?}", load(RANGE_WEIGHTS).display()))?;
+    Ok(LoadedScbg {
+        scbg: Scbg {
+            predictor: model,
+            generator,
+            range,
+            stats: ckpt.stats.clone(),
+            features: ckpt.train_config.feature_config(),
+            labels: checkpoint.labels,
+        },
+        checkpoint,
+        predictor: ckpt,
+        device,
+    })
+}
+
+/// The label options a demo or CLI run asks for, with the reward fixed to the paper's.
+pub fn default_labels(
+    marginal: MarginalEstimate,
+    sample_noise: f32,
+) -> anyhow::Result<LabelOptions> {
+    crate::labels::label_options(8, Reward::AverageSpeed, marginal, sample_noise)
+}

@@ -1,0 +1,566 @@
+//! Courtesy labels (paper eq. (2), Sec. III-C, Fig. 3): one labelling path for every pair role
+//! of a prepared cache — used by `scbg label`, the generator's training and evaluation sets and
+//! the demo — and the label table (Parquet) it is stored in.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+use anyhow::Context;
+use arrow_array::{ArrayRef, Float32Array, Int64Array, RecordBatch, StringArray, UInt32Array};
+use arrow_schema::{DataType, Field, Schema};
+use burn::tensor::Device;
+use rand::SeedableRng;
+use scbg_courtesy::Reward;
+use scbg_courtesy::label::{LabelOptions, LabelledRole, label_scene, scene_seed};
+use scbg_features::PreparedScene;
+use scbg_features::cache::PreparedDataset;
+use scbg_model::Multipath;
+use scbg_synth::GroundTruth;
+use scbg_train::Checkpoint;
+use serde::Serialize;
+
+use crate::{Progress, ensure_request};
+
+/// The labelled pair roles of one scene of a cache.
+#[derive(Debug, Clone)]
+pub struct SceneLabels {
+    /// Index of the scene in the cache (its labelling stream).
+    pub index: usize,
+    /// The scenario id.
+    pub scenario_id: String,
+    /// Every ordered pair role of every window, labelled.
+    pub roles: Vec<LabelledRole>,
+}
+
+impl SceneLabels {
+    /// The label-table rows of these roles: one per future of B.
+    pub fn rows(&self) -> Vec<LabelRow> {
+        let mut rows = Vec::new();
+        for role in &self.roles {
+            for (k, psi) in role.labels.psi.iter().enumerate() {
+                rows.push(LabelRow {
+                    scenario_id: self.scenario_id.clone(),
+                    window_step: role.window_step as u32,
+                    a_id: role.a_id,
+                    b_id: role.b_id,
+                    sample: k as u32,
+                    psi: *psi,
+                    e_marg: role.labels.e_marg,
+                    e_cond: role.labels.e_cond[k],
+                });
+            }
+        }
+        rows
+    }
+}
+
+/// The labelling path: every pair role of the cache scenes `range` for which `keep` holds,
+/// labelled with the predictor of `ckpt` (standardised by its statistics, its feature
+/// settings). Scene `i` draws B's sampled futures from its own stream
+/// ([`scene_seed`]`(seed, i)`), so a scene's labels do not depend on which other scenes are
+/// labelled, in which order, or by which command. Run on a plain (non-autodiff) device.
+#[allow(clippy::too_many_arguments)]
+pub fn label_scenes(
+    predictor: &Multipath,
+    ckpt: &Checkpoint,
+    device: &Device,
+    dataset: &PreparedDataset,
+    range: std::ops::Range<usize>,
+    keep: &dyn Fn(&PreparedScene) -> bool,
+    options: LabelOptions,
+    seed: u64,
+    progress: &dyn Progress,
+) -> anyhow::Result<Vec<SceneLabels>> {
+    let features = ckpt.train_config.feature_config();
+    let pb = progress.bar("label", range.len() as u64);
+    let mut out = Vec::new();
+    for i in range {
+        let scene = dataset.scene(i)?;
+        pb.inc(1);
+        if !keep(&scene) {
+            continue;
+        }
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(scene_seed(seed, i as u64));
+        let roles = label_scene(
+            predictor,
+            &scene,
+            &ckpt.stats,
+            &features,
+            options,
+            &mut rng,
+            device,
+        );
+        out.push(SceneLabels {
+            index: i,
+            scenario_id: scene.scenario_id,
+            roles,
+        });
+    }
+    Ok(out)
+}
+
+/// One labelled future of B for target A.
+///
+/// The label table (one Parquet file per cache shard) has one row per future:
+/// `scenario_id, window_step, a_id, b_id, sample, psi, e_marg, e_cond`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LabelRow {
+    /// The scenario.
+    pub scenario_id: String,
+    /// The window's current step.
+    pub window_step: u32,
+    /// Track id of A (whose expected reward counts).
+    pub a_id: i64,
+    /// Track id of B (whose future is labelled).
+    pub b_id: i64,
+    /// 0 = logged future, 1.. = sampled from B's marginal prediction.
+    pub sample: u32,
+    /// ψ = e_cond − e_marg (m/s for the average-speed reward).
+    pub psi: f32,
+    /// E[r(Y_A) | x] as estimated.
+    pub e_marg: f32,
+    /// E[r(Y_A) | x, y_B] for this future.
+    pub e_cond: f32,
+}
+
+fn schema() -> Arc<Schema> {
+    Arc::new(Schema::new(vec![
+        Field::new("scenario_id", DataType::Utf8, false),
+        Field::new("window_step", DataType::UInt32, false),
+        Field::new("a_id", DataType::Int64, false),
+        Field::new("b_id", DataType::Int64, false),
+        Field::new("sample", DataType::UInt32, false),
+        Field::new("psi", DataType::Float32, false),
+        Field::new("e_marg", DataType::Float32, false),
+        Field::new("e_cond", DataType::Float32, false),
+    ]))
+}
+
+/// Writes the label table as Parquet, atomically.
+pub fn write_label_table(path: &Path, rows: &[LabelRow]) -> anyhow::Result<()> {
+    let schema = schema();
+    let columns: Vec<ArrayRef> = vec![
+        Arc::new(StringArray::from(
+            rows.iter()
+                .map(|r| r.scenario_id.as_str())
+                .collect::<Vec<_>>(),
+        )),
+        Arc::new(UInt32Array::from(
+            rows.iter().map(|r| r.window_step).collect::<Vec<_>>(),
+        )),
+        Arc::new(Int64Array::from(
+            rows.iter().map(|r| r.a_id).collect::<Vec<_>>(),
+        )),
+        Arc::new(Int64Array::from(
+            rows.iter().map(|r| r.b_id).collect::<Vec<_>>(),
+        )),
+        Arc::new(UInt32Array::from(
+            rows.iter().map(|r| r.sample).collect::<Vec<_>>(),
+        )),
+        Arc::new(Float32Array::from(
+            rows.iter().map(|r| r.psi).collect::<Vec<_>>(),
+        )),
+        Arc::new(Float32Array::from(
+            rows.iter().map(|r| r.e_marg).collect::<Vec<_>>(),
+        )),
+        Arc::new(Float32Array::from(
+            rows.iter().map(|r| r.e_cond).collect::<Vec<_>>(),
+        )),
+    ];
+    let batch = RecordBatch::try_new(schema.clone(), columns)?;
+    scbg_base::atomic::write_with(path, |file| -> anyhow::Result<()> {
+        let mut writer = parquet::arrow::ArrowWriter::try_new(file, schema, None)?;
+        writer.write(&batch)?;
+        writer.close()?;
+        Ok(())
+    })?;
+    Ok(())
+}
+
+/// Reads a label table back (resumed shards, summaries, tests); a missing column or a column
+/// of the wrong type is an error naming the file and column.
+pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
+    use arrow_array::Array;
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let reader =
+        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)?.build()?;
+    let mut rows = Vec::new();
+    for batch in reader {
+        let b = batch?;
+        let col = |name: &str| {
+            b.column_by_name(name)
+                .with_context(|| format!("{}: no column {name}", path.display()))
+                .cloned()
+        };
+        let typed = |name: &str| format!("{}: column {name} has the wrong type", path.display());
+        let ids = col("scenario_id")?;
+        let ids = ids
+            .as_any()
+            .downcast_ref::<StringArray>()
+            .with_context(|| typed("scenario_id"))?;
+        let ws = col("window_step")?;
+        let ws = ws
+            .as_any()
+            .downcast_ref::<UInt32Array>()
+            .with_context(|| typed("window_step"))?;
+        let a = col("a_id")?;
+        let a = a
+            .as_any()
+            .downcast_ref::<Int64Array>()
+            .with_context(|| typed("a_id"))?;
+        let bb = col("b_id")?;
+        let bb = bb
+            .as_any()
+            .downcast_ref::<Int64Array>()
+            .with_context(|| typed("b_id"))?;
+        let s = col("sample")?;
+        let s = s
+            .as_any()
+            .downcast_ref::<UInt32Array>()
+            .with_context(|| typed("sample"))?;
+        let f = |n: &str| -> anyhow::Result<Float32Array> {
+            Ok(col(n)?
+                .as_any()
+                .downcast_ref::<Float32Array>()
+                .with_context(|| typed(n))?
+                .clone())
+        };
+        let (psi, em, ec) = (f("psi")?, f("e_marg")?, f("e_cond")?);
+        for i in 0..b.num_rows() {
+            rows.push(LabelRow {
+                scenario_id: ids.value(i).to_string(),
+                window_step: ws.value(i),
+                a_id: a.value(i),
+                b_id: bb.value(i),
+                sample: s.value(i),
+                psi: psi.value(i),
+                e_marg: em.value(i),
+                e_cond: ec.value(i),
+            });
+        }
+    }
+    Ok(rows)
+}
+
+/// Spearman(ψ of the logged y_B with roles (A, B) as in the ground truth, latent courtesy c)
+/// per family: `{family: (rho, n)}`.
+pub fn spearman_latent(
+    rows: &[LabelRow],
+    truth: &[GroundTruth],
+) -> BTreeMap<String, (Option<f64>, usize)> {
+    let truth: BTreeMap<&str, &GroundTruth> =
+        truth.iter().map(|t| (t.scenario_id.as_str(), t)).collect();
+    let mut by_family: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    for r in rows.iter().filter(|r| r.sample == 0) {
+        if let Some(t) = truth.get(r.scenario_id.as_str())
+            && r.a_id == t.a_id
+            && r.b_id == t.b_id
+        {
+            let e = by_family.entry(t.family.name().to_string()).or_default();
+            e.0.push(f64::from(r.psi));
+            e.1.push(t.courtesy);
+        }
+    }
+    by_family
+        .into_iter()
+        .map(|(f, (x, y))| (f, (scbg_metrics::spearman(&x, &y), x.len())))
+        .collect()
+}
+
+/// The spread of ψ that B's future causes: the square root of the mean, over pair roles, of
+/// the variance of ψ across that role's futures (logged and sampled). When it is small next to
+/// the overall std, ψ says more about the scene than about what B does.
+pub fn within_pair_std(rows: &[LabelRow]) -> f64 {
+    let mut groups: BTreeMap<(&str, u32, i64, i64), Vec<f64>> = BTreeMap::new();
+    for r in rows {
+        groups
+            .entry((r.scenario_id.as_str(), r.window_step, r.a_id, r.b_id))
+            .or_default()
+            .push(f64::from(r.psi));
+    }
+    let vars: Vec<f64> = groups
+        .values()
+        .filter(|v| v.len() > 1)
+        .map(|v| {
+            let m = v.iter().sum::<f64>() / v.len() as f64;
+            v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64
+        })
+        .collect();
+    (vars.iter().sum::<f64>() / vars.len().max(1) as f64).sqrt()
+}
+
+/// Mean and population standard deviation.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Spread {
+    /// Mean.
+    pub mean: f64,
+    /// Population standard deviation.
+    pub std: f64,
+}
+
+/// ψ over every future, logged and sampled.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct PsiAll {
+    /// Mean.
+    pub mean: f64,
+    /// Population standard deviation.
+    pub std: f64,
+    /// Smallest ψ.
+    pub min: f64,
+    /// Largest ψ.
+    pub max: f64,
+    /// Share of futures with |ψ| > 2 m/s (the paper's high-courtesy threshold).
+    pub fraction_abs_gt_2: f64,
+}
+
+/// Spearman's ρ of one family and the number of pairs it is over.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FamilyRho {
+    /// Spearman's ρ (`None` when undefined: fewer than two pairs or no spread).
+    pub rho: Option<f64>,
+    /// Number of pairs.
+    pub n: usize,
+}
+
+/// `summary.json` of a label run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LabelSummary {
+    /// Labelled futures.
+    pub rows: usize,
+    /// Labelled pair roles (= logged futures).
+    pub pairs_roles: usize,
+    /// Futures sampled from B's marginal prediction per pair role.
+    pub samples_per_pair: usize,
+    /// The reward r(y_A).
+    pub reward: Reward,
+    /// How E[r(Y_A) | x] was estimated.
+    pub marginal: scbg_courtesy::label::MarginalEstimate,
+    /// Scale of the Gaussian part of B's sampled futures.
+    pub sample_noise: f32,
+    /// ψ of the logged futures.
+    pub psi_logged: Spread,
+    /// See [`within_pair_std`].
+    pub psi_within_pair_std: f64,
+    /// ψ of every future.
+    pub psi_all: PsiAll,
+    /// Spearman(ψ of the logged future, latent courtesy) per family (synthetic data only).
+    pub spearman_latent: BTreeMap<String, FamilyRho>,
+}
+
+impl LabelSummary {
+    /// The summary of `rows` labelled with `options`; `truth` adds the latent-courtesy check.
+    pub fn of(rows: &[LabelRow], options: LabelOptions, truth: Option<&[GroundTruth]>) -> Self {
+        let logged: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.sample == 0)
+            .map(|r| f64::from(r.psi))
+            .collect();
+        let all: Vec<f64> = rows.iter().map(|r| f64::from(r.psi)).collect();
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        let std = |v: &[f64]| {
+            (v.iter().map(|x| (x - mean(v)).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
+        };
+        let high = all.iter().filter(|p| p.abs() > 2.0).count();
+        Self {
+            rows: rows.len(),
+            pairs_roles: logged.len(),
+            samples_per_pair: options.samples,
+            reward: options.reward,
+            marginal: options.marginal,
+            sample_noise: options.sample_noise,
+            psi_logged: Spread {
+                mean: mean(&logged),
+                std: std(&logged),
+            },
+            psi_within_pair_std: within_pair_std(rows),
+            psi_all: PsiAll {
+                mean: mean(&all),
+                std: std(&all),
+                min: all.iter().copied().fold(f64::INFINITY, f64::min),
+                max: all.iter().copied().fold(f64::NEG_INFINITY, f64::max),
+                fraction_abs_gt_2: high as f64 / all.len().max(1) as f64,
+            },
+            spearman_latent: truth
+                .map(|t| spearman_latent(rows, t))
+                .unwrap_or_default()
+                .into_iter()
+                .map(|(f, (rho, n))| (f, FamilyRho { rho, n }))
+                .collect(),
+        }
+    }
+
+    /// The lines `scbg label` prints.
+    pub fn to_text(&self) -> String {
+        let mut s = format!(
+            "labelled {} futures ({} pair roles × {} each); ψ of logged futures: mean {:.3}, std {:.3}; std within a pair role {:.3}; |ψ| > 2 for {:.1} % of all",
+            self.rows,
+            self.pairs_roles,
+            1 + self.samples_per_pair,
+            self.psi_logged.mean,
+            self.psi_logged.std,
+            self.psi_within_pair_std,
+            100.0 * self.psi_all.fraction_abs_gt_2
+        );
+        for (family, r) in &self.spearman_latent {
+            s += &format!(
+                "\nSpearman(ψ, latent courtesy) {family}: {} (n = {})",
+                r.rho.map_or("-".into(), |r| format!("{r:.3}")),
+                r.n
+            );
+        }
+        s
+    }
+}
+
+/// A `scbg label` run.
+#[derive(Debug, Clone)]
+pub struct LabelRun {
+    /// Predictor checkpoint folder.
+    pub model: PathBuf,
+    /// Prepared cache folder.
+    pub data: PathBuf,
+    /// Output folder: `labels-NNNNN.parquet` per cache shard, `psi_histogram.png`,
+    /// `summary.json`.
+    pub out: PathBuf,
+    /// Futures to sample, reward, estimator, noise.
+    pub options: LabelOptions,
+    /// Seed of the sampled futures.
+    pub seed: u64,
+    /// A synthetic `ground_truth.jsonl` for the latent-courtesy check.
+    pub ground_truth: Option<PathBuf>,
+}
+
+/// The labelling options, checked: `sample_noise` must be finite and ≥ 0.
+pub fn label_options(
+    samples: usize,
+    reward: Reward,
+    marginal: scbg_courtesy::label::MarginalEstimate,
+    sample_noise: f32,
+) -> anyhow::Result<LabelOptions> {
+    ensure_request!(
+        sample_noise.is_finite() && sample_noise >= 0.0,
+        "--sample-noise {sample_noise}: expected a finite number >= 0"
+    );
+    Ok(LabelOptions {
+        samples,
+        reward,
+        marginal,
+        sample_noise,
+    })
+}
+
+/// The label table's file for cache shard `index`.
+pub fn shard_table_name(index: usize) -> String {
+    format!("labels-{index:05}.parquet")
+}
+
+/// Writes the label table of each cache shard, the ψ histogram (paper Fig. 3) and
+/// `summary.json` in `out` from labelled scenes, and returns the rows and the summary.
+pub fn write_label_outputs(
+    out: &Path,
+    dataset: &PreparedDataset,
+    labelled: &[SceneLabels],
+    options: LabelOptions,
+    truth: Option<&[GroundTruth]>,
+) -> anyhow::Result<(Vec<LabelRow>, LabelSummary)> {
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let mut rows = Vec::new();
+    let mut next = labelled.iter().peekable();
+    for (si, range) in shard_ranges(dataset).into_iter().enumerate() {
+        let mut shard_rows = Vec::new();
+        while let Some(s) = next.next_if(|s| range.contains(&s.index)) {
+            shard_rows.extend(s.rows());
+        }
+        write_label_table(&out.join(shard_table_name(si)), &shard_rows)?;
+        rows.extend(shard_rows);
+    }
+    let summary = finish_labels(out, &rows, options, truth)?;
+    Ok((rows, summary))
+}
+
+/// The histogram and summary.json of a finished label table.
+fn finish_labels(
+    out: &Path,
+    rows: &[LabelRow],
+    options: LabelOptions,
+    truth: Option<&[GroundTruth]>,
+) -> anyhow::Result<LabelSummary> {
+    let logged: Vec<f64> = rows
+        .iter()
+        .filter(|r| r.sample == 0)
+        .map(|r| f64::from(r.psi))
+        .collect();
+    scbg_plot::histogram(
+        &logged,
+        40,
+        "courtesy ψ of logged trajectories (m/s)",
+        &out.join("psi_histogram.png"),
+    )?;
+    let summary = LabelSummary::of(rows, options, truth);
+    scbg_base::atomic::write_json(out.join("summary.json"), &summary)?;
+    Ok(summary)
+}
+
+/// The global scene indices of each cache shard, in manifest order.
+fn shard_ranges(dataset: &PreparedDataset) -> Vec<std::ops::Range<usize>> {
+    let mut start = 0;
+    dataset
+        .manifest
+        .shards
+        .iter()
+        .map(|s| {
+            let r = start..start + s.scenarios;
+            start = r.end;
+            r
+        })
+        .collect()
+}
+
+/// `scbg label`: labels every pair role of the cache, one Parquet table per shard (a shard
+/// whose table exists is read back, not labelled again), then the histogram and summary.
+pub fn label_cache(
+    run: &LabelRun,
+    progress: &dyn Progress,
+) -> anyhow::Result<(Vec<LabelRow>, LabelSummary)> {
+    let ckpt = Checkpoint::read(&run.model)?;
+    let device = scbg_model::device::device(&ckpt.train_config.backend)?;
+    let model = ckpt.load_model(&run.model, &device)?;
+    let dataset = PreparedDataset::open(&run.data)?;
+    let truth = run
+        .ground_truth
+        .as_deref()
+        .map(crate::synth::read_ground_truth)
+        .transpose()?;
+    std::fs::create_dir_all(&run.out).with_context(|| format!("creating {}", run.out.display()))?;
+    let mut rows = Vec::new();
+    for (si, range) in shard_ranges(&dataset).into_iter().enumerate() {
+        let path = run.out.join(shard_table_name(si));
+        if path.is_file() {
+            rows.extend(read_label_table(&path)?);
+            continue;
+        }
+        let labelled = label_scenes(
+            &model,
+            &ckpt,
+            &device,
+            &dataset,
+            range,
+            &|_| true,
+            run.options,
+            run.seed,
+            progress,
+        )?;
+        let shard_rows: Vec<LabelRow> = labelled.iter().flat_map(SceneLabels::rows).collect();
+        write_label_table(&path, &shard_rows)?;
+        rows.extend(shard_rows);
+    }
+    ensure_request!(
+        !rows.is_empty(),
+        "no interacting pairs to label in {}",
+        run.data.display()
+    );
+    let summary = finish_labels(&run.out, &rows, run.options, truth.as_deref())?;
+    progress.note(&summary.to_text());
+    Ok((rows, summary))
+}
