@@ -116,6 +116,10 @@ pub struct ClassifierThresholds {
     pub max_abs_heading_diff_straight_rad: f32,
     /// A left turn ending at a longitudinal offset below this (metres) is a left U-turn.
     pub min_longitudinal_u_turn_m: f32,
+    /// Whether the heading change is wrapped into (−π, π] before the tests. Waymo's pre-2024
+    /// code compares the raw difference of the two headings (a track whose heading crosses
+    /// ±π is not straight there); the current code normalises it.
+    pub normalize_heading_diff: bool,
 }
 
 impl ClassifierThresholds {
@@ -126,6 +130,7 @@ impl ClassifierThresholds {
         max_lateral_straight_m: 5.0,
         max_abs_heading_diff_straight_rad: PI / 6.0,
         min_longitudinal_u_turn_m: -5.0,
+        normalize_heading_diff: false,
     };
     /// The current Waymo code's set.
     pub const CURRENT: Self = Self {
@@ -134,6 +139,7 @@ impl ClassifierThresholds {
         max_lateral_straight_m: 2.5,
         max_abs_heading_diff_straight_rad: PI / 6.0,
         min_longitudinal_u_turn_m: 0.0,
+        normalize_heading_diff: true,
     };
 }
 
@@ -168,7 +174,12 @@ pub fn classify_trajectory(gt: &GroundTruth, t: &ClassifierThresholds) -> Option
         gt.future_xy_m[last][1] - gt.current_xy_m[1],
     ];
     let displacement = norm(delta);
-    let heading_diff = wrap(gt.future_heading_rad[last] - gt.current_heading_rad);
+    let raw_heading_diff = gt.future_heading_rad[last] - gt.current_heading_rad;
+    let heading_diff = if t.normalize_heading_diff {
+        wrap(raw_heading_diff)
+    } else {
+        raw_heading_diff
+    };
     let (s, c) = gt.current_heading_rad.sin_cos();
     let lon = c * delta[0] + s * delta[1];
     let lat = -s * delta[0] + c * delta[1];

@@ -244,3 +244,37 @@ fn two_hz_predictions_and_missing_ground_truth() {
     assert!(t.by_time[2].1.min_ade.is_some());
     assert!((t.mean.min_fde.unwrap() - 1.0).abs() < 1e-5);
 }
+
+/// A straight track whose heading crosses ±π (3.0 rad → −3.0 rad, a real change of 0.28 rad):
+/// the pre-2024 classifier compares the raw difference (−6.0 rad) and calls it a left turn,
+/// the current one wraps it and calls it straight-left (lateral offset 4.2 m > 2.5 m).
+#[test]
+fn heading_wrap_is_normalised_only_by_the_current_classifier() {
+    let steps = 80;
+    let heading0 = 3.0f32;
+    let gt = GroundTruth {
+        current_xy_m: [0.0, 0.0],
+        current_heading_rad: heading0,
+        current_velocity_mps: [-10.0, 0.0],
+        future_xy_m: (1..=steps)
+            .map(|i| [-30.0 * i as f32 / steps as f32, 0.0])
+            .collect(),
+        future_heading_rad: (1..=steps)
+            .map(|i| if i < steps / 2 { 3.1 } else { -3.0 })
+            .collect(),
+        future_velocity_mps: vec![[-10.0, 0.0]; steps],
+        future_valid: vec![true; steps],
+    };
+    assert_eq!(
+        classify_trajectory(&gt, &ClassifierThresholds::PRE_2024),
+        Some(TrajectoryType::LeftTurn)
+    );
+    assert_eq!(
+        classify_trajectory(&gt, &ClassifierThresholds::CURRENT),
+        Some(TrajectoryType::StraightLeft)
+    );
+    assert_eq!(
+        ClassifierThresholds::default(),
+        ClassifierThresholds::PRE_2024
+    );
+}
