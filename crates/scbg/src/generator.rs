@@ -8,8 +8,7 @@ use anyhow::Context;
 use burn::module::Module;
 use burn::tensor::Device;
 use rand::SeedableRng;
-use scbg_courtesy::Reward;
-use scbg_courtesy::label::{LabelOptions, MarginalEstimate};
+use scbg_courtesy::label::LabelOptions;
 use scbg_features::cache::PreparedDataset;
 use scbg_generator::{
     Example, GeneratorConfig, RangePredictor, Scbg, StepOptions, Threshold, Variant,
@@ -474,12 +473,4 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
         predictor: ckpt,
         device,
     })
-}
-
-/// The label options a demo or CLI run asks for, with the reward fixed to the paper's.
-pub fn default_labels(
-    marginal: MarginalEstimate,
-    sample_noise: f32,
-) -> anyhow::Result<LabelOptions> {
-    crate::labels::label_options(8, Reward::AverageSpeed, marginal, sample_noise)
 }
