@@ -178,55 +178,39 @@ pub fn write_label_table(path: &Path, rows: &[LabelRow]) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Column `name` of a label-table batch as its Arrow array type (a cheap, shared copy); a
+/// missing column or one of another type is an error naming the file and column.
+fn column<T: arrow_array::Array + Clone + 'static>(
+    batch: &RecordBatch,
+    name: &str,
+    path: &Path,
+) -> anyhow::Result<T> {
+    batch
+        .column_by_name(name)
+        .with_context(|| format!("{}: no column {name}", path.display()))?
+        .as_any()
+        .downcast_ref::<T>()
+        .cloned()
+        .with_context(|| format!("{}: column {name} has the wrong type", path.display()))
+}
+
 /// Reads a label table back (resumed shards, summaries, tests); a missing column or a column
 /// of the wrong type is an error naming the file and column.
 pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
-    use arrow_array::Array;
     let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
     let reader =
         parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)?.build()?;
     let mut rows = Vec::new();
     for batch in reader {
         let b = batch?;
-        let col = |name: &str| {
-            b.column_by_name(name)
-                .with_context(|| format!("{}: no column {name}", path.display()))
-                .cloned()
-        };
-        let typed = |name: &str| format!("{}: column {name} has the wrong type", path.display());
-        let ids = col("scenario_id")?;
-        let ids = ids
-            .as_any()
-            .downcast_ref::<StringArray>()
-            .with_context(|| typed("scenario_id"))?;
-        let ws = col("window_step")?;
-        let ws = ws
-            .as_any()
-            .downcast_ref::<UInt32Array>()
-            .with_context(|| typed("window_step"))?;
-        let a = col("a_id")?;
-        let a = a
-            .as_any()
-            .downcast_ref::<Int64Array>()
-            .with_context(|| typed("a_id"))?;
-        let bb = col("b_id")?;
-        let bb = bb
-            .as_any()
-            .downcast_ref::<Int64Array>()
-            .with_context(|| typed("b_id"))?;
-        let s = col("sample")?;
-        let s = s
-            .as_any()
-            .downcast_ref::<UInt32Array>()
-            .with_context(|| typed("sample"))?;
-        let f = |n: &str| -> anyhow::Result<Float32Array> {
-            Ok(col(n)?
-                .as_any()
-                .downcast_ref::<Float32Array>()
-                .with_context(|| typed(n))?
-                .clone())
-        };
-        let (psi, em, ec) = (f("psi")?, f("e_marg")?, f("e_cond")?);
+        let ids: StringArray = column(&b, "scenario_id", path)?;
+        let ws: UInt32Array = column(&b, "window_step", path)?;
+        let a: Int64Array = column(&b, "a_id", path)?;
+        let bb: Int64Array = column(&b, "b_id", path)?;
+        let s: UInt32Array = column(&b, "sample", path)?;
+        let psi: Float32Array = column(&b, "psi", path)?;
+        let em: Float32Array = column(&b, "e_marg", path)?;
+        let ec: Float32Array = column(&b, "e_cond", path)?;
         for i in 0..b.num_rows() {
             rows.push(LabelRow {
                 scenario_id: ids.value(i).to_string(),

@@ -17,10 +17,7 @@ use crate::checkpoint::{Checkpoint, CheckpointError, EpochReport, TrainState};
 use crate::config::{ConfigError, TrainConfig};
 use crate::data::{load_samples, standardise};
 use crate::eval::{Mode, mean_nll, predict, score};
-
-/// Re-export of [`scbg_base::seed::mix`] (SplitMix64 of a `(seed, counter)` pair), kept for
-/// callers outside this crate that name it here.
-pub use scbg_base::seed::mix;
+use scbg_base::seed::mix;
 
 /// Why [`train`] failed.
 #[derive(Debug, thiserror::Error)]
