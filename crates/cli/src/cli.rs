@@ -58,6 +58,9 @@ pub struct DemoArgs {
     /// Training epochs of each generator variant.
     #[arg(long, default_value_t = 8)]
     pub generator_epochs: usize,
+    /// Seeds of the generator stage (trained side by side; the report gives seed means).
+    #[arg(long, default_value_t = 3)]
+    pub generator_seeds: usize,
     /// Weight β of the courtesy loss (in units of the labels' ψ spread) for the full variant.
     #[arg(long, default_value_t = 1.0)]
     pub beta: f32,
@@ -104,7 +107,8 @@ pub struct LabelArgs {
 
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Synthetic ground truth (ground_truth.jsonl) for the Spearman check against the latent courtesy.
+    /// Synthetic ground truth (ground_truth.jsonl): the latent-courtesy check and the fidelity
+    /// report against the simulator's ψ_true (psi_fidelity.png).
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
 }
@@ -202,6 +206,10 @@ pub struct EvalScbgArgs {
     /// Evaluate on the validation split (by scenario id) or on every pair.
     #[arg(long, value_enum, default_value_t = SplitSelection::Validation)]
     pub split: SplitSelection,
+    /// Synthetic ground truth (ground_truth.jsonl): also score the generated futures with the
+    /// simulator's oracle (Spearman(quantile, ψ_true)).
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
     /// Folder for the figures (fig4_quantile_courtesy.png, fig5a_*.png, fig5b_*.png).
     #[arg(long)]
     pub figures: Option<PathBuf>,

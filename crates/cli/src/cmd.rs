@@ -26,6 +26,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     scenarios: a.scenarios,
                     epochs: a.epochs,
                     generator_epochs: a.generator_epochs,
+                    generator_seeds: a.generator_seeds,
                     beta: a.beta,
                     labels,
                     seed: a.seed,
@@ -121,6 +122,11 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         }
         Command::Generate(a) => generate(&a, progress)?,
         Command::Eval(EvalCommand::Scbg(a)) => {
+            let truth = a
+                .ground_truth
+                .as_deref()
+                .map(scbg::synth::read_ground_truth)
+                .transpose()?;
             let result = scbg::scbg_eval::evaluate_scbg(
                 &a.model,
                 &a.data,
@@ -128,6 +134,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 a.split.split(),
                 a.seed,
                 a.figures.as_deref(),
+                truth.as_deref(),
                 progress,
             )?;
             if a.json {

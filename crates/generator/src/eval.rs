@@ -215,6 +215,19 @@ pub fn evaluate(
     options: &EvalOptions,
     device: &Device,
 ) -> VariantEval {
+    evaluate_measured(generator, range, predictor, examples, options, device).0
+}
+
+/// [`evaluate`], also returning what was generated and measured: per example, index 0 is
+/// `g(x, ψ_data)`, `1..=9` the futures for [`EVAL_QUANTILES`], then the 9 arbitrary ψ.
+pub fn evaluate_measured(
+    generator: &Generator,
+    range: &RangePredictor,
+    predictor: &Multipath,
+    examples: &[&Example],
+    options: &EvalOptions,
+    device: &Device,
+) -> (VariantEval, Measured) {
     let ranges = predicted_ranges(range, examples, device);
     let nq = EVAL_QUANTILES.len();
     let arbitrary: Vec<f32> = (0..nq)
@@ -304,7 +317,7 @@ pub fn evaluate(
     };
     let per_quantile = curve(&|_| true);
     let per_quantile_high = curve(&high);
-    VariantEval {
+    let eval = VariantEval {
         courtesy_mse_data: MeanStd::of(&data),
         courtesy_mse_range: MeanStd::of(&range_err),
         courtesy_mse_arbitrary: MeanStd::of(&arbitrary_err),
@@ -325,5 +338,6 @@ pub fn evaluate(
         high_examples: (0..n).filter(|&i| high(i)).count(),
         per_quantile,
         per_quantile_high,
-    }
+    };
+    (eval, m)
 }

@@ -1,4 +1,4 @@
-//! Charts of numbers: [`histogram`], [`scatter`] and [`line_chart`] (with ± bands).
+//! Charts of numbers: [`histogram`], [`scatter`], [`scatter_series`] and [`line_chart`] (with ± bands).
 
 use std::path::Path;
 
@@ -59,12 +59,33 @@ pub fn scatter(
     title: &str,
     path: &Path,
 ) -> Result<(), PlotError> {
-    let fin: Vec<(f64, f64)> = points
-        .iter()
-        .copied()
-        .filter(|(x, y)| x.is_finite() && y.is_finite())
-        .collect();
-    let ((x0, x1), (y0, y1)) = bounds(fin.iter().copied());
+    let one = Series {
+        label: String::new(),
+        points: points.to_vec(),
+        band: None,
+    };
+    scatter_series(std::slice::from_ref(&one), x_label, y_label, title, path)
+}
+
+/// A scatter of several groups of points, one colour each, with a legend of the labelled
+/// groups (e.g. learned vs true courtesy by scene family). Non-finite points are left out;
+/// bands are ignored.
+pub fn scatter_series(
+    series: &[Series],
+    x_label: &str,
+    y_label: &str,
+    title: &str,
+    path: &Path,
+) -> Result<(), PlotError> {
+    let finite = |s: &Series| -> Vec<(f64, f64)> {
+        s.points
+            .iter()
+            .copied()
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .collect()
+    };
+    let groups: Vec<Vec<(f64, f64)>> = series.iter().map(finite).collect();
+    let ((x0, x1), (y0, y1)) = bounds(groups.iter().flatten().copied());
     draw_png(path, (800, 600), |root| {
         root.fill(&WHITE)?;
         let mut chart = ChartBuilder::on(&root)
@@ -79,10 +100,27 @@ pub fn scatter(
             .y_desc(y_label)
             .label_style(("sans-serif", 12))
             .draw()?;
-        chart.draw_series(
-            fin.iter()
-                .map(|&(x, y)| Circle::new((x, y), 2, RGBColor(40, 90, 200).mix(0.5).filled())),
-        )?;
+        for (k, (s, points)) in series.iter().zip(&groups).enumerate() {
+            let c = PALETTE[k % PALETTE.len()];
+            let drawn = chart.draw_series(
+                points
+                    .iter()
+                    .map(move |&(x, y)| Circle::new((x, y), 2, c.mix(0.5).filled())),
+            )?;
+            if !s.label.is_empty() {
+                drawn
+                    .label(s.label.clone())
+                    .legend(move |(x, y)| Circle::new((x + 8, y), 4, c.filled()));
+            }
+        }
+        if series.iter().any(|s| !s.label.is_empty()) {
+            chart
+                .configure_series_labels()
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .label_font(("sans-serif", 12))
+                .draw()?;
+        }
         root.present()?;
         Ok(())
     })

@@ -19,6 +19,6 @@ mod scene;
 mod trajectories;
 
 pub use canvas::{PlotError, draw_png, write_png};
-pub use charts::{Series, histogram, line_chart, scatter};
+pub use charts::{Series, histogram, line_chart, scatter, scatter_series};
 pub use scene::{RenderOptions, render_scene};
 pub use trajectories::{Line, trajectories};

@@ -270,10 +270,23 @@ pub fn train_variant(
     let started = std::time::Instant::now();
     ensure_request!(!examples.is_empty(), "no labelled pairs to train on");
     let device = &p.device;
-    device.seed(s.seed);
     let mut gen_config = GeneratorConfig::new(p.ckpt.model_config.embedding_width());
     gen_config.psi_scale = psi_spread(examples);
-    let mut generator = gen_config.init(device);
+    let range_hidden = 64;
+    // The backend's random stream is the device's, shared by every thread: seed and draw the
+    // initial weights of both models under one lock, so that variants trained side by side
+    // (the demo's generator seeds) get the weights their seed says. Training itself draws
+    // nothing from it.
+    let (mut generator, mut range) = {
+        let _stream = DEVICE_STREAM
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        device.seed(s.seed);
+        let generator = gen_config.init(device);
+        let range =
+            RangePredictor::init(p.ckpt.model_config.embedding_width(), range_hidden, device);
+        (generator, range)
+    };
     let mut optim = burn::optim::AdamConfig::new().init();
     let options = StepOptions {
         variant: s.variant,
@@ -331,9 +344,6 @@ pub fn train_variant(
     let refs: Vec<&Example> = examples.iter().collect();
     let embedding = scbg_generator::stored_embeddings(&refs, device);
     let labels: Vec<&[f32]> = examples.iter().map(|e| e.psi.as_slice()).collect();
-    let range_hidden = 64;
-    let mut range =
-        RangePredictor::init(p.ckpt.model_config.embedding_width(), range_hidden, device);
     let mut range_optim = burn::optim::AdamConfig::new().init();
     let mut range_loss = f32::NAN;
     for _ in 0..s.range_steps {
@@ -391,6 +401,9 @@ pub fn train_variant(
     ));
     Ok(saved)
 }
+
+/// Guards the backend's shared random stream while a model is seeded and initialised.
+static DEVICE_STREAM: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// What `scbg train generator` does: labels the training split of `data` with the predictor
 /// in `predictor` and trains one variant into `out`.

@@ -34,10 +34,15 @@ pub struct SceneLabels {
 }
 
 impl SceneLabels {
-    /// The label-table rows of these roles: one per future of B.
-    pub fn rows(&self) -> Vec<LabelRow> {
+    /// The label-table rows of these roles: one per future of B. With the scene's synthetic
+    /// ground truth, the futures of the role it describes get ψ_true from the oracle
+    /// ([`crate::fidelity::psi_true_of_futures`]).
+    pub fn rows(&self, truth: Option<&GroundTruth>) -> Vec<LabelRow> {
         let mut rows = Vec::new();
         for role in &self.roles {
+            let psi_true = truth
+                .map(|t| crate::fidelity::psi_true_of_role(t, role))
+                .unwrap_or_default();
             for (k, psi) in role.labels.psi.iter().enumerate() {
                 rows.push(LabelRow {
                     scenario_id: self.scenario_id.clone(),
@@ -48,6 +53,7 @@ impl SceneLabels {
                     psi: *psi,
                     e_marg: role.labels.e_marg,
                     e_cond: role.labels.e_cond[k],
+                    psi_true: psi_true.get(k).copied().flatten(),
                 });
             }
         }
@@ -103,7 +109,8 @@ pub fn label_scenes(
 /// One labelled future of B for target A.
 ///
 /// The label table (one Parquet file per cache shard) has one row per future:
-/// `scenario_id, window_step, a_id, b_id, sample, psi, e_marg, e_cond`.
+/// `scenario_id, window_step, a_id, b_id, sample, psi, e_marg, e_cond, psi_true` (the last
+/// nullable: only synthetic scenes' ground-truth roles have it).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LabelRow {
     /// The scenario.
@@ -122,6 +129,8 @@ pub struct LabelRow {
     pub e_marg: f32,
     /// E[r(Y_A) | x, y_B] for this future.
     pub e_cond: f32,
+    /// ψ_true of this future from the synthetic simulator's oracle (m/s), when known.
+    pub psi_true: Option<f32>,
 }
 
 fn schema() -> Arc<Schema> {
@@ -134,6 +143,7 @@ fn schema() -> Arc<Schema> {
         Field::new("psi", DataType::Float32, false),
         Field::new("e_marg", DataType::Float32, false),
         Field::new("e_cond", DataType::Float32, false),
+        Field::new("psi_true", DataType::Float32, true),
     ]))
 }
 
@@ -166,6 +176,9 @@ pub fn write_label_table(path: &Path, rows: &[LabelRow]) -> anyhow::Result<()> {
         )),
         Arc::new(Float32Array::from(
             rows.iter().map(|r| r.e_cond).collect::<Vec<_>>(),
+        )),
+        Arc::new(Float32Array::from(
+            rows.iter().map(|r| r.psi_true).collect::<Vec<_>>(),
         )),
     ];
     let batch = RecordBatch::try_new(schema.clone(), columns)?;
@@ -211,6 +224,11 @@ pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
         let psi: Float32Array = column(&b, "psi", path)?;
         let em: Float32Array = column(&b, "e_marg", path)?;
         let ec: Float32Array = column(&b, "e_cond", path)?;
+        // Optional: tables written before the oracle existed have no psi_true.
+        let pt: Option<Float32Array> = match b.column_by_name("psi_true") {
+            None => None,
+            Some(_) => Some(column(&b, "psi_true", path)?),
+        };
         for i in 0..b.num_rows() {
             rows.push(LabelRow {
                 scenario_id: ids.value(i).to_string(),
@@ -221,6 +239,9 @@ pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
                 psi: psi.value(i),
                 e_marg: em.value(i),
                 e_cond: ec.value(i),
+                psi_true: pt
+                    .as_ref()
+                    .and_then(|c| arrow_array::Array::is_valid(c, i).then(|| c.value(i))),
             });
         }
     }
@@ -330,6 +351,8 @@ pub struct LabelSummary {
     pub psi_all: PsiAll,
     /// Spearman(ψ of the logged future, latent courtesy) per family (synthetic data only).
     pub spearman_latent: BTreeMap<String, FamilyRho>,
+    /// Agreement with the simulator's ψ_true (synthetic data with its ground truth only).
+    pub fidelity: Option<crate::fidelity::Fidelity>,
 }
 
 impl LabelSummary {
@@ -371,6 +394,7 @@ impl LabelSummary {
                 .into_iter()
                 .map(|(f, (rho, n))| (f, FamilyRho { rho, n }))
                 .collect(),
+            fidelity: truth.and_then(|t| crate::fidelity::fidelity(rows, t)),
         }
     }
 
@@ -392,6 +416,10 @@ impl LabelSummary {
                 r.rho.map_or("-".into(), |r| format!("{r:.3}")),
                 r.n
             );
+        }
+        if let Some(f) = &self.fidelity {
+            s += "\nfidelity of ψ_label against the simulator's ψ_true:\n";
+            s += &f.to_markdown();
         }
         s
     }
@@ -449,18 +477,34 @@ pub fn write_label_outputs(
     truth: Option<&[GroundTruth]>,
 ) -> anyhow::Result<(Vec<LabelRow>, LabelSummary)> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let index = truth.map(crate::fidelity::TruthIndex::new);
     let mut rows = Vec::new();
     let mut next = labelled.iter().peekable();
     for (si, range) in shard_ranges(dataset).into_iter().enumerate() {
-        let mut shard_rows = Vec::new();
+        let mut scenes = Vec::new();
         while let Some(s) = next.next_if(|s| range.contains(&s.index)) {
-            shard_rows.extend(s.rows());
+            scenes.push(s);
         }
+        let shard_rows = scored_rows(&scenes, index.as_ref());
         write_label_table(&out.join(shard_table_name(si)), &shard_rows)?;
         rows.extend(shard_rows);
     }
     let summary = finish_labels(out, &rows, options, truth)?;
     Ok((rows, summary))
+}
+
+/// The label-table rows of labelled scenes, scored by the oracle where a ground-truth line
+/// describes the scene (in parallel: the oracle re-simulates each scene some 40 times).
+fn scored_rows(
+    scenes: &[&SceneLabels],
+    truth: Option<&crate::fidelity::TruthIndex<'_>>,
+) -> Vec<LabelRow> {
+    use rayon::prelude::*;
+    scenes
+        .par_iter()
+        .map(|s| s.rows(truth.and_then(|t| t.get(&s.scenario_id))))
+        .collect::<Vec<_>>()
+        .concat()
 }
 
 /// The histogram and summary.json of a finished label table.
@@ -482,6 +526,9 @@ fn finish_labels(
         &out.join("psi_histogram.png"),
     )?;
     let summary = LabelSummary::of(rows, options, truth);
+    if let (Some(truth), Some(_)) = (truth, &summary.fidelity) {
+        crate::fidelity::write_scatter(rows, truth, &out.join("psi_fidelity.png"))?;
+    }
     scbg_base::atomic::write_json(out.join("summary.json"), &summary)?;
     Ok(summary)
 }
@@ -517,6 +564,7 @@ pub fn label_cache(
         .map(crate::synth::read_ground_truth)
         .transpose()?;
     std::fs::create_dir_all(&run.out).with_context(|| format!("creating {}", run.out.display()))?;
+    let index = truth.as_deref().map(crate::fidelity::TruthIndex::new);
     let mut rows = Vec::new();
     for (si, range) in shard_ranges(&dataset).into_iter().enumerate() {
         let path = run.out.join(shard_table_name(si));
@@ -535,7 +583,8 @@ pub fn label_cache(
             run.seed,
             progress,
         )?;
-        let shard_rows: Vec<LabelRow> = labelled.iter().flat_map(SceneLabels::rows).collect();
+        let scenes: Vec<&SceneLabels> = labelled.iter().collect();
+        let shard_rows = scored_rows(&scenes, index.as_ref());
         write_label_table(&path, &shard_rows)?;
         rows.extend(shard_rows);
     }

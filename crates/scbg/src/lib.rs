@@ -31,6 +31,7 @@ pub mod bench;
 pub mod choices;
 pub mod data;
 pub mod demo;
+pub mod fidelity;
 mod figures;
 pub mod generate;
 pub mod generator;

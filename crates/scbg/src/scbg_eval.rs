@@ -30,6 +30,9 @@ pub struct ScbgEval {
     pub figures: Vec<String>,
     /// Why nothing was evaluated (the demo goes on without generators on data without pairs).
     pub not_evaluated: Option<String>,
+    /// Per variant (same order), the generated futures scored by the synthetic simulator's
+    /// oracle (synthetic data with its ground truth only).
+    pub truth_control: Vec<(String, crate::fidelity::TruthControl)>,
 }
 
 fn ms_json(m: &Option<MeanStd>) -> serde_json::Value {
@@ -71,6 +74,7 @@ impl ScbgEval {
             psi_range: (f32::NAN, f32::NAN),
             figures: Vec::new(),
             not_evaluated: Some(why),
+            truth_control: Vec::new(),
         }
     }
 
@@ -102,10 +106,22 @@ impl ScbgEval {
         serde_json::Value::Object(map)
     }
 
-    /// The report JSON: `{variants, examples, high_threshold_psi, psi_min, psi_max, figures}`.
+    /// `{"<variant>": TruthControl}` for the variants scored by the oracle.
+    pub fn truth_control_json(&self) -> serde_json::Value {
+        serde_json::Value::Object(
+            self.truth_control
+                .iter()
+                .map(|(name, t)| (name.clone(), serde_json::to_value(t).expect("plain data")))
+                .collect(),
+        )
+    }
+
+    /// The report JSON: `{variants, truth_control, examples, high_threshold_psi, psi_min,
+    /// psi_max, figures}`.
     pub fn to_json(&self) -> serde_json::Value {
         json!({
             "variants": self.variants_json(),
+            "truth_control": self.truth_control_json(),
             "examples": self.examples,
             "high_threshold_psi": self.high_threshold_psi,
             "psi_min": self.psi_range.0,
@@ -136,6 +152,33 @@ impl ScbgEval {
                 c(v.corr_quantile_within),
             ));
         }
+        if !self.truth_control.is_empty() {
+            s.push_str("\nControl in truth — Spearman(input quantile, ψ_true of the generated future), oracle of the synthetic simulator:\n\n| model | all | merge | crossing | cutin | scored pair roles | Pearson(achieved ψ, ψ_true) |\n|---|---|---|---|---|---|---|\n");
+            for (name, t) in &self.truth_control {
+                let c = |k: &str| {
+                    t.spearman_quantile_psi_true
+                        .get(k)
+                        .copied()
+                        .flatten()
+                        .map_or("-".into(), |x| format!("{x:.3}"))
+                };
+                s.push_str(&format!(
+                    "| {} | {} | {} | {} | {} | {} | {} |\n",
+                    label_of(name),
+                    c(crate::fidelity::POOLED),
+                    c("merge"),
+                    c("crossing"),
+                    c("cutin"),
+                    t.examples
+                        .get(crate::fidelity::POOLED)
+                        .copied()
+                        .unwrap_or(0),
+                    t.achieved_vs_true
+                        .pearson
+                        .map_or("-".into(), |x| format!("{x:.3}")),
+                ));
+            }
+        }
         s.push_str(&format!(
             "\n{} held-out pair roles; high courtesy = |ψ_logged| > {} ({} of them); arbitrary ψ from {} to {} (training labels).\n",
             self.examples,
@@ -149,7 +192,9 @@ impl ScbgEval {
 }
 
 /// Evaluates the generator folders `models` on the pair roles of `split` of the cache `data`
-/// (labelled as in training) and writes the figures to `figures`.
+/// (labelled as in training) and writes the figures to `figures`; with a synthetic ground truth
+/// the generated futures are also scored by the oracle.
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate_scbg(
     models: &[PathBuf],
     data: &Path,
@@ -157,6 +202,7 @@ pub fn evaluate_scbg(
     split: Option<Split>,
     seed: u64,
     figures: Option<&Path>,
+    truth: Option<&[scbg_synth::GroundTruth]>,
     progress: &dyn Progress,
 ) -> anyhow::Result<ScbgEval> {
     ensure_request!(!models.is_empty(), "no generator folder given");
@@ -185,18 +231,22 @@ pub fn evaluate_scbg(
         seed,
         progress,
     )?;
-    evaluate_examples(&loaded, &examples, data, figures, progress)
+    evaluate_examples(&loaded, &examples, data, figures, truth, progress)
 }
 
 /// Evaluates loaded variants on labelled examples (e.g. the held-out split the demo labelled
-/// once); `data` is the cache the examples come from (road geometry of the figures).
+/// once); `data` is the cache the examples come from (road geometry of the figures). With a
+/// synthetic ground truth, the generated futures are also scored by the oracle.
 pub fn evaluate_examples(
     loaded: &[LoadedScbg],
     examples: &[Example],
     data: &Path,
     figures: Option<&Path>,
+    truth: Option<&[scbg_synth::GroundTruth]>,
     progress: &dyn Progress,
 ) -> anyhow::Result<ScbgEval> {
+    let index = truth.map(crate::fidelity::TruthIndex::new);
+    let mut truth_control = Vec::new();
     ensure_request!(
         !examples.is_empty(),
         "no interacting pairs in the evaluated split of {}",
@@ -210,7 +260,7 @@ pub fn evaluate_examples(
     for l in loaded {
         let name = l.checkpoint.variant.name();
         let pb = progress.bar(&format!("evaluating {name}"), 1);
-        let v = scbg_generator::eval::evaluate(
+        let (v, measured) = scbg_generator::eval::evaluate_measured(
             &l.scbg.generator,
             &l.scbg.range,
             &l.scbg.predictor,
@@ -224,6 +274,12 @@ pub fn evaluate_examples(
             &l.device,
         );
         pb.inc(1);
+        if let Some(t) = index
+            .as_ref()
+            .and_then(|index| crate::fidelity::truth_control(&refs, &measured, index))
+        {
+            truth_control.push((name.to_string(), t));
+        }
         variants.push((name.to_string(), v));
     }
     let mut written = Vec::new();
@@ -238,6 +294,7 @@ pub fn evaluate_examples(
         psi_range,
         figures: written,
         not_evaluated: None,
+        truth_control,
     })
 }
 

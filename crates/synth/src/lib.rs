@@ -24,7 +24,7 @@ use scbg_scene::{PredictionDifficulty, PredictionTarget, Scene};
 pub use path::RefPath;
 pub use sim::{STEP_SECS, boxes_overlap};
 
-use families::{A_ID, B_ID, NUM_STEPS, Run};
+use families::{A_ID, B_ID, BPlan, NUM_STEPS, Run};
 
 /// History steps including the current one.
 pub const CURRENT_STEP: usize = 10;
@@ -77,6 +77,13 @@ pub struct UnknownFamily(pub String);
 pub struct GroundTruth {
     /// Id of the generated scene (`synth-<seed hex>-<index>`).
     pub scenario_id: String,
+    /// Seed of the run the scene belongs to.
+    pub seed: u64,
+    /// Index of the scene in its run.
+    pub index: u64,
+    /// The families the run drew from (with `seed` and `index`, what [`Scenario::draw`] needs
+    /// to rebuild the scene for the [`Scenario`] oracle).
+    pub families: Vec<Family>,
     /// The scene's family.
     pub family: Family,
     /// Track id of vehicle A (the SDC).
@@ -89,6 +96,15 @@ pub struct GroundTruth {
     pub a_avg_speed_mps: f64,
     /// The same with B absent (re-simulated with every other draw unchanged).
     pub a_avg_speed_alone_mps: f64,
+    /// The oracle's A reward for B's logged future: B replayed from the scene's track, A
+    /// re-simulated ([`Scenario::a_avg_speed_mps`]). Equal to `a_avg_speed_mps` up to the
+    /// replay's error (the oracle-consistency check).
+    pub a_avg_speed_replayed_mps: f64,
+    /// `E_c'[r_A(y_B(c'))]`: the oracle's A reward averaged over B re-simulated from the
+    /// current step with courtesy `c'` from its prior ([`Scenario::expected_a_avg_speed_mps`]).
+    pub a_avg_speed_expected_mps: f64,
+    /// ψ_true of B's logged future: `a_avg_speed_replayed_mps − a_avg_speed_expected_mps`.
+    pub psi_true: f64,
     /// Whether A's and B's boxes overlapped at some step.
     pub collision: bool,
 }
@@ -102,30 +118,60 @@ pub struct Generated {
     pub truth: GroundTruth,
 }
 
-fn run(family: Family, rng: &mut Pcg64Mcg, courtesy: f64) -> (Run, Run) {
-    match family {
-        Family::Merge => {
-            let p = families::merge_params(rng);
-            (
-                families::simulate_merge(&p, courtesy, true),
-                families::simulate_merge(&p, courtesy, false),
-            )
-        }
-        Family::Crossing => {
-            let p = families::crossing_params(rng);
-            (
-                families::simulate_crossing(&p, courtesy, true),
-                families::simulate_crossing(&p, courtesy, false),
-            )
-        }
-        Family::Cutin => {
-            let p = families::cutin_params(rng);
-            (
-                families::simulate_cutin(&p, courtesy, true),
-                families::simulate_cutin(&p, courtesy, false),
-            )
-        }
-    }
+/// The random draws of one scene, whichever family it is.
+#[derive(Debug, Clone)]
+enum Params {
+    Merge(families::MergeParams),
+    Crossing(families::CrossingParams),
+    Cutin(families::CutinParams),
+}
+
+/// Draws of the courtesy prior `c' ∈ [0, 1]` behind ψ_true's expectation: stratified, the
+/// midpoints of [`PRIOR_DRAWS`] equal bins (the prior is uniform).
+pub const PRIOR_DRAWS: usize = 16;
+
+/// A future of B that the oracle cannot score.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum OracleError {
+    /// The future has the wrong number of steps.
+    #[error("B's future has {got} steps, the oracle needs {expected}")]
+    Steps {
+        /// Steps given.
+        got: usize,
+        /// Steps needed (the scene's future steps).
+        expected: usize,
+    },
+    /// A coordinate is NaN or infinite.
+    #[error("B's future has a non-finite coordinate at future step {0}")]
+    NotFinite(usize),
+    /// The ground-truth line does not rebuild the scene it names.
+    #[error("ground truth of {0} does not rebuild its scene (seed, index or families wrong)")]
+    Mismatch(String),
+}
+
+/// One synthetic scenario as drawn (its family, B's latent courtesy, every random draw): the
+/// generator of its scene and **the counterfactual oracle** of its courtesy.
+///
+/// The oracle scores any world-frame future of B (logged, sampled or generated): B is
+/// replayed along it, A and the other agents are re-simulated with their own parameters,
+/// reaction delay and noise draws, reacting to B through the family's documented rule, which
+/// looks at B's observable motion only (`families::merging_into_lane`,
+/// `families::committed_to_cross`, and lane occupancy on the cut-in road). A uses that same rule
+/// when the scene is generated, so replaying B's logged future reproduces A's logged reward up
+/// to the replay's rounding. Then
+/// `ψ_true(y_B) = r_A(y_B) − E_c'[r_A(y_B(c'))]`, the expectation over B re-simulated from the
+/// current step with courtesy `c'` from its prior ([`PRIOR_DRAWS`] stratified draws), every
+/// other draw unchanged, and each `y_B(c')` scored by the same replay.
+#[derive(Debug, Clone)]
+pub struct Scenario {
+    seed: u64,
+    index: u64,
+    families: Vec<Family>,
+    /// The scene's family.
+    pub family: Family,
+    /// B's latent courtesy.
+    pub courtesy: f64,
+    params: Params,
 }
 
 fn a_future_speed(track: &scbg_scene::Track) -> f64 {
@@ -133,61 +179,284 @@ fn a_future_speed(track: &scbg_scene::Track) -> f64 {
     future.iter().map(|s| f64::from(s.speed_mps())).sum::<f64>() / future.len() as f64
 }
 
+impl Scenario {
+    /// Draws scenario `index` of the run with this `seed`, its family from `families`.
+    ///
+    /// # Panics
+    /// If `families` is empty.
+    pub fn draw(seed: u64, index: u64, families: &[Family]) -> Self {
+        assert!(!families.is_empty(), "at least one family");
+        let mut rng = Pcg64Mcg::seed_from_u64(scbg_base::seed::mix(seed, index));
+        let family = families[rng.random_range(0..families.len())];
+        let courtesy: f64 = rng.random();
+        // Draw order is part of the data: keep it.
+        let params = match family {
+            Family::Merge => Params::Merge(families::merge_params(&mut rng)),
+            Family::Crossing => Params::Crossing(families::crossing_params(&mut rng)),
+            Family::Cutin => Params::Cutin(families::cutin_params(&mut rng)),
+        };
+        Self {
+            seed,
+            index,
+            families: families.to_vec(),
+            family,
+            courtesy,
+            params,
+        }
+    }
+
+    /// The scenario a ground-truth line describes (checked against its id).
+    pub fn of_truth(truth: &GroundTruth) -> Result<Self, OracleError> {
+        if truth.families.is_empty() {
+            return Err(OracleError::Mismatch(truth.scenario_id.clone()));
+        }
+        let s = Self::draw(truth.seed, truth.index, &truth.families);
+        if s.scenario_id() != truth.scenario_id || s.family != truth.family {
+            return Err(OracleError::Mismatch(truth.scenario_id.clone()));
+        }
+        Ok(s)
+    }
+
+    /// The scene's id (`synth-<seed hex>-<index>`).
+    pub fn scenario_id(&self) -> String {
+        format!("synth-{:x}-{:07}", self.seed, self.index)
+    }
+
+    /// A run without the map (what the oracle's many runs need).
+    fn simulate(&self, b: BPlan<'_>) -> Run {
+        self.simulate_with(b, false)
+    }
+
+    fn simulate_with(&self, b: BPlan<'_>, with_map: bool) -> Run {
+        match &self.params {
+            Params::Merge(p) => families::simulate_merge(p, b, with_map),
+            Params::Crossing(p) => families::simulate_crossing(p, b, with_map),
+            Params::Cutin(p) => families::simulate_cutin(p, b, with_map),
+        }
+    }
+
+    fn logged_plan(&self) -> BPlan<'static> {
+        BPlan::Simulated {
+            history: self.courtesy,
+            future: self.courtesy,
+        }
+    }
+
+    fn logged(&self) -> Run {
+        self.simulate(self.logged_plan())
+    }
+
+    /// A's average future speed when B, after its logged history, follows `run_b`'s states
+    /// (`(s, d, v)` along B's path for every step).
+    fn replayed_a_speed(&self, b_states: &[(f64, f64, f64)], paths: &[RefPath]) -> f64 {
+        let run = self.simulate(BPlan::Replayed(b_states));
+        a_future_speed(&sim::record_track(&run.agents[0], paths, NUM_STEPS))
+    }
+
+    /// B's states along its path: the logged history, then `future` (world frame, one point
+    /// per future step) projected onto B's path, speeds by finite differences.
+    fn b_states(
+        logged_b: &sim::Agent,
+        path: &RefPath,
+        future: &[[f64; 2]],
+    ) -> Vec<(f64, f64, f64)> {
+        let mut states: Vec<(f64, f64, f64)> = logged_b.history[..=CURRENT_STEP].to_vec();
+        let mut hint = states[CURRENT_STEP].0;
+        for p in future {
+            let (s, d) = path.project(p[0], p[1], Some(hint));
+            hint = s;
+            states.push((s, d, 0.0));
+        }
+        let n = states.len();
+        for t in CURRENT_STEP + 1..n {
+            let (a, b) = if t + 1 < n {
+                (t - 1, t + 1)
+            } else {
+                (t - 1, t)
+            };
+            let v = (states[b].0 - states[a].0) / ((b - a) as f64 * STEP_SECS);
+            states[t].2 = v.max(0.0);
+        }
+        states
+    }
+
+    /// The oracle: A's realised average future speed (m/s, over the 80 future steps) when B
+    /// follows `b_future` — B's world-frame positions at the future steps 11..=90 — after its
+    /// logged history.
+    pub fn a_avg_speed_mps(&self, b_future: &[[f64; 2]]) -> Result<f64, OracleError> {
+        let logged = self.logged();
+        self.a_avg_speed_given(&logged, b_future)
+    }
+
+    fn a_avg_speed_given(&self, logged: &Run, b_future: &[[f64; 2]]) -> Result<f64, OracleError> {
+        let expected = NUM_STEPS - CURRENT_STEP - 1;
+        if b_future.len() != expected {
+            return Err(OracleError::Steps {
+                got: b_future.len(),
+                expected,
+            });
+        }
+        if let Some(t) = b_future
+            .iter()
+            .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
+            return Err(OracleError::NotFinite(t));
+        }
+        let b = &logged.agents[1];
+        let states = Self::b_states(b, &logged.paths[b.path], b_future);
+        Ok(self.replayed_a_speed(&states, &logged.paths))
+    }
+
+    /// B's world-frame future (steps 11..=90) in a run.
+    fn b_future_of(run: &Run) -> Vec<[f64; 2]> {
+        let b = &run.agents[1];
+        let path = &run.paths[b.path];
+        b.history[CURRENT_STEP + 1..NUM_STEPS]
+            .iter()
+            .map(|&(s, d, _)| {
+                let (x, y) = path.pose(s, d);
+                [x, y]
+            })
+            .collect()
+    }
+
+    /// `E_c'[r_A(y_B(c'))]`: the oracle's reward averaged over B re-simulated from the current
+    /// step with courtesy `c'` at the midpoints of `draws` equal bins of its uniform prior,
+    /// each future scored by replay like any other.
+    pub fn expected_a_avg_speed_mps(&self, draws: usize) -> f64 {
+        let logged = self.logged();
+        self.expected_given(&logged, draws)
+    }
+
+    fn expected_given(&self, logged: &Run, draws: usize) -> f64 {
+        let draws = draws.max(1);
+        (0..draws)
+            .map(|k| {
+                let run = self.simulate(BPlan::Simulated {
+                    history: self.courtesy,
+                    future: (k as f64 + 0.5) / draws as f64,
+                });
+                self.a_avg_speed_given(logged, &Self::b_future_of(&run))
+                    .expect("a simulated future is complete and finite")
+            })
+            .sum::<f64>()
+            / draws as f64
+    }
+
+    /// ψ_true of a world-frame future of B (steps 11..=90): the oracle's A reward for it minus
+    /// its expectation over B's behaviour ([`PRIOR_DRAWS`] draws).
+    pub fn psi_true(&self, b_future: &[[f64; 2]]) -> Result<f64, OracleError> {
+        let logged = self.logged();
+        Ok(self.a_avg_speed_given(&logged, b_future)? - self.expected_given(&logged, PRIOR_DRAWS))
+    }
+
+    /// An oracle that keeps the logged run and the expectation, for scoring many futures of
+    /// B in this scene.
+    pub fn oracle(&self) -> Oracle<'_> {
+        let logged = self.logged();
+        let expected_a_avg_speed_mps = self.expected_given(&logged, PRIOR_DRAWS);
+        Oracle {
+            scenario: self,
+            logged,
+            expected_a_avg_speed_mps,
+        }
+    }
+
+    /// The scene and its ground truth.
+    pub fn generate(&self) -> Generated {
+        let with_b = self.simulate_with(self.logged_plan(), true);
+        let alone = self.simulate(BPlan::Absent);
+        let tracks: Vec<_> = with_b
+            .agents
+            .iter()
+            .map(|a| sim::record_track(a, &with_b.paths, NUM_STEPS))
+            .collect();
+        let alone_a = sim::record_track(&alone.agents[0], &alone.paths, NUM_STEPS);
+        let a = &tracks[0];
+        let b = &tracks[1];
+        let collision = a
+            .states
+            .iter()
+            .zip(&b.states)
+            .any(|(sa, sb)| boxes_overlap(sa, sb));
+        let logged_future: Vec<[f64; 2]> = b.states[CURRENT_STEP + 1..NUM_STEPS]
+            .iter()
+            .map(|s| [s.x_m, s.y_m])
+            .collect();
+        let replayed = self
+            .a_avg_speed_given(&with_b, &logged_future)
+            .expect("a logged future is complete and finite");
+        let expected = self.expected_given(&with_b, PRIOR_DRAWS);
+        let scenario_id = self.scenario_id();
+        let truth = GroundTruth {
+            scenario_id: scenario_id.clone(),
+            seed: self.seed,
+            index: self.index,
+            families: self.families.clone(),
+            family: self.family,
+            a_id: A_ID,
+            b_id: B_ID,
+            courtesy: self.courtesy,
+            a_avg_speed_mps: a_future_speed(a),
+            a_avg_speed_alone_mps: a_future_speed(&alone_a),
+            a_avg_speed_replayed_mps: replayed,
+            a_avg_speed_expected_mps: expected,
+            psi_true: replayed - expected,
+            collision,
+        };
+        let scene = Scene {
+            scenario_id,
+            timestamps_secs: (0..NUM_STEPS).map(|i| i as f64 * STEP_SECS).collect(),
+            current_step: CURRENT_STEP,
+            sdc_track_index: Some(0),
+            objects_of_interest: vec![A_ID, B_ID],
+            tracks_to_predict: vec![
+                PredictionTarget {
+                    track_index: 0,
+                    difficulty: PredictionDifficulty::Level1,
+                },
+                PredictionTarget {
+                    track_index: 1,
+                    difficulty: PredictionDifficulty::Level1,
+                },
+            ],
+            map: with_b.map,
+            signals_per_step: Vec::new(),
+            tracks,
+        };
+        Generated { scene, truth }
+    }
+}
+
+/// The oracle of one scenario with its logged run and `E_c'[r_A(y_B(c'))]` computed once
+/// ([`Scenario::oracle`]).
+#[derive(Debug)]
+pub struct Oracle<'a> {
+    scenario: &'a Scenario,
+    logged: Run,
+    /// `E_c'[r_A(y_B(c'))]`, m/s.
+    pub expected_a_avg_speed_mps: f64,
+}
+
+impl Oracle<'_> {
+    /// A's realised average future speed when B follows `b_future` (world frame, steps
+    /// 11..=90); see [`Scenario::a_avg_speed_mps`].
+    pub fn a_avg_speed_mps(&self, b_future: &[[f64; 2]]) -> Result<f64, OracleError> {
+        self.scenario.a_avg_speed_given(&self.logged, b_future)
+    }
+
+    /// ψ_true of `b_future`; see [`Scenario::psi_true`].
+    pub fn psi_true(&self, b_future: &[[f64; 2]]) -> Result<f64, OracleError> {
+        Ok(self.a_avg_speed_mps(b_future)? - self.expected_a_avg_speed_mps)
+    }
+}
+
 /// Generates scenario `index` of the run with this `seed`, drawing its family from `families`.
 ///
 /// # Panics
 /// If `families` is empty.
 pub fn generate(seed: u64, index: u64, families: &[Family]) -> Generated {
-    assert!(!families.is_empty(), "at least one family");
-    let mut rng = Pcg64Mcg::seed_from_u64(scbg_base::seed::mix(seed, index));
-    let family = families[rng.random_range(0..families.len())];
-    let courtesy: f64 = rng.random();
-    let (with_b, alone) = run(family, &mut rng, courtesy);
-    let tracks: Vec<_> = with_b
-        .agents
-        .iter()
-        .map(|a| sim::record_track(a, &with_b.paths, NUM_STEPS))
-        .collect();
-    let alone_a = sim::record_track(&alone.agents[0], &alone.paths, NUM_STEPS);
-    let a = &tracks[0];
-    let b = &tracks[1];
-    let collision = a
-        .states
-        .iter()
-        .zip(&b.states)
-        .any(|(sa, sb)| boxes_overlap(sa, sb));
-    let scenario_id = format!("synth-{seed:x}-{index:07}");
-    let truth = GroundTruth {
-        scenario_id: scenario_id.clone(),
-        family,
-        a_id: A_ID,
-        b_id: B_ID,
-        courtesy,
-        a_avg_speed_mps: a_future_speed(a),
-        a_avg_speed_alone_mps: a_future_speed(&alone_a),
-        collision,
-    };
-    let scene = Scene {
-        scenario_id,
-        timestamps_secs: (0..NUM_STEPS).map(|i| i as f64 * STEP_SECS).collect(),
-        current_step: CURRENT_STEP,
-        sdc_track_index: Some(0),
-        objects_of_interest: vec![A_ID, B_ID],
-        tracks_to_predict: vec![
-            PredictionTarget {
-                track_index: 0,
-                difficulty: PredictionDifficulty::Level1,
-            },
-            PredictionTarget {
-                track_index: 1,
-                difficulty: PredictionDifficulty::Level1,
-            },
-        ],
-        map: with_b.map,
-        signals_per_step: Vec::new(),
-        tracks,
-    };
-    Generated { scene, truth }
+    Scenario::draw(seed, index, families).generate()
 }
 
 #[cfg(test)]

@@ -69,6 +69,44 @@ impl RefPath {
         (x + extra * ch - d * sh, y + extra * sh + d * ch)
     }
 
+    /// Frenet coordinates `(s, d)` of a world point: the nearest point of the polyline (a
+    /// global scan when `s_hint` is `None`, else a search within 40 m of it, which is what a
+    /// trajectory stepping along the path needs), extended linearly beyond both ends as
+    /// [`Self::pose`] does. `d` is positive to the left.
+    pub fn project(&self, x: f64, y: f64, s_hint: Option<f64>) -> (f64, f64) {
+        let last = self.x.len() - 2;
+        let (lo, hi) = match s_hint {
+            None => (0, last),
+            Some(s) => {
+                let i = (s / self.ds_m).round().clamp(0.0, last as f64) as usize;
+                let w = (40.0 / self.ds_m).ceil() as usize;
+                (i.saturating_sub(w), (i + w).min(last))
+            }
+        };
+        let mut best = (f64::INFINITY, 0.0, 0.0);
+        for i in lo..=hi {
+            let (ax, ay) = (self.x[i], self.y[i]);
+            let (dx, dy) = (self.x[i + 1] - ax, self.y[i + 1] - ay);
+            let l2 = (dx * dx + dy * dy).max(1e-12);
+            let mut t = ((x - ax) * dx + (y - ay) * dy) / l2;
+            // Only the end segments extend beyond the path.
+            if i > 0 {
+                t = t.max(0.0);
+            }
+            if i < last {
+                t = t.min(1.0);
+            }
+            let (px, py) = (ax + t * dx, ay + t * dy);
+            let dist2 = (x - px).powi(2) + (y - py).powi(2);
+            if dist2 < best.0 {
+                let l = l2.sqrt();
+                let d = (dx * (y - ay) - dy * (x - ax)) / l;
+                best = (dist2, (i as f64 + t) * self.ds_m, d);
+            }
+        }
+        (best.1, best.2)
+    }
+
     /// Points of the path offset by `d(s)`, every `step_m`, over `[s0, s1]`.
     pub fn offset_points(
         &self,
@@ -102,5 +140,30 @@ mod tests {
         assert!((p.heading_at(50.0) - std::f64::consts::FRAC_PI_2).abs() < 1e-9);
         let (_, y) = p.pose(110.0, 0.0);
         assert!((y - 112.0).abs() < 1e-9);
+    }
+
+    #[test]
+    fn project_inverts_pose() {
+        let k = 1.0 / 300.0;
+        let p = RefPath::from_fn(400.0, 1.0, |s| {
+            ((k * s).sin() / k, (1.0 - (k * s).cos()) / k)
+        });
+        for (s, d) in [
+            (0.3, 0.0),
+            (57.25, 3.5),
+            (200.0, -2.0),
+            (399.5, 1.0),
+            (-5.0, 0.5),
+            (410.0, -1.0),
+        ] {
+            let (x, y) = p.pose(s, d);
+            for hint in [None, Some(s + 15.0)] {
+                let (s2, d2) = p.project(x, y, hint);
+                assert!(
+                    (s2 - s).abs() < 0.02 && (d2 - d).abs() < 0.02,
+                    "{s},{d} -> {s2},{d2}"
+                );
+            }
+        }
     }
 }

@@ -110,6 +110,26 @@ impl Agent {
         self.history.push((self.s, self.d, self.v));
     }
 
+    /// Puts the agent at a given state instead of the one its last step reached (a replayed
+    /// agent): the last history entry is replaced, the acceleration follows from the speeds.
+    pub fn replace_state(&mut self, s: f64, d: f64, v: f64) {
+        let v_prev = self.history.len().checked_sub(2).map(|i| self.history[i].2);
+        self.a = v_prev.map_or(0.0, |vp| (v - vp) / STEP_SECS);
+        (self.s, self.d, self.v) = (s, d, v);
+        *self.history.last_mut().expect("an agent has a state") = (s, d, v);
+    }
+
+    /// Lateral rate of the state `delay` steps ago, m/s (0 at the first step).
+    pub fn delayed_lateral_rate(&self, delay: usize) -> f64 {
+        let n = self.history.len();
+        let i = n.saturating_sub(1 + delay);
+        if i == 0 {
+            0.0
+        } else {
+            (self.history[i].1 - self.history[i - 1].1) / STEP_SECS
+        }
+    }
+
     /// Bumper-to-bumper gap to an agent ahead on the same path.
     pub fn gap_to(&self, s_other: f64, other_length_m: f64) -> f64 {
         s_other - self.s - 0.5 * (self.length_m + other_length_m)

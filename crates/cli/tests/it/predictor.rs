@@ -172,6 +172,8 @@ fn demo_writes_a_report() {
         "1",
         "--generator-epochs",
         "1",
+        "--generator-seeds",
+        "2",
     ]);
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
@@ -196,12 +198,34 @@ fn demo_writes_a_report() {
     let families = report["spearman_latent"].as_object().unwrap();
     assert_eq!(families.len(), 3, "{report}");
     assert!(report["checks"]["range_below_arbitrary"].is_boolean());
+    // Two generator seeds: seed means, their spread, each seed's numbers.
+    assert_eq!(report["generator_seeds"], serde_json::json!([0, 1]));
+    assert_eq!(report["variants_per_seed"].as_array().unwrap().len(), 2);
+    assert!(report["variants_seed_std"]["full"]["traj_ade"]["mean"].is_number());
+    assert!(out.join("generator_full_seed1/generator.json").is_file());
+    // The fidelity issue's keys.
+    assert_eq!(report["fidelity"]["logged"]["all"]["n"], 40, "{report}");
+    assert!(report["truth_control"]["full"]["spearman_quantile_psi_true"].is_object());
+    for key in [
+        "oracle_consistency_95",
+        "fidelity_logged_spearman_0_7",
+        "fidelity_sampled_spearman_0_7",
+        "fidelity_spread_ratio",
+        "label_latent_spearman_0_5",
+        "truth_control_spearman",
+        "corr_quantile_at_least_0_6",
+        "corr_quantile_high_at_least_0_8",
+    ] {
+        assert!(report["checks"][key].is_boolean(), "{key}: {report}");
+    }
+    assert!(report["checks"]["oracle_consistency_95"].as_bool().unwrap());
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("| Conditional (interacting agents) |"), "{md}");
     assert!(md.contains("| ①+②+③ courtesy loss |"), "{md}");
     for f in [
         "scene.png",
         "psi_histogram.png",
+        "psi_fidelity.png",
         "fig4_quantile_courtesy.png",
         "fig5a_case1.png",
         "fig5b_quantile_speed.png",
@@ -254,6 +278,18 @@ fn label_writes_parquet_and_resumes() {
     assert_eq!(summary["rows"], 20 * 2 * 4);
     assert_eq!(summary["pairs_roles"], 40);
     assert!(dir.path().join("labels/psi_histogram.png").is_file());
+    // The fidelity report: every future of the 20 ground-truth roles is scored by the oracle.
+    let fidelity = &summary["fidelity"];
+    assert_eq!(fidelity["logged"]["all"]["n"], 20, "{summary}");
+    assert_eq!(fidelity["sampled"]["all"]["n"], 60, "{summary}");
+    for key in ["spearman", "pearson", "slope", "spread_ratio"] {
+        assert!(fidelity["logged"]["all"].get(key).is_some(), "{key}");
+    }
+    assert!(fidelity["oracle_consistency"]["all"][0].as_f64().unwrap() >= 0.95);
+    assert!(dir.path().join("labels/psi_fidelity.png").is_file());
+    let rows =
+        scbg::labels::read_label_table(&dir.path().join("labels/labels-00000.parquet")).unwrap();
+    assert_eq!(rows.iter().filter(|r| r.psi_true.is_some()).count(), 80);
     let parquet = dir.path().join("labels/labels-00000.parquet");
     let bytes = std::fs::read(&parquet).unwrap();
     assert_eq!(&bytes[..4], b"PAR1");

@@ -7,7 +7,11 @@ use scbg_scene::{
     RoadLineType, StopSign,
 };
 
-use super::{NUM_STEPS, PairSetup, Run, arc_path, idm, mp, noise_track, pts, vehicle_size};
+use super::{
+    BPlan, NUM_STEPS, PairSetup, Run, arc_path, committed_to_cross, idm, mp, noise_track, pts,
+    vehicle_size,
+};
+use crate::CURRENT_STEP;
 use crate::path::RefPath;
 use crate::sim::{Agent, Idm};
 
@@ -39,7 +43,10 @@ pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
     let b_conflict_s = rng.random_range(80.0..110.0);
     // B reaches the conflict point around A's arrival, give or take.
     let tau_b = tau_a + rng.random_range(-3.0..1.5);
-    let b_s0 = (b_conflict_s - tau_b.max(1.5) * b_v0).max(2.0);
+    // Both start one history (1 s) earlier than these arrival times say, so that B reaches
+    // its decision after the current step, with the history showing its approach.
+    let history_s = CURRENT_STEP as f64 * 0.1;
+    let b_s0 = (b_conflict_s - (tau_b.max(1.5) + history_s) * b_v0).max(2.0);
     let follower = rng.random_bool(0.5).then(|| {
         let size = vehicle_size(rng);
         let v = rng.random_range(11.0..14.0);
@@ -61,7 +68,7 @@ pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
     let from_right = rng.random_bool(0.5);
     let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
     let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
-    let a_s0 = (a_conflict_s - tau_a * a_v0).max(5.0);
+    let a_s0 = (a_conflict_s - (tau_a + history_s) * a_v0).max(5.0);
     let reaction_steps = rng.random_range(3..8);
     let pair = PairSetup {
         a_size,
@@ -88,8 +95,9 @@ pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
     }
 }
 
-/// Simulates a crossing scene with B's courtesy `c ∈ [0, 1]`; without B when `with_b` is false.
-pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
+/// Simulates a crossing scene with B as `b` says; the map is built only when `with_map`.
+pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Run {
+    let with_b = b.present();
     let w = p.lane_width_m;
     let a_path = arc_path(0.0, 0.0, 0.0, p.curvature, 400.0);
     let (cx, cy) = a_path.pose(p.a_conflict_s, 0.0);
@@ -155,7 +163,9 @@ pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
     let mut decision: Option<bool> = None;
     for t in 0..NUM_STEPS - 1 {
         let mut cmds = vec![0.0; agents.len()];
-        if with_b && decision.is_none() && agents[1].s >= stop_s - 20.0 {
+        let c = b.courtesy(t);
+        // B decides from the current step on, so its courtesy shows in the future to predict.
+        if with_b && decision.is_none() && t >= CURRENT_STEP && agents[1].s >= stop_s - 20.0 {
             let (a, b) = (&agents[0], &agents[1]);
             let tau_a = (p.a_conflict_s - half_zone - a.s - a.length_m / 2.0) / a.v.max(1.0);
             let tau_b_clear = (p.b_conflict_s + half_zone + b.length_m - b.s) / b.v.max(3.0);
@@ -165,15 +175,16 @@ pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
                 agents[1].idm.desired_speed_mps *= 1.0 + 0.2 * c;
             }
         }
-        // A: follows nothing on its road but B occupying (or committed to) the conflict zone.
+        // A: follows nothing on its road but B occupying (or committed to) the conflict zone, by
+        // B's observable motion only ([`committed_to_cross`]).
         {
             let a = &agents[0];
             let mut leader = None;
             if with_b {
-                let (s_b, _, _) = agents[1].delayed(p.pair.reaction_steps);
+                let (s_b, _, v_b) = agents[1].delayed(p.pair.reaction_steps);
                 let b_len = agents[1].length_m;
                 let b_in_or_coming = s_b > p.b_conflict_s - half_zone - b_len - 25.0
-                    && (decision == Some(true) || s_b > stop_s + 0.5);
+                    && committed_to_cross(s_b, v_b, stop_s);
                 let b_not_cleared = s_b < p.b_conflict_s + half_zone + b_len;
                 let a_before = a.s + a.length_m / 2.0 < p.a_conflict_s - half_zone + 1.0;
                 if b_in_or_coming && b_not_cleared && a_before {
@@ -189,7 +200,8 @@ pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
             let b = &agents[1];
             let mut leader = None;
             let a_cleared = agents[0].s - agents[0].length_m > p.a_conflict_s + half_zone;
-            if decision != Some(true) && !a_cleared && b.s < stop_s + 0.5 {
+            let undecided_history = decision.is_none() && t < CURRENT_STEP;
+            if decision != Some(true) && !undecided_history && !a_cleared && b.s < stop_s + 0.5 {
                 leader = Some((stop_s - b.s - b.length_m / 2.0, 0.0));
             }
             cmds[1] = b.idm.accel(b.v, leader) + p.noise[1][t];
@@ -203,9 +215,18 @@ pub fn simulate_crossing(p: &CrossingParams, c: f64, with_b: bool) -> Run {
             cmds[ped0 + k] = ped.idm.accel(ped.v, None);
         }
         for (i, a) in agents.iter_mut().enumerate() {
-            let _ = i;
             a.step(cmds[i], 0.0);
         }
+        b.after_step(&mut agents, t);
+    }
+    if !with_map {
+        let mut paths = vec![a_path, b_path];
+        paths.extend(ped_paths);
+        return Run {
+            paths,
+            agents,
+            map: Map::default(),
+        };
     }
     let lane_pts =
         |path: &RefPath, s0: f64, s1: f64, d: f64| pts(path.offset_points(s0, s1, 1.0, |_| d));

@@ -4,7 +4,8 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::{Lane, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
 
-use super::{NUM_STEPS, PairSetup, Run, arc_path, idm, noise_track, pts, vehicle_size};
+use super::{BPlan, NUM_STEPS, PairSetup, Run, arc_path, idm, noise_track, pts, vehicle_size};
+use crate::CURRENT_STEP;
 use crate::sim::{Agent, Idm, STEP_SECS, closer};
 
 /// How far back a fully courteous B looks for a faster A to make way for.
@@ -60,14 +61,18 @@ pub fn cutin_params(rng: &mut Pcg64Mcg) -> CutinParams {
     let o_s0 = b_s0 + rng.random_range(45.0..75.0);
     let lane_change_s = rng.random_range(3.0..4.5);
     let reaction_steps = rng.random_range(3..8);
+    // Everyone starts one history (1 s) back at its speed, so that the situation above is the
+    // one at the current step, where B starts deciding.
+    let history_s = CURRENT_STEP as f64 * STEP_SECS;
+    let o_s0 = o_s0 - o_v * history_s;
     let pair = PairSetup {
         a_size,
         b_size,
         a_idm,
         b_idm,
-        a_s0,
+        a_s0: a_s0 - a_v0 * history_s,
         a_v0,
-        b_s0,
+        b_s0: b_s0 - b_v0 * history_s,
         b_v0,
         reaction_steps,
     };
@@ -85,8 +90,9 @@ pub fn cutin_params(rng: &mut Pcg64Mcg) -> CutinParams {
     }
 }
 
-/// Simulates a cut-in scene with B's courtesy `c ∈ [0, 1]`; without B when `with_b` is false.
-pub fn simulate_cutin(p: &CutinParams, c: f64, with_b: bool) -> Run {
+/// Simulates a cut-in scene with B as `b` says; the map is built only when `with_map`.
+pub fn simulate_cutin(p: &CutinParams, b: BPlan<'_>, with_map: bool) -> Run {
+    let with_b = b.present();
     let w = p.lane_width_m;
     let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);
     let b_lane = if p.cut_in { -w } else { 0.0 };
@@ -104,8 +110,6 @@ pub fn simulate_cutin(p: &CutinParams, c: f64, with_b: bool) -> Run {
         -w,
         p.o_idm.desired_speed_mps,
     ));
-    let politeness = 2.0 * c;
-    let safe_brake = 7.0 - 6.0 * c;
     let mut change_start: Option<usize> = None;
     let lc_steps = (p.lane_change_s / STEP_SECS).round() as usize;
     let d_of = |start: Option<usize>, t: usize| match start {
@@ -139,7 +143,11 @@ pub fn simulate_cutin(p: &CutinParams, c: f64, with_b: bool) -> Run {
     };
     for t in 0..NUM_STEPS - 1 {
         let mut cmds = vec![0.0; agents.len()];
-        if with_b && change_start.is_none() {
+        let c = b.courtesy(t);
+        let politeness = 2.0 * c;
+        let safe_brake = 7.0 - 6.0 * c;
+        // B decides from the current step on, so its courtesy shows in the future to predict.
+        if with_b && change_start.is_none() && t >= CURRENT_STEP {
             // MOBIL: B's advantage minus politeness × A's disadvantage, with A's safety.
             let (a, b) = (&agents[0], &agents[1]);
             let b_now = b
@@ -225,7 +233,15 @@ pub fn simulate_cutin(p: &CutinParams, c: f64, with_b: bool) -> Run {
             };
             a.step(cmds[i], d_next);
         }
+        b.after_step(&mut agents, t);
         let _ = o;
+    }
+    if !with_map {
+        return Run {
+            paths: vec![path],
+            agents,
+            map: Map::default(),
+        };
     }
     let lane = |id, d: f64| Lane {
         id,

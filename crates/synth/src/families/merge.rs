@@ -4,7 +4,11 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::{Lane, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
 
-use super::{NUM_STEPS, PairSetup, Run, arc_path, idm, noise_track, pts, vehicle_size};
+use super::{
+    BPlan, NUM_STEPS, PairSetup, Run, arc_path, idm, merging_into_lane, noise_track, pts,
+    vehicle_size,
+};
+use crate::CURRENT_STEP;
 use crate::sim::{Agent, Idm, STEP_SECS, closer};
 
 /// Length over which the on-ramp's approach angle eases into the parallel lane.
@@ -118,8 +122,9 @@ impl MergeParams {
     }
 }
 
-/// Simulates a merge scene with B's courtesy `c ∈ [0, 1]`; without B when `with_b` is false.
-pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
+/// Simulates a merge scene with B as `b` says; the map is built only when `with_map`.
+pub fn simulate_merge(p: &MergeParams, b: BPlan<'_>, with_map: bool) -> Run {
+    let with_b = b.present();
     let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);
     let mut b_idm = p.pair.b_idm;
     let mut agents = p.pair.agents(0, p.ramp_d(p.pair.b_s0), with_b);
@@ -141,8 +146,10 @@ pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
     let mut decision: Option<bool> = None; // Some(true) = B goes first
     for t in 0..NUM_STEPS - 1 {
         let mut cmds = vec![0.0; agents.len()];
+        let c = b.courtesy(t);
         // B's decision, latched at the commit point.
-        if with_b && decision.is_none() && agents[1].s >= taper_start - 40.0 {
+        // B decides from the current step on, so its courtesy shows in the future to predict.
+        if with_b && decision.is_none() && t >= CURRENT_STEP && agents[1].s >= taper_start - 40.0 {
             let (a, b) = (&agents[0], &agents[1]);
             let mid = p.merge_end_s - p.taper_m * 0.5;
             let lead = (mid - a.s) / a.v.max(1.0) - (mid - b.s) / b.v.max(1.0);
@@ -171,14 +178,15 @@ pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
                 if j == i {
                     continue;
                 }
-                let (s_j, d_j, v_j) = if i == 0 && with_b && j == 1 {
-                    other.delayed(p.pair.reaction_steps)
+                let delay = if i == 0 && with_b && j == 1 {
+                    p.pair.reaction_steps
                 } else {
-                    (other.s, other.d, other.v)
+                    0
                 };
+                let (s_j, d_j, v_j) = other.delayed(delay);
                 let relevant = if with_b && j == 1 && i != 1 {
-                    // B matters to main-lane traffic once it is merging (or committed to go).
-                    d_j.abs() < 0.75 * w || (decision == Some(true) && s_j > taper_start - 10.0)
+                    // B matters to main-lane traffic once it is (about to be) in the lane.
+                    merging_into_lane(d_j, other.delayed_lateral_rate(delay), w)
                 } else if with_b && i == 1 {
                     // B on the ramp: main-lane agents matter once B is in the taper.
                     in_lane(j) && (me.s > taper_start || me.d.abs() < 0.75 * w)
@@ -206,7 +214,15 @@ pub fn simulate_merge(p: &MergeParams, c: f64, with_b: bool) -> Run {
             };
             a.step(cmds[i], d_next);
         }
+        b.after_step(&mut agents, t);
         let _ = bg0;
+    }
+    if !with_map {
+        return Run {
+            paths: vec![path],
+            agents,
+            map: Map::default(),
+        };
     }
     // Map: main lane before/after the merge, ramp lane, road lines and edges.
     let ramp_start = (p.pair.b_s0 - 30.0)

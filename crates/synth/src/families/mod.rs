@@ -88,6 +88,72 @@ pub(super) fn noise_track(rng: &mut Pcg64Mcg, n: usize) -> Vec<f64> {
         .collect()
 }
 
+/// How vehicle B behaves in one run of a scene.
+#[derive(Debug, Clone, Copy)]
+pub enum BPlan<'a> {
+    /// No B: the "A alone" counterfactual.
+    Absent,
+    /// B simulated with courtesy `history` before the current step ([`crate::CURRENT_STEP`])
+    /// and `future` from it on (the logged run has both equal).
+    Simulated {
+        /// Courtesy while the history is recorded.
+        history: f64,
+        /// Courtesy from the current step on.
+        future: f64,
+    },
+    /// B replayed: its `(s, d, v)` along its own reference path at every step
+    /// ([`NUM_STEPS`] entries); B's own decisions are ignored, everyone else reacts to it.
+    Replayed(&'a [(f64, f64, f64)]),
+}
+
+impl BPlan<'_> {
+    /// Whether B takes part.
+    pub fn present(&self) -> bool {
+        !matches!(self, Self::Absent)
+    }
+
+    /// B's courtesy when commanding step `t` (irrelevant, 0.5, when replayed or absent).
+    pub fn courtesy(&self, t: usize) -> f64 {
+        match *self {
+            Self::Simulated { history, future } => {
+                if t < crate::CURRENT_STEP {
+                    history
+                } else {
+                    future
+                }
+            }
+            _ => 0.5,
+        }
+    }
+
+    /// After every agent stepped to `t + 1`: a replayed B is put where the replay says.
+    pub(super) fn after_step(&self, agents: &mut [Agent], t: usize) {
+        if let Self::Replayed(states) = self {
+            let (s, d, v) = states[t + 1];
+            agents[1].replace_state(s, d, v);
+        }
+    }
+}
+
+/// The documented reaction of a vehicle on A's road to B merging into its lane (merge family):
+/// B counts (as a leader, when ahead) once its centre is within `0.75 w` of the lane centre, or
+/// once it has left the acceleration lane's centre line by 0.1 m towards A's lane (`|d| < w −
+/// 0.1`) while moving towards it (lateral rate over 0.05 m/s). Only B's observable motion
+/// counts, never B's intentions, so a replayed B (any future, logged or generated) gets the same
+/// reaction as a simulated one.
+pub(super) fn merging_into_lane(d: f64, d_rate: f64, lane_width_m: f64) -> bool {
+    d.abs() < 0.75 * lane_width_m || (d.abs() < lane_width_m - 0.1 && d_rate * d.signum() < -0.05)
+}
+
+/// The documented reaction of A to B at a crossing (crossing family): B occupies the conflict
+/// zone, for A, while B is within 25 m before the zone's entry and has not cleared it, and is
+/// either past its stop line or too fast to stop at it comfortably (the deceleration it needs,
+/// `v² / 2·distance`, is over 3.5 m/s²). A then treats the zone's entry as a standing
+/// obstacle until it is clear (or A is already in it).
+pub(super) fn committed_to_cross(s: f64, v: f64, stop_s: f64) -> bool {
+    s > stop_s + 0.5 || v * v / (2.0 * (stop_s - s).max(0.1)) > 3.5
+}
+
 /// Vehicles A and B as every family sets them up (values drawn by the family, in its order).
 #[derive(Debug, Clone)]
 pub(super) struct PairSetup {
