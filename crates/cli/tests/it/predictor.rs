@@ -204,7 +204,13 @@ fn demo_writes_a_report() {
     assert!(report["variants_seed_std"]["full"]["traj_ade"]["mean"].is_number());
     assert!(out.join("generator_full_seed1/generator.json").is_file());
     // The fidelity issue's keys.
-    assert_eq!(report["fidelity"]["logged"]["all"]["n"], 40, "{report}");
+    assert_eq!(
+        report["fidelity_all_scenes"]["logged"]["all"]["n"], 40,
+        "{report}"
+    );
+    // The held-out split's share of the 40 scenes.
+    let held_out = report["fidelity"]["logged"]["all"]["n"].as_u64().unwrap();
+    assert!((1..40).contains(&held_out), "{report}");
     assert!(report["truth_control"]["full"]["spearman_quantile_psi_true"].is_object());
     for key in [
         "oracle_consistency_95",
