@@ -285,6 +285,9 @@ pub fn train_variant(
         let generator = gen_config.init(device);
         let range =
             RangePredictor::init(p.ckpt.model_config.embedding_width(), range_hidden, device);
+        // burn initialises parameters lazily, at first use: draw them now, inside the lock.
+        generator.visit(&mut Materialize);
+        range.visit(&mut Materialize);
         (generator, range)
     };
     let mut optim = burn::optim::AdamConfig::new().init();
@@ -404,6 +407,32 @@ pub fn train_variant(
 
 /// Guards the backend's shared random stream while a model is seeded and initialised.
 static DEVICE_STREAM: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// Forces every lazily initialised parameter of a module to be drawn.
+struct Materialize;
+
+impl burn::module::ModuleVisitor for Materialize {
+    fn visit_float<const D: usize>(
+        &mut self,
+        param: &burn::module::Param<burn::tensor::Tensor<D>>,
+    ) {
+        let _ = param.val();
+    }
+
+    fn visit_int<const D: usize>(
+        &mut self,
+        param: &burn::module::Param<burn::tensor::Tensor<D, burn::tensor::Int>>,
+    ) {
+        let _ = param.val();
+    }
+
+    fn visit_bool<const D: usize>(
+        &mut self,
+        param: &burn::module::Param<burn::tensor::Tensor<D, burn::tensor::Bool>>,
+    ) {
+        let _ = param.val();
+    }
+}
 
 /// What `scbg train generator` does: labels the training split of `data` with the predictor
 /// in `predictor` and trains one variant into `out`.
