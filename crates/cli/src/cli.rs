@@ -382,6 +382,18 @@ pub enum BenchCommand {
     Synth(BenchSynthArgs),
     /// Predictor training step time and inference throughput.
     Train(BenchTrainArgs),
+    /// WOSAC realism metric time for one scenario × 32 rollouts (1 thread).
+    Wosac(BenchWosacArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchWosacArgs {
+    /// A WOMD Scenario TFRecord (default: the shared genuine one-scenario file).
+    #[arg(long)]
+    pub file: Option<PathBuf>,
+    /// Timed repetitions per baseline.
+    #[arg(long, default_value_t = 10)]
+    pub repeats: usize,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -90,6 +90,12 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 );
             }
         }
+        Command::Bench(BenchCommand::Wosac(a)) => {
+            print!(
+                "{}",
+                scbg::bench::wosac(a.file.as_deref(), a.repeats)?.to_text()
+            );
+        }
         Command::Bench(BenchCommand::Train(a)) => {
             let bench = scbg::bench::train(&a.presets, a.batch, a.steps, &a.backend)?;
             print!("{}", bench.to_text());

@@ -6,6 +6,8 @@
 //! Coordinates may be in any frame as long as predictions and ground truth share it; headings
 //! are in that frame too (the miss test rotates errors into the ground-truth heading frame).
 //!
+//! The sim-agents realism meta-metric (WOSAC, `shared/spec/wosac.md`) is in [`wosac`].
+//!
 //! **Architecture invariant:** no I/O, no tensors, no dataset formats; plain numbers in,
 //! plain numbers out.
 
@@ -18,6 +20,8 @@ use serde::Serialize;
 
 mod stats;
 pub use stats::{pearson, ranks, spearman};
+
+pub mod wosac;
 
 /// Future steps at 10 Hz (8 s).
 pub const FUTURE_STEPS: usize = 80;

@@ -243,6 +243,86 @@ pub fn synth(scenarios: usize) -> anyhow::Result<Vec<(usize, f64, f64)>> {
     Ok(rows)
 }
 
+/// Time of the WOSAC realism metric for one scenario × 32 rollouts ([`wosac`]).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct WosacBench {
+    /// The scenario scored.
+    pub scenario_id: String,
+    /// Sim agents (simulated objects) of the scenario.
+    pub sim_agents: usize,
+    /// Timed repetitions per baseline.
+    pub repeats: usize,
+    /// `(baseline, meta-metric, best ms, mean ms)` for log replay and constant velocity.
+    pub rows: Vec<(String, f32, f64, f64)>,
+}
+
+impl WosacBench {
+    /// The lines `scbg bench wosac` prints.
+    pub fn to_text(&self) -> String {
+        let mut s = format!(
+            "WOSAC metrics, scenario {} ({} sim agents), 32 rollouts, 1 thread, {} repeats:\n",
+            self.scenario_id, self.sim_agents, self.repeats
+        );
+        for (name, meta, best, mean) in &self.rows {
+            s += &format!(
+                "{name:<18} meta-metric {meta:.7}  best {best:.1} ms  mean {mean:.1} ms\n"
+            );
+        }
+        s
+    }
+}
+
+/// Times `scbg_metrics::wosac::scenario_metrics` on the first scenario of `file` (default: the
+/// shared genuine one-scenario WOMD file) for log replay and constant velocity, on the calling
+/// thread (the metric is single-threaded).
+pub fn wosac(file: Option<&std::path::Path>, repeats: usize) -> anyhow::Result<WosacBench> {
+    use scbg_metrics::wosac::{
+        ROLLOUTS_PER_SCENARIO, WosacConfig, constant_velocity_rollouts, log_replay_rollouts,
+        scenario_metrics, sim_agent_ids,
+    };
+    let path = match file {
+        Some(p) => p.to_path_buf(),
+        None => scbg_womd::fixtures::real_data_dir()
+            .context("no --file and no shared real data folder")?
+            .join("womd/motion_data_one_scenario.tfrecord"),
+    };
+    let womd = scbg_womd::WomdFile::open(&path)?;
+    let scene = womd
+        .scenes()
+        .next()
+        .with_context(|| format!("{}: no scenario", path.display()))??;
+    let repeats = repeats.max(1);
+    let mut rows = Vec::new();
+    for (name, rollouts) in [
+        (
+            "log replay",
+            log_replay_rollouts(&scene, ROLLOUTS_PER_SCENARIO)?,
+        ),
+        (
+            "constant velocity",
+            constant_velocity_rollouts(&scene, ROLLOUTS_PER_SCENARIO)?,
+        ),
+    ] {
+        let mut times = Vec::with_capacity(repeats);
+        let mut meta = f32::NAN;
+        for _ in 0..repeats {
+            let t = Instant::now();
+            let m = scenario_metrics(&scene, &rollouts, WosacConfig::V2025)?;
+            times.push(t.elapsed().as_secs_f64() * 1e3);
+            meta = m.metametric;
+        }
+        let best = times.iter().copied().fold(f64::INFINITY, f64::min);
+        let mean = times.iter().sum::<f64>() / times.len() as f64;
+        rows.push((name.to_string(), meta, best, mean));
+    }
+    Ok(WosacBench {
+        scenario_id: scene.scenario_id.clone(),
+        sim_agents: sim_agent_ids(&scene).len(),
+        repeats,
+        rows,
+    })
+}
+
 /// Training step time and inference throughput on synthetic samples of the default feature
 /// sizes, at the current rayon/backend thread count.
 pub fn train(

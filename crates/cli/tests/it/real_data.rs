@@ -262,3 +262,21 @@ fn labelled_pairs_of_interactive_scenarios() {
         .unwrap();
     assert!(p.pairs[0].iter().all(|x| x.source == PairSource::Mined));
 }
+
+#[test]
+fn bench_wosac_scores_the_reference_scenario() {
+    let Some(dir) = real_dir() else { return };
+    let text = crate::scbg_ok(&[
+        "bench",
+        "wosac",
+        "--file",
+        dir.join("womd/motion_data_one_scenario.tfrecord")
+            .to_str()
+            .unwrap(),
+        "--repeats",
+        "1",
+    ]);
+    assert!(text.contains("(50 sim agents)"), "{text}");
+    assert!(text.contains("meta-metric 0.82663"), "{text}");
+    assert!(text.contains("meta-metric 0.21769"), "{text}");
+}
