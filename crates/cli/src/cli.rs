@@ -56,7 +56,7 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
     /// Training epochs of each generator variant.
-    #[arg(long, default_value_t = 8)]
+    #[arg(long, default_value_t = 6)]
     pub generator_epochs: usize,
     /// Seeds of the generator stage (trained side by side; the report gives seed means).
     #[arg(long, default_value_t = 3)]
