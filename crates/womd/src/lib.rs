@@ -3,7 +3,8 @@
 //! Main entry points: [`WomdFile::open`] (memory-maps a TFRecord file, detects whether it
 //! holds `Scenario` protos or motion `tf.Example`s, iterates [`Scene`]s with errors that name
 //! the file, record index and byte offset), [`write_scenes`] (atomic `Scenario` TFRecord
-//! writer), [`encode_scene`] / [`scenario::scene_from_scenario`] for single records.
+//! writer), [`encode_scene`] / [`scenario::scene_from_scenario`] for single records, and
+//! [`wosac`] (Waymo Open Sim Agents Challenge submission export).
 //!
 //! **Architecture invariant:** this is the only crate that knows protobuf, TFRecord or
 //! tf.Example. Everything downstream sees [`Scene`] only. It knows nothing about features,
@@ -24,6 +25,7 @@ pub mod fixtures;
 pub mod proto;
 pub mod scenario;
 pub mod tfrecord;
+pub mod wosac;
 
 pub use scenario::{TrackIdOverflow, encode_scene};
 pub use tfrecord::{Record, RecordAt, RecordError, RecordIter, RecordWriter};
