@@ -13,7 +13,7 @@ use scbg_scene::Pose2;
 use scbg_synth::{CURRENT_STEP, GroundTruth, Scenario};
 use serde::Serialize;
 
-use crate::labels::LabelRow;
+use crate::label_table::LabelRow;
 
 /// Key of the pooled entry beside the per-family ones.
 pub const POOLED: &str = "all";

@@ -4,11 +4,8 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
 
 use anyhow::Context;
-use arrow_array::{ArrayRef, Float32Array, Int64Array, RecordBatch, StringArray, UInt32Array};
-use arrow_schema::{DataType, Field, Schema};
 use burn::tensor::Device;
 use rand::SeedableRng;
 use scbg_courtesy::Reward;
@@ -20,6 +17,7 @@ use scbg_synth::GroundTruth;
 use scbg_train::Checkpoint;
 use serde::Serialize;
 
+pub use crate::label_table::{LabelRow, read_label_table, write_label_table};
 use crate::{Progress, ensure_request};
 
 /// The labelled pair roles of one scene of a cache.
@@ -104,148 +102,6 @@ pub fn label_scenes(
         });
     }
     Ok(out)
-}
-
-/// One labelled future of B for target A.
-///
-/// The label table (one Parquet file per cache shard) has one row per future:
-/// `scenario_id, window_step, a_id, b_id, sample, psi, e_marg, e_cond, psi_true` (the last
-/// nullable: only synthetic scenes' ground-truth roles have it).
-#[derive(Debug, Clone, PartialEq)]
-pub struct LabelRow {
-    /// The scenario.
-    pub scenario_id: String,
-    /// The window's current step.
-    pub window_step: u32,
-    /// Track id of A (whose expected reward counts).
-    pub a_id: i64,
-    /// Track id of B (whose future is labelled).
-    pub b_id: i64,
-    /// 0 = logged future, 1.. = sampled from B's marginal prediction.
-    pub sample: u32,
-    /// ψ = e_cond − e_marg (m/s for the average-speed reward).
-    pub psi: f32,
-    /// E[r(Y_A) | x] as estimated.
-    pub e_marg: f32,
-    /// E[r(Y_A) | x, y_B] for this future.
-    pub e_cond: f32,
-    /// ψ_true of this future from the synthetic simulator's oracle (m/s), when known.
-    pub psi_true: Option<f32>,
-}
-
-fn schema() -> Arc<Schema> {
-    Arc::new(Schema::new(vec![
-        Field::new("scenario_id", DataType::Utf8, false),
-        Field::new("window_step", DataType::UInt32, false),
-        Field::new("a_id", DataType::Int64, false),
-        Field::new("b_id", DataType::Int64, false),
-        Field::new("sample", DataType::UInt32, false),
-        Field::new("psi", DataType::Float32, false),
-        Field::new("e_marg", DataType::Float32, false),
-        Field::new("e_cond", DataType::Float32, false),
-        Field::new("psi_true", DataType::Float32, true),
-    ]))
-}
-
-/// Writes the label table as Parquet, atomically.
-pub fn write_label_table(path: &Path, rows: &[LabelRow]) -> anyhow::Result<()> {
-    let schema = schema();
-    let columns: Vec<ArrayRef> = vec![
-        Arc::new(StringArray::from(
-            rows.iter()
-                .map(|r| r.scenario_id.as_str())
-                .collect::<Vec<_>>(),
-        )),
-        Arc::new(UInt32Array::from(
-            rows.iter().map(|r| r.window_step).collect::<Vec<_>>(),
-        )),
-        Arc::new(Int64Array::from(
-            rows.iter().map(|r| r.a_id).collect::<Vec<_>>(),
-        )),
-        Arc::new(Int64Array::from(
-            rows.iter().map(|r| r.b_id).collect::<Vec<_>>(),
-        )),
-        Arc::new(UInt32Array::from(
-            rows.iter().map(|r| r.sample).collect::<Vec<_>>(),
-        )),
-        Arc::new(Float32Array::from(
-            rows.iter().map(|r| r.psi).collect::<Vec<_>>(),
-        )),
-        Arc::new(Float32Array::from(
-            rows.iter().map(|r| r.e_marg).collect::<Vec<_>>(),
-        )),
-        Arc::new(Float32Array::from(
-            rows.iter().map(|r| r.e_cond).collect::<Vec<_>>(),
-        )),
-        Arc::new(Float32Array::from(
-            rows.iter().map(|r| r.psi_true).collect::<Vec<_>>(),
-        )),
-    ];
-    let batch = RecordBatch::try_new(schema.clone(), columns)?;
-    scbg_base::atomic::write_with(path, |file| -> anyhow::Result<()> {
-        let mut writer = parquet::arrow::ArrowWriter::try_new(file, schema, None)?;
-        writer.write(&batch)?;
-        writer.close()?;
-        Ok(())
-    })?;
-    Ok(())
-}
-
-/// Column `name` of a label-table batch as its Arrow array type (a cheap, shared copy); a
-/// missing column or one of another type is an error naming the file and column.
-fn column<T: arrow_array::Array + Clone + 'static>(
-    batch: &RecordBatch,
-    name: &str,
-    path: &Path,
-) -> anyhow::Result<T> {
-    batch
-        .column_by_name(name)
-        .with_context(|| format!("{}: no column {name}", path.display()))?
-        .as_any()
-        .downcast_ref::<T>()
-        .cloned()
-        .with_context(|| format!("{}: column {name} has the wrong type", path.display()))
-}
-
-/// Reads a label table back (resumed shards, summaries, tests); a missing column or a column
-/// of the wrong type is an error naming the file and column.
-pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
-    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let reader =
-        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)?.build()?;
-    let mut rows = Vec::new();
-    for batch in reader {
-        let b = batch?;
-        let ids: StringArray = column(&b, "scenario_id", path)?;
-        let ws: UInt32Array = column(&b, "window_step", path)?;
-        let a: Int64Array = column(&b, "a_id", path)?;
-        let bb: Int64Array = column(&b, "b_id", path)?;
-        let s: UInt32Array = column(&b, "sample", path)?;
-        let psi: Float32Array = column(&b, "psi", path)?;
-        let em: Float32Array = column(&b, "e_marg", path)?;
-        let ec: Float32Array = column(&b, "e_cond", path)?;
-        // Optional: tables written before the oracle existed have no psi_true.
-        let pt: Option<Float32Array> = match b.column_by_name("psi_true") {
-            None => None,
-            Some(_) => Some(column(&b, "psi_true", path)?),
-        };
-        for i in 0..b.num_rows() {
-            rows.push(LabelRow {
-                scenario_id: ids.value(i).to_string(),
-                window_step: ws.value(i),
-                a_id: a.value(i),
-                b_id: bb.value(i),
-                sample: s.value(i),
-                psi: psi.value(i),
-                e_marg: em.value(i),
-                e_cond: ec.value(i),
-                psi_true: pt
-                    .as_ref()
-                    .and_then(|c| arrow_array::Array::is_valid(c, i).then(|| c.value(i))),
-            });
-        }
-    }
-    Ok(rows)
 }
 
 /// Spearman(ψ of the logged y_B with roles (A, B) as in the ground truth, latent courtesy c)

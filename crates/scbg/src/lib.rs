@@ -36,6 +36,7 @@ mod figures;
 pub mod generate;
 pub mod generator;
 pub mod inputs;
+mod label_table;
 pub mod labels;
 pub mod predictor;
 mod progress;
