@@ -25,6 +25,8 @@ mod road_edge;
 mod traffic_light;
 
 #[cfg(test)]
+mod scene_tests;
+#[cfg(test)]
 mod tests;
 
 use std::collections::HashMap;
