@@ -22,6 +22,7 @@ mod geometry;
 mod interaction;
 mod kinematics;
 mod road_edge;
+pub use road_edge::RoadEdges;
 mod traffic_light;
 
 #[cfg(test)]
@@ -36,7 +37,6 @@ use serde::Serialize;
 
 use estimators::HistogramSpec;
 use features::{Features, Objects, Trajectories};
-use road_edge::RoadEdges;
 use traffic_light::TrafficLights;
 
 /// Duration of one step, seconds (10 Hz).

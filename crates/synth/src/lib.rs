@@ -22,9 +22,10 @@ use rand_pcg::Pcg64Mcg;
 use scbg_scene::{PredictionDifficulty, PredictionTarget, Scene};
 
 pub use path::RefPath;
-pub use sim::{STEP_SECS, boxes_overlap};
+pub use families::{A_ID, B_ID, NUM_STEPS};
+pub use sim::{Idm, STEP_SECS, boxes_overlap, closer};
 
-use families::{A_ID, B_ID, BPlan, NUM_STEPS, Run};
+use families::{BPlan, Run};
 
 /// History steps including the current one.
 pub const CURRENT_STEP: usize = 10;
@@ -255,6 +256,10 @@ impl Scenario {
 
     /// B's states along its path: the logged history, then `future` (world frame, one point
     /// per future step) projected onto B's path, speeds by finite differences.
+    ///
+    /// A `future` shorter than the scene's (a closed-loop prefix) is continued at its last
+    /// speed and lateral offset up to [`NUM_STEPS`] states, so a run can use it; every agent's
+    /// state at step `t + 1` depends on B's states up to `t` only.
     fn b_states(
         logged_b: &sim::Agent,
         path: &RefPath,
@@ -276,6 +281,10 @@ impl Scenario {
             };
             let v = (states[b].0 - states[a].0) / ((b - a) as f64 * STEP_SECS);
             states[t].2 = v.max(0.0);
+        }
+        while states.len() < NUM_STEPS {
+            let (s, d, v) = *states.last().expect("the history is there");
+            states.push((s + v * STEP_SECS, d, v));
         }
         states
     }
@@ -448,6 +457,62 @@ impl Oracle<'_> {
     /// ψ_true of `b_future`; see [`Scenario::psi_true`].
     pub fn psi_true(&self, b_future: &[[f64; 2]]) -> Result<f64, OracleError> {
         Ok(self.a_avg_speed_mps(b_future)? - self.expected_a_avg_speed_mps)
+    }
+}
+
+/// The oracle's rule as a closed-loop world ([`Scenario::closed_loop`]): A and the other
+/// agents re-simulated around a B that is driven from outside, step by step.
+#[derive(Debug)]
+pub struct ClosedLoop {
+    scenario: Scenario,
+    logged: Run,
+}
+
+impl ClosedLoop {
+    /// The scenario.
+    pub fn scenario(&self) -> &Scenario {
+        &self.scenario
+    }
+
+    /// Every agent's track ([`NUM_STEPS`] states, in the scene's track order: A, B, the
+    /// others) when B, after its logged history, has been at `b_prefix` (world frame, one
+    /// point per step from [`CURRENT_STEP`]` + 1` on; at most the 80 future steps). The tracks
+    /// of A and the others are exact up to step `CURRENT_STEP + b_prefix.len() + 1` (each
+    /// agent's step `t + 1` depends on B's states up to `t` only); later steps continue B at
+    /// its last speed. B's own track is its prefix projected onto its reference path.
+    pub fn tracks(&self, b_prefix: &[[f64; 2]]) -> Result<Vec<scbg_scene::Track>, OracleError> {
+        let expected = NUM_STEPS - CURRENT_STEP - 1;
+        if b_prefix.len() > expected {
+            return Err(OracleError::Steps {
+                got: b_prefix.len(),
+                expected,
+            });
+        }
+        if let Some(t) = b_prefix
+            .iter()
+            .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
+            return Err(OracleError::NotFinite(t));
+        }
+        let b = &self.logged.agents[1];
+        let states = Scenario::b_states(b, &self.logged.paths[b.path], b_prefix);
+        let run = self.scenario.simulate(BPlan::Replayed(&states));
+        Ok(run
+            .agents
+            .iter()
+            .map(|a| sim::record_track(a, &run.paths, NUM_STEPS))
+            .collect())
+    }
+}
+
+impl Scenario {
+    /// This scenario as a closed-loop world (keeps its logged run).
+    pub fn closed_loop(self) -> ClosedLoop {
+        let logged = self.logged();
+        ClosedLoop {
+            scenario: self,
+            logged,
+        }
     }
 }
 

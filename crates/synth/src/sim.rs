@@ -14,10 +14,15 @@ pub const MAX_JERK_MPS3: f64 = 25.0;
 /// Intelligent Driver Model parameters.
 #[derive(Debug, Clone, Copy)]
 pub struct Idm {
+    /// Speed on a free road, m/s.
     pub desired_speed_mps: f64,
+    /// Maximum acceleration, m/s².
     pub max_accel_mps2: f64,
+    /// Comfortable deceleration, m/s² (positive).
     pub comfort_brake_mps2: f64,
+    /// Desired time headway, s.
     pub time_headway_s: f64,
+    /// Standstill gap, m.
     pub min_gap_m: f64,
 }
 

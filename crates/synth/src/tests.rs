@@ -192,3 +192,40 @@ fn oracle_scores_any_future_and_rejects_bad_ones() {
         Err(OracleError::Mismatch(_))
     ));
 }
+
+#[test]
+fn closed_loop_world_is_causal_and_replays_the_log() {
+    for index in 0..30 {
+        let scenario = Scenario::draw(5, index, &Family::ALL);
+        let logged = scenario.generate();
+        let world = scenario.clone().closed_loop();
+        let b_future: Vec<[f64; 2]> = logged.scene.tracks[1].states[CURRENT_STEP + 1..]
+            .iter()
+            .map(|s| [s.x_m, s.y_m])
+            .collect();
+        let full = world.tracks(&b_future).unwrap();
+        assert_eq!(full.len(), logged.scene.tracks.len());
+        // Replaying the whole logged future reproduces A's logged track closely.
+        let a_err = full[0]
+            .states
+            .iter()
+            .zip(&logged.scene.tracks[0].states)
+            .map(|(p, q)| (p.x_m - q.x_m).hypot(p.y_m - q.y_m))
+            .fold(0.0, f64::max);
+        assert!(a_err < 3.0, "{} A off the log by {a_err} m", logged.scene.scenario_id);
+        // A prefix of k steps fixes every agent other than B up to step CURRENT_STEP + k + 1.
+        for k in [0, 1, 7, 40] {
+            let part = world.tracks(&b_future[..k]).unwrap();
+            for (i, (p, f)) in part.iter().zip(&full).enumerate() {
+                if i == 1 {
+                    continue;
+                }
+                let last = CURRENT_STEP + k + 1;
+                assert_eq!(p.states[..=last], f.states[..=last], "track {i}, prefix {k}");
+            }
+        }
+    }
+    let world = Scenario::draw(5, 0, &Family::ALL).closed_loop();
+    assert!(world.tracks(&vec![[0.0, 0.0]; 81]).is_err());
+    assert!(world.tracks(&[[f64::NAN, 0.0]]).is_err());
+}

@@ -34,7 +34,7 @@ impl Chunk {
 
 /// The road-edge polylines of a map as flat segments (float32, 3-D).
 #[derive(Debug, Clone)]
-pub(crate) struct RoadEdges {
+pub struct RoadEdges {
     /// Segment start points.
     start: Vec<[f32; 3]>,
     /// Segment vectors `b − a`.

@@ -1,0 +1,150 @@
+//! Closed-loop simulations of synthetic scenes: the log reproduced, errors named, limits kept.
+
+use scbg_scene::Scene;
+use scbg_synth::{A_ID, B_ID, Family, Scenario};
+
+use super::*;
+
+/// Plans what the log says the agent did next, from the step the simulation is at (plans
+/// are made every `every` steps from step 10).
+struct LogPlanner<'a> {
+    log: &'a Scene,
+    every: usize,
+    calls: usize,
+}
+
+impl Planner for LogPlanner<'_> {
+    fn plan(&mut self, _view: &Scene, agent_id: i64) -> Result<Vec<[f64; 2]>, PlanError> {
+        let step = 10 + self.calls * self.every;
+        self.calls += 1;
+        let states = &self.log.tracks[self.log.track_index(agent_id).unwrap()].states;
+        Ok((1..=HORIZON_STEPS)
+            .map(|k| {
+                let s = &states[(step + k).min(states.len() - 1)];
+                [s.x_m, s.y_m]
+            })
+            .collect())
+    }
+}
+
+struct Failing;
+
+impl Planner for Failing {
+    fn plan(&mut self, _: &Scene, _: i64) -> Result<Vec<[f64; 2]>, PlanError> {
+        Err(PlanError("no model".into()))
+    }
+}
+
+fn max_distance(a: &[scbg_scene::AgentState], b: &[scbg_scene::AgentState]) -> f64 {
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| (p.x_m - q.x_m).hypot(p.y_m - q.y_m))
+        .fold(0.0, f64::max)
+}
+
+#[test]
+fn following_the_logged_plan_reproduces_the_synthetic_log() {
+    let reactive = SimConfig {
+        others: OthersMode::Reactive,
+        ..SimConfig::default()
+    };
+    let (mut worst_b, mut worst_a) = (0.0f64, 0.0f64);
+    for index in 0..12 {
+        let scenario = Scenario::draw(3, index, &Family::ALL);
+        let log = scenario.generate().scene;
+        let mut sim =
+            Simulation::reset(&log, None, &[B_ID], reactive, Some(scenario.clone().closed_loop()))
+                .unwrap();
+        assert_eq!(sim.ego_id(), A_ID);
+        let mut planner = LogPlanner {
+            log: &log,
+            every: 10,
+            calls: 0,
+        };
+        sim.run(&mut planner).unwrap();
+        assert_eq!(planner.calls, HORIZON_STEPS / 10);
+        let out = sim.to_scene();
+        out.validate().unwrap();
+        assert_eq!(out.num_steps(), 91);
+        assert_eq!(out.tracks[0].states[..=10], log.tracks[0].states[..=10]);
+        worst_b = worst_b.max(max_distance(&out.tracks[1].states, &log.tracks[1].states));
+        worst_a = worst_a.max(max_distance(&out.tracks[0].states, &log.tracks[0].states));
+        assert!(matches!(sim.step(&mut planner, None), Err(SimError::Finished)));
+    }
+    // B's bicycle lags a little behind the log's hardest braking (−7 m/s² at highway speed).
+    assert!(worst_b < 2.0, "B strays {worst_b} m from its logged future");
+    assert!(worst_a < 2.0, "A strays {worst_a} m from its logged future");
+}
+
+#[test]
+fn idm_world_and_external_ego() {
+    let log = scbg_synth::generate(4, 1, &Family::ALL).scene;
+    // IDM for everyone but B; B follows its log.
+    let config = SimConfig {
+        others: OthersMode::Reactive,
+        replan_every: 1,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulation::reset(&log, None, &[B_ID], config, None).unwrap();
+    let mut planner = LogPlanner {
+        log: &log,
+        every: 1,
+        calls: 0,
+    };
+    sim.run(&mut planner).unwrap();
+    assert_eq!(planner.calls, HORIZON_STEPS);
+    let out = sim.to_scene();
+    let m = agent_metrics(&out, 0, None);
+    assert!(m.avg_speed_mps > 1.0 && m.valid_steps == HORIZON_STEPS);
+    // The ego driven from outside along its log follows it exactly.
+    let config = SimConfig {
+        ego: EgoMode::External,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulation::reset(&log, Some(A_ID), &[B_ID], config, None).unwrap();
+    planner.calls = 0;
+    planner.every = 10;
+    assert!(matches!(
+        sim.step(&mut planner, None),
+        Err(SimError::EgoState(_))
+    ));
+    assert_eq!(sim.step_index(), 10);
+    let mut bad = log.tracks[0].states[11];
+    bad.x_m = f64::NAN;
+    assert!(sim.step(&mut planner, Some(bad)).is_err());
+    for t in 11..=90 {
+        let snap = sim.step(&mut planner, Some(log.tracks[0].states[t])).unwrap();
+        assert_eq!(snap[0].state, log.tracks[0].states[t]);
+    }
+}
+
+#[test]
+fn bad_requests_name_what_is_wrong() {
+    let log = scbg_synth::generate(4, 2, &Family::ALL).scene;
+    let c = SimConfig::default();
+    let err = |r: Result<Simulation, SimError>| r.unwrap_err().to_string();
+    assert!(err(Simulation::reset(&log, None, &[999], c, None)).contains("no agent with id 999"));
+    assert!(err(Simulation::reset(&log, None, &[A_ID], c, None)).contains("is the ego"));
+    assert!(err(Simulation::reset(&log, None, &[B_ID, B_ID], c, None)).contains("twice"));
+    let zero = SimConfig {
+        replan_every: 0,
+        ..c
+    };
+    assert!(err(Simulation::reset(&log, None, &[B_ID], zero, None)).contains("replan_every"));
+    let mut short = log.clone();
+    short.current_step = 5;
+    assert!(err(Simulation::reset(&short, None, &[B_ID], c, None)).contains("history steps"));
+    let mut invalid = log.clone();
+    invalid.tracks[1].states[10].valid = false;
+    assert!(
+        err(Simulation::reset(&invalid, None, &[B_ID], c, None))
+            .contains("not valid at the current step 10")
+    );
+    let other = Scenario::draw(4, 3, &Family::ALL).closed_loop();
+    assert!(err(Simulation::reset(&log, None, &[B_ID], c, Some(other))).contains("not this"));
+    // A failing planner leaves the simulation where it was.
+    let mut sim = Simulation::reset(&log, None, &[B_ID], c, None).unwrap();
+    let e = sim.step(&mut Failing, None).unwrap_err().to_string();
+    assert!(e.contains("agent 202") && e.contains("no model"), "{e}");
+    assert_eq!(sim.step_index(), 10);
+}
