@@ -33,6 +33,9 @@ pub enum Command {
     Train(TrainCommand),
     /// Generate B's future at a chosen courtesy quantile for a pair in a WOMD scenario file.
     Generate(GenerateArgs),
+    /// Closed-loop simulation: courtesy-controlled agents re-planned by the generator, A and
+    /// the others reactive; rollouts exported as Scenario TFRecords or a WOSAC shard.
+    Sim(SimArgs),
     /// Evaluate models and predictions.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -64,6 +67,9 @@ pub struct DemoArgs {
     /// Weight β of the courtesy loss (in units of the labels' ψ spread) for the full variant.
     #[arg(long, default_value_t = 1.0)]
     pub beta: f32,
+    /// Held-out scenes of the closed-loop stage (0 skips it).
+    #[arg(long, default_value_t = 60)]
+    pub closed_loop_scenes: usize,
     #[command(flatten)]
     pub estimator: EstimatorArgs,
     #[arg(long, default_value_t = 0)]
@@ -189,6 +195,114 @@ pub enum EvalCommand {
     /// Evaluate SCBG generator variants: CourtesyMSE, TrajADE, correlation (paper Table II,
     /// Figs. 4 and 5).
     Scbg(EvalScbgArgs),
+    /// The courtesy knob in closed loop: realised courtesy, A's speed, B's collisions and
+    /// off-road, WOSAC realism per quantile, beside log replay, constant velocity and IDM.
+    Sim(EvalSimArgs),
+}
+
+/// Closed-loop settings shared by `sim` and `eval sim`.
+#[derive(Debug, Clone, Args)]
+pub struct LoopArgs {
+    /// Steps between the generator's plans (1..=80).
+    #[arg(long, default_value_t = 10)]
+    pub replan_every: usize,
+    /// How A (the ego) moves.
+    #[arg(long, value_enum, default_value_t = scbg::sim::EgoMode::Reactive)]
+    pub ego: scbg::sim::EgoMode,
+    /// How the agents that are neither A nor controlled move.
+    #[arg(long, value_enum)]
+    pub others: Option<scbg::sim::OthersMode>,
+    /// Follow the plans without the safety guard (no cap by IDM toward agents ahead or
+    /// crossing conflicts).
+    #[arg(long)]
+    pub no_safety_guard: bool,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct SimArgs {
+    /// Generator folder (`scbg train generator --out`, or a demo's `generator_full_s0`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
+    /// WOMD Scenario TFRecord file.
+    #[arg(long)]
+    pub scenario: PathBuf,
+    /// Which scenario of the file (default: the first with A and B).
+    #[arg(long)]
+    pub scenario_id: Option<String>,
+    /// Track id of A, the ego.
+    #[arg(long)]
+    pub a: i64,
+    /// Track id of B, the controlled agent.
+    #[arg(long)]
+    pub b: i64,
+    /// B's courtesy quantile in [0, 1].
+    #[arg(long, default_value_t = 0.5, conflicts_with = "psi")]
+    pub quantile: f32,
+    /// B's explicit ψ instead of a quantile.
+    #[arg(long, allow_negative_numbers = true)]
+    pub psi: Option<f32>,
+    /// More controlled agents, each `ID=QUANTILE` (courteous toward A too).
+    #[arg(long, num_args = 1..)]
+    pub also: Vec<String>,
+    #[command(flatten)]
+    pub loop_args: LoopArgs,
+    /// Synthetic ground truth (default: ground_truth.jsonl beside the file, if it has the
+    /// scenario): the synthetic world's rule is the reactive one.
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
+    /// Reactive agents use IDM even on a synthetic scene.
+    #[arg(long)]
+    pub no_synthetic_world: bool,
+    /// Rollouts (default 1; 32 for --format wosac), spread over a band of quantiles.
+    #[arg(long)]
+    pub rollouts: Option<usize>,
+    /// Width of that band.
+    #[arg(long, default_value_t = 0.2)]
+    pub spread: f32,
+    /// Output folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// `scenario` (rollouts.tfrecord) or `wosac` (NAME.binproto-00000-of-00001).
+    #[arg(long, value_enum, default_value_t = scbg::sim::ExportFormat::Scenario)]
+    pub format: scbg::sim::ExportFormat,
+    /// Method name of the WOSAC submission.
+    #[arg(long, default_value = "scbg")]
+    pub name: String,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct EvalSimArgs {
+    /// Generator folder.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
+    /// WOMD Scenario files (globs, folders or paths).
+    #[arg(long, required = true, num_args = 1..)]
+    pub data: Vec<String>,
+    /// Synthetic ground truth (ground_truth.jsonl): the synthetic rule drives A and the others.
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
+    /// Scenes on the validation split (by scenario id, as in training) or all.
+    #[arg(long, value_enum, default_value_t = SplitSelection::Validation)]
+    pub split: SplitSelection,
+    /// Scenes of the courtesy curve.
+    #[arg(long, default_value_t = 40)]
+    pub scenes: usize,
+    /// Scenes scored with WOSAC realism (32 rollouts per quantile and baseline).
+    #[arg(long, default_value_t = 8)]
+    pub wosac_scenes: usize,
+    #[command(flatten)]
+    pub loop_args: LoopArgs,
+    /// Output folder (eval_sim.json, sim_courtesy.png, sim_realism.png).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -384,6 +498,18 @@ pub enum BenchCommand {
     Train(BenchTrainArgs),
     /// WOSAC realism metric time for one scenario × 32 rollouts (1 thread).
     Wosac(BenchWosacArgs),
+    /// Closed-loop rollout time with one generator agent, and WOSAC of 32 rollouts (1 thread).
+    Sim(BenchSimArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchSimArgs {
+    /// Generator folder (e.g. a demo's `generator_full_s0`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Synthetic scenes to time.
+    #[arg(long, default_value_t = 12)]
+    pub scenes: usize,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -27,6 +27,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     epochs: a.epochs,
                     generator_epochs: a.generator_epochs,
                     generator_seeds: a.generator_seeds,
+                    closed_loop_scenes: a.closed_loop_scenes,
                     beta: a.beta,
                     labels,
                     seed: a.seed,
@@ -95,6 +96,35 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 "{}",
                 scbg::bench::wosac(a.file.as_deref(), a.repeats)?.to_text()
             );
+        }
+        Command::Bench(BenchCommand::Sim(a)) => {
+            let model = scbg::generator::load_scbg(&a.model, None)?;
+            print!("{}", scbg::bench::sim(&model, a.scenes)?.to_text());
+            println!();
+        }
+        Command::Sim(a) => sim(&a, progress)?,
+        Command::Eval(EvalCommand::Sim(a)) => {
+            let options = scbg::sim_eval::SimEvalOptions {
+                scenes: a.scenes,
+                wosac_scenes: a.wosac_scenes,
+                config: loop_config(&a.loop_args, scbg::sim::OthersMode::Reactive),
+                ..Default::default()
+            };
+            let eval = scbg::sim_eval::eval_sim_files(
+                &a.model,
+                a.predictor.as_deref(),
+                &a.data,
+                a.ground_truth.as_deref(),
+                a.split,
+                &options,
+                &a.out,
+                progress,
+            )?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&eval)?);
+            } else {
+                print_sim_eval(&eval);
+            }
         }
         Command::Bench(BenchCommand::Train(a)) => {
             let bench = scbg::bench::train(&a.presets, a.batch, a.steps, &a.backend)?;
@@ -186,6 +216,131 @@ pub fn run(command: Command) -> anyhow::Result<()> {
 }
 
 /// The labelling options of `--marginal` and `--sample-noise`.
+fn loop_config(a: &crate::cli::LoopArgs, others: scbg::sim::OthersMode) -> scbg::sim::SimConfig {
+    scbg::sim::SimConfig {
+        replan_every: a.replan_every,
+        ego: a.ego,
+        others: a.others.unwrap_or(others),
+        safety_guard: !a.no_safety_guard,
+        ..Default::default()
+    }
+}
+
+fn sim(a: &crate::cli::SimArgs, progress: &dyn Progress) -> anyhow::Result<()> {
+    use scbg::sim::ControlledAgent;
+    let mut controlled = vec![ControlledAgent {
+        id: a.b,
+        courtesy: match a.psi {
+            Some(p) => Courtesy::Psi(p),
+            None => Courtesy::Quantile(a.quantile),
+        },
+    }];
+    for also in &a.also {
+        let (id, q) = also
+            .split_once('=')
+            .with_context(|| format!("--also {also:?}: expected ID=QUANTILE"))?;
+        controlled.push(ControlledAgent {
+            id: id
+                .trim()
+                .parse()
+                .with_context(|| format!("--also {also:?}: {id:?} is not a track id"))?,
+            courtesy: Courtesy::Quantile(
+                q.trim()
+                    .parse()
+                    .with_context(|| format!("--also {also:?}: {q:?} is not a quantile"))?,
+            ),
+        });
+    }
+    let rollouts = a.rollouts.unwrap_or(match a.format {
+        scbg::sim::ExportFormat::Wosac => 32,
+        scbg::sim::ExportFormat::Scenario => 1,
+    });
+    let out = scbg::sim::run_sim(
+        &scbg::sim::SimRun {
+            model: a.model.clone(),
+            predictor: a.predictor.clone(),
+            scenario: a.scenario.clone(),
+            scenario_id: a.scenario_id.clone(),
+            ego: a.a,
+            controlled,
+            config: loop_config(&a.loop_args, scbg::sim::OthersMode::Log),
+            ground_truth: a.ground_truth.clone(),
+            no_synthetic_world: a.no_synthetic_world,
+            rollouts,
+            spread: a.spread,
+            out: a.out.clone(),
+            format: a.format,
+            name: a.name.clone(),
+        },
+        progress,
+    )?;
+    let r = &out.reports[0];
+    eprintln!(
+        "{}: {} rollout(s){}; A's realised average speed {:.2} m/s; B collision {}, off-road {}",
+        out.scenario_id,
+        out.reports.len(),
+        if out.synthetic_world {
+            " in the synthetic world"
+        } else {
+            " (IDM world)"
+        },
+        r.ego.avg_speed_mps,
+        r.controlled[0].collision,
+        r.controlled[0]
+            .offroad
+            .map_or("n/a".into(), |o| o.to_string()),
+    );
+    for f in &out.files {
+        eprintln!("wrote {}", f.display());
+    }
+    Ok(())
+}
+
+fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
+    println!(
+        "closed loop, {} scenes, re-plan every {} steps ({:.0} ms per rollout, {:.0} s)",
+        e.scenes, e.replan_every, e.rollout_ms, e.seconds
+    );
+    println!("quantile  A speed m/s  realised courtesy  B collision  B off-road  WOSAC meta");
+    for r in &e.per_quantile {
+        println!(
+            "{:8.1}  {:11.2}  {:17.3}  {:11.3}  {:10.3}  {}",
+            r.quantile,
+            r.a_avg_speed_mps,
+            r.realised_courtesy_mps,
+            r.b_collision_rate,
+            r.b_offroad_rate,
+            r.wosac
+                .as_ref()
+                .map_or("-".into(), |w| format!("{:.4}", w.metametric))
+        );
+    }
+    for (name, b) in &e.baselines {
+        println!(
+            "{name:>18}: A speed {:.2} m/s, B collision {:.3}, WOSAC meta {}",
+            b.a_avg_speed_mps,
+            b.b_collision_rate,
+            b.wosac
+                .as_ref()
+                .map_or("-".into(), |w| format!("{:.4}", w.metametric))
+        );
+    }
+    let fmt = |m: &scbg::sim_eval::PerFamily| {
+        m.iter()
+            .map(|(k, v)| format!("{k} {}", v.map_or("-".into(), |v| format!("{v:.3}"))))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    println!(
+        "Spearman(quantile, A speed): {}",
+        fmt(&e.spearman_quantile_a_speed)
+    );
+    println!(
+        "Spearman(quantile, realised courtesy): {}",
+        fmt(&e.spearman_quantile_realised_courtesy)
+    );
+}
+
 fn label_options(
     estimator: &EstimatorArgs,
     samples: usize,

@@ -37,7 +37,7 @@ pub struct Measured {
     pub futures_b: Vec<Vec<Vec<[f32; 2]>>>,
 }
 
-fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
+pub(crate) fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
     t.into_data().try_to_vec::<f32>().expect("f32 tensor")
 }
 

@@ -107,24 +107,7 @@ impl Scbg {
         courtesy: &[Courtesy],
         device: &Device,
     ) -> Result<Vec<Generated>, GenerateError> {
-        if a_id == b_id {
-            return Err(GenerateError::SameTrack(a_id));
-        }
-        for c in courtesy {
-            match *c {
-                Courtesy::Quantile(q) if !(0.0..=1.0).contains(&q) => {
-                    return Err(GenerateError::Quantile(q));
-                }
-                Courtesy::Psi(p) if !p.is_finite() => return Err(GenerateError::Psi(p)),
-                _ => {}
-            }
-        }
-        let index = |id: i64| {
-            scene
-                .track_index(id)
-                .ok_or_else(|| GenerateError::NoSuchTrack(id, scene.scenario_id.clone()))
-        };
-        let (ia, ib) = (index(a_id)?, index(b_id)?);
+        let (ia, ib) = check_request(scene, a_id, b_id, courtesy)?;
         let mut builder = SampleBuilder::new(scene, &self.features);
         let mut a = builder
             .sample(window, ia, Some(ib))
@@ -194,6 +177,94 @@ impl Scbg {
                     })
                     .collect(),
                 step_secs: crate::train::STEP_SECS,
+            })
+            .collect())
+    }
+}
+
+/// Checks a request (distinct tracks that exist, quantiles in [0, 1], finite ψ): the track
+/// indices of A and B.
+fn check_request(
+    scene: &PreparedScene,
+    a_id: i64,
+    b_id: i64,
+    courtesy: &[Courtesy],
+) -> Result<(usize, usize), GenerateError> {
+    if a_id == b_id {
+        return Err(GenerateError::SameTrack(a_id));
+    }
+    for c in courtesy {
+        match *c {
+            Courtesy::Quantile(q) if !(0.0..=1.0).contains(&q) => {
+                return Err(GenerateError::Quantile(q));
+            }
+            Courtesy::Psi(p) if !p.is_finite() => return Err(GenerateError::Psi(p)),
+            _ => {}
+        }
+    }
+    let index = |id: i64| {
+        scene
+            .track_index(id)
+            .ok_or_else(|| GenerateError::NoSuchTrack(id, scene.scenario_id.clone()))
+    };
+    Ok((index(a_id)?, index(b_id)?))
+}
+
+impl Scbg {
+    /// B's future only (world frame, 80 points at 10 Hz), for closed-loop planning: the
+    /// encoder, the range predictor and the generator, without J_φ's measurement of the
+    /// achieved ψ (which [`Scbg::generate`] adds). A must be a track valid at the window's
+    /// current step; the same future as `generate` gives for the same request.
+    pub fn plan(
+        &self,
+        scene: &PreparedScene,
+        window: &Window,
+        a_id: i64,
+        b_id: i64,
+        courtesy: Courtesy,
+        device: &Device,
+    ) -> Result<Vec<[f64; 2]>, GenerateError> {
+        let (ia, ib) = check_request(scene, a_id, b_id, &[courtesy])?;
+        let now = window.current_step;
+        if !scene.tracks[ia].valid_at(now as isize) {
+            return Err(GenerateError::Sample {
+                id: a_id,
+                error: SampleError::TargetInvalidNow {
+                    track_id: a_id,
+                    step: now,
+                },
+            });
+        }
+        let mut b = SampleBuilder::new(scene, &self.features)
+            .sample(window, ib, None)
+            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
+        self.stats.normalize(&mut b);
+        let embedding = marginal_embedding(&self.predictor, &b, device);
+        let e = embedding.len();
+        let embedding = burn::tensor::Tensor::from_data(
+            burn::tensor::TensorData::new(embedding, [1, e]),
+            device,
+        );
+        let psi = match courtesy {
+            Courtesy::Psi(p) => p,
+            Courtesy::Quantile(q) => {
+                let (low, high) = self.range.forward(embedding.clone());
+                let low = crate::eval::to_vec(low)[0];
+                let high = crate::eval::to_vec(high)[0];
+                psi_for_quantile(q, low, high)
+            }
+        };
+        let future = self.generator.forward(
+            embedding,
+            burn::tensor::Tensor::from_data(burn::tensor::TensorData::new(vec![psi], [1]), device),
+        );
+        let xy = crate::eval::to_vec(future);
+        let pose = b.world_from_agent;
+        Ok(xy
+            .chunks_exact(2)
+            .map(|p| {
+                let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
+                [x, y]
             })
             .collect())
     }

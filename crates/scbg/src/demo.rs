@@ -50,6 +50,9 @@ pub struct DemoOptions {
     pub beta: f32,
     /// How courtesy is labelled (8 sampled futures per pair role by default).
     pub labels: LabelOptions,
+    /// Held-out scenes of the closed-loop stage (0 skips it); WOSAC realism is scored on up
+    /// to 10 of them.
+    pub closed_loop_scenes: usize,
     /// Seed of everything.
     pub seed: u64,
 }
@@ -127,6 +130,10 @@ pub struct DemoReport {
     pub truth_control_seed_std: serde_json::Value,
     /// The evaluation's settings and figures.
     pub scbg_eval: ScbgEvalSummary,
+    /// The closed-loop stage (full variant, first seed, held-out scenes): realised courtesy,
+    /// A's speed, B's collisions and off-road per quantile, WOSAC realism beside log replay,
+    /// constant velocity and IDM-only agents; `null` when skipped.
+    pub closed_loop: Option<crate::sim_eval::SimEval>,
     /// Acceptance checks: key → passed.
     pub checks: BTreeMap<&'static str, bool>,
     /// Training time of each generator variant of the first seed, seconds.
@@ -152,7 +159,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     let out = &options.out;
     std::fs::create_dir_all(out.join("figures"))
         .with_context(|| format!("creating {}", out.display()))?;
-    let total = 8;
+    let total = 9;
     let stage = |n: usize, what: &str| progress.note(&format!("\n[{n}/{total}] {what}"));
     let inputs: Vec<String> = if options.data.is_empty() {
         stage(
@@ -361,6 +368,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 ScbgEval::not_evaluated(why)
             })
     };
+    let generators_trained = skipped.is_none();
     let per_seed: Vec<ScbgEval> = match skipped {
         Some(why) => vec![ScbgEval::not_evaluated(why)],
         None => std::thread::scope(|scope| {
@@ -392,7 +400,57 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             .collect::<Vec<_>>(),
     );
 
-    stage(8, "writing figures and the report");
+    let closed_loop = if options.closed_loop_scenes == 0 || !generators_trained {
+        None
+    } else {
+        stage(
+            8,
+            "closed loop: the full generator drives B among reactive agents on held-out scenes (realised courtesy, WOSAC realism)",
+        );
+        let run = || -> anyhow::Result<crate::sim_eval::SimEval> {
+            let dir = out.join(generator_dir_name(Variant::Full, 0));
+            let model = load_scbg(&dir, None)?;
+            let (scenes, _) = crate::sim_eval::load_scenes(
+                &inputs,
+                truth.as_deref(),
+                crate::predictor::SplitSelection::Validation,
+                vf,
+                options.closed_loop_scenes,
+            )?;
+            let eval = crate::sim_eval::evaluate_sim(
+                &model,
+                &scenes,
+                &crate::sim_eval::SimEvalOptions {
+                    scenes: options.closed_loop_scenes,
+                    wosac_scenes: options.closed_loop_scenes.min(10),
+                    ..Default::default()
+                },
+            )?;
+            crate::sim_eval::write_figures(&eval, &out.join("figures"))?;
+            Ok(eval)
+        };
+        match run() {
+            Ok(eval) => {
+                progress.note(&format!(
+                    "closed loop: {} scenes in {:.0} s; Spearman(quantile, A's speed) {}",
+                    eval.scenes,
+                    eval.seconds,
+                    eval.spearman_quantile_a_speed
+                        .get("all")
+                        .copied()
+                        .flatten()
+                        .map_or("-".into(), |r| format!("{r:.3}"))
+                ));
+                Some(eval)
+            }
+            Err(err) => {
+                progress.note(&format!("the closed-loop stage failed: {err:#}"));
+                None
+            }
+        }
+    };
+
+    stage(9, "writing figures and the report");
     let first_file = crate::inputs::expand(&inputs)?
         .into_iter()
         .next()
@@ -408,7 +466,12 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     let fidelity = truth
         .as_deref()
         .and_then(|t| crate::fidelity::fidelity(&held_out_rows, t));
-    let check_list = acceptance_checks(&variants_mean, &truth_mean, fidelity.as_ref());
+    let check_list = acceptance_checks(
+        &variants_mean,
+        &truth_mean,
+        fidelity.as_ref(),
+        closed_loop.as_ref(),
+    );
     let report = DemoReport {
         data: DataReport {
             inputs,
@@ -443,6 +506,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             psi_max: scbg.psi_range.1,
             figures: scbg.figures.clone(),
         },
+        closed_loop,
         checks: check_list.iter().map(|c| (c.key, c.passed)).collect(),
         generator_seconds,
         generator_stage_seconds,
@@ -482,6 +546,7 @@ impl DemoReport {
              ### Fig. 4 — input quantile → courtesy of the generated trajectory\n\n![fig4](figures/fig4_quantile_courtesy.png)\n\n\
              ### Fig. 5a — B generated at quantiles 0.1…0.9 (full variant), A's logged future in red\n\n{}\n\
              ### Fig. 5b — A's expected speed vs quantile\n\n![fig5b](figures/fig5b_quantile_speed.png)\n\n\
+             ## Closed loop (beyond the paper)\n\n{}\n\
              ![scene](figures/scene.png)\n\nRun time: {:.0} s.\n",
             self.data.scenarios,
             self.data.windows,
@@ -522,6 +587,9 @@ impl DemoReport {
                 .collect::<Vec<_>>()
                 .join("\n"),
             fig5a,
+            self.closed_loop
+                .as_ref()
+                .map_or("(skipped)\n".to_string(), closed_loop_markdown),
             self.seconds
         )
     }
@@ -613,6 +681,61 @@ impl DemoReport {
 
 /// The directory of a generator variant of seed number `k` (the first seed keeps the plain
 /// `generator_<variant>` name).
+/// The closed-loop section of report.md.
+fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
+    let meta = |w: Option<&crate::sim_eval::WosacSummary>| {
+        w.map_or("-".into(), |w| {
+            format!(
+                "{:.4} | {:.3} | {:.3} | {:.3} | {:.3}",
+                w.metametric, w.kinematic, w.interactive, w.map_based, w.collision_rate
+            )
+        })
+    };
+    let mut out = format!(
+        "The full generator drives B (re-planning every {} steps from the simulated history, kinematic bicycle with a safety guard) among reactive agents (the synthetic world's rule) on {} held-out scenes.\n\n\
+         | quantile | A's realised speed (m/s) | realised courtesy (m/s) | B collision | B off-road | WOSAC meta | kinematic | interactive | map | collision rate |\n|---|---|---|---|---|---|---|---|---|---|\n",
+        c.replan_every, c.scenes
+    );
+    for r in &c.per_quantile {
+        out += &format!(
+            "| {:.1} | {:.2} ± {:.2} | {:.3} ± {:.3} | {:.3} | {:.3} | {} |\n",
+            r.quantile,
+            r.a_avg_speed_mps,
+            r.a_avg_speed_std_mps,
+            r.realised_courtesy_mps,
+            r.realised_courtesy_std_mps,
+            r.b_collision_rate,
+            r.b_offroad_rate,
+            r.wosac
+                .as_ref()
+                .map_or("- | - | - | - | -".into(), |w| meta(Some(w)))
+        );
+    }
+    for (name, b) in &c.baselines {
+        out += &format!(
+            "| {name} | {:.2} | – | {:.3} | {:.3} | {} |\n",
+            b.a_avg_speed_mps,
+            b.b_collision_rate,
+            b.b_offroad_rate,
+            meta(b.wosac.as_ref())
+        );
+    }
+    let fmt = |m: &crate::sim_eval::PerFamily| {
+        m.iter()
+            .map(|(k, v)| format!("{k} {}", v.map_or("-".into(), |v| format!("{v:.3}"))))
+            .collect::<Vec<_>>()
+            .join(", ")
+    };
+    out += &format!(
+        "\nSpearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. scbg WOSAC over its quantiles: {}.\n\n\
+         ![closed-loop courtesy](figures/sim_courtesy.png)\n![closed-loop realism](figures/sim_realism.png)\n",
+        fmt(&c.spearman_quantile_a_speed),
+        fmt(&c.spearman_quantile_realised_courtesy),
+        meta(c.wosac_scbg.as_ref())
+    );
+    out
+}
+
 fn generator_dir_name(variant: Variant, k: usize) -> String {
     if k == 0 {
         format!("generator_{}", variant.name())

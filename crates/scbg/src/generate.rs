@@ -89,6 +89,33 @@ pub fn generate(
     })
 }
 
+/// B's future only (80 world-frame points after the scene's current step) at one courtesy:
+/// what a closed-loop planner needs, without measuring the achieved ψ (see
+/// `scbg_generator::Scbg::plan`).
+pub fn plan(
+    model: &LoadedScbg,
+    scene: &Scene,
+    a: i64,
+    b: i64,
+    courtesy: Courtesy,
+) -> anyhow::Result<Vec<[f64; 2]>> {
+    let prepared = scbg_features::PreparedScene::for_inference(
+        scene,
+        &scbg_features::WindowConfig::default(),
+        ROAD_SUBSAMPLE,
+    );
+    let window = prepared.windows.first().ok_or_else(|| {
+        anyhow::Error::new(InvalidRequest(format!(
+            "scenario {}: too short for one window (11 history steps)",
+            scene.scenario_id
+        )))
+    })?;
+    model
+        .scbg
+        .plan(&prepared, window, a, b, courtesy, &model.device)
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+}
+
 /// Draws the scene with B's generated futures (A and B highlighted) as a PNG.
 pub fn render_generation(scene: &Scene, generation: &Generation, png: &Path) -> anyhow::Result<()> {
     let index = |id: i64| {

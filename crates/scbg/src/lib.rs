@@ -15,6 +15,8 @@
 //! | [`generator`] | generator + range predictor training, the generator artefact, loading | eq. (1), Sec. III-D |
 //! | [`generate`] | B's world-frame future at a courtesy quantile or ψ | Sec. III-E |
 //! | [`scbg_eval`] | CourtesyMSE, TrajADE, correlations, Figs. 4–5 | Table II, Figs. 4–5 |
+//! | [`sim`] | closed-loop simulation with courtesy-controlled agents, WOSAC rollouts, export | beyond the paper |
+//! | [`sim_eval`] | realised courtesy and WOSAC realism against the quantile, with baselines | beyond the paper |
 //! | [`demo`] | the whole pipeline with report.md / report.json | — |
 //! | [`bench`] | throughput measurements | — |
 //!
@@ -41,6 +43,8 @@ pub mod labels;
 pub mod predictor;
 mod progress;
 pub mod scbg_eval;
+pub mod sim;
+pub mod sim_eval;
 pub mod synth;
 
 pub use progress::{Bar, Progress, Quiet};

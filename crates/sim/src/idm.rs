@@ -19,7 +19,7 @@ use crate::kinematics::STEP_SECS;
 
 const LOOKAHEAD_M: f64 = 60.0;
 const EXTENSION_M: f64 = 150.0;
-const PATH_STEP_M: f64 = 0.5;
+const PATH_STEP_M: f64 = 1.0;
 
 /// One agent moving along its logged path under IDM.
 #[derive(Debug, Clone)]
@@ -36,7 +36,9 @@ pub struct IdmAgent {
     accel_mps2: f64,
 }
 
-fn polyline_path(points: &[[f64; 2]], heading_rad: f64) -> RefPath {
+/// A path through `points` (closer than 0.1 m merged), continued straight for 150 m; a
+/// straight 150 m along `heading_rad` when they span under 1 m.
+pub(crate) fn polyline_path(points: &[[f64; 2]], heading_rad: f64) -> RefPath {
     let mut pts: Vec<[f64; 2]> = Vec::with_capacity(points.len() + 1);
     for &p in points {
         if pts
@@ -64,7 +66,10 @@ fn polyline_path(points: &[[f64; 2]], heading_rad: f64) -> RefPath {
     RefPath::from_fn(logged + EXTENSION_M, PATH_STEP_M, move |s| {
         if s >= logged {
             let e = s - logged;
-            return (pts[n - 1][0] + e * end_dir[0], pts[n - 1][1] + e * end_dir[1]);
+            return (
+                pts[n - 1][0] + e * end_dir[0],
+                pts[n - 1][1] + e * end_dir[1],
+            );
         }
         let i = cum.partition_point(|&c| c <= s).clamp(1, n - 1);
         let t = (s - cum[i - 1]) / (cum[i] - cum[i - 1]);
@@ -73,6 +78,75 @@ fn polyline_path(points: &[[f64; 2]], heading_rad: f64) -> RefPath {
             pts[i - 1][1] + t * (pts[i][1] - pts[i - 1][1]),
         )
     })
+}
+
+/// The closest leader of an agent at `(s_m, d_m)` on `path` among `others` (the leader rule
+/// of the module docs): `(bumper gap m, speed along the path m/s)`.
+pub(crate) fn leader_on_path(
+    path: &RefPath,
+    s_m: f64,
+    d_m: f64,
+    me: &AgentState,
+    others: &[&AgentState],
+) -> Option<(f64, f64)> {
+    let mut best: Option<(f64, f64)> = None;
+    let (sn, cs) = f64::from(me.heading_rad).sin_cos();
+    for o in others {
+        let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
+        // Far away or behind (along the agent's heading): never a leader.
+        if dx.hypot(dy) > LOOKAHEAD_M + 10.0 || dx * cs + dy * sn < -5.0 {
+            continue;
+        }
+        // The projection searches ±40 m around its hint: centred so it covers the lookahead.
+        let (s, d) = path.project(o.x_m, o.y_m, Some(s_m + 25.0));
+        let ahead = s - s_m;
+        let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
+        if ahead <= 0.0 || ahead > LOOKAHEAD_M || (d - d_m).abs() > half {
+            continue;
+        }
+        let gap = ahead - 0.5 * f64::from(me.length_m + o.length_m);
+        let (sn, cs) = path.heading_at(s).sin_cos();
+        let v = (f64::from(o.velocity_x_mps) * cs + f64::from(o.velocity_y_mps) * sn).max(0.0);
+        best = closer(best, Some((gap, v)));
+    }
+    best
+}
+
+/// A crossing conflict ahead of an agent at `s_m` on `path` that follows `arrival` (the time,
+/// s from now, at which it reaches each arclength, increasing): another agent whose position
+/// extrapolated at constant velocity 0.5, 1, …, 3 s ahead lies in the corridor ahead at an
+/// arclength the agent reaches within 1 s of the same time. The conflict point is returned as
+/// a standing leader `(bumper gap m, 0)`; the nearest one counts.
+pub(crate) fn crossing_conflict(
+    path: &RefPath,
+    s_m: f64,
+    me: &AgentState,
+    others: &[&AgentState],
+    arrival: impl Fn(f64) -> Option<f64>,
+) -> Option<(f64, f64)> {
+    let mut best: Option<(f64, f64)> = None;
+    for o in others {
+        let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
+        if vx.hypot(vy) < 0.5 || (o.x_m - me.x_m).hypot(o.y_m - me.y_m) > LOOKAHEAD_M + 40.0 {
+            continue;
+        }
+        let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
+        for k in 1..=6 {
+            let tau = 0.5 * f64::from(k);
+            let (x, y) = (o.x_m + vx * tau, o.y_m + vy * tau);
+            let (s, d) = path.project(x, y, Some(s_m + 25.0));
+            let ahead = s - s_m;
+            if ahead <= 0.0 || ahead > LOOKAHEAD_M || d.abs() > half {
+                continue;
+            }
+            if arrival(s).is_some_and(|t| (t - tau).abs() < 1.0) {
+                let gap = ahead - 0.5 * f64::from(me.length_m + o.length_m);
+                best = closer(best, Some((gap, 0.0)));
+                break;
+            }
+        }
+    }
+    best
 }
 
 impl IdmAgent {
@@ -111,34 +185,11 @@ impl IdmAgent {
         })
     }
 
-    /// The closest leader among `others` (`(gap m, speed along the path m/s)`), `me` being this
-    /// agent's current state.
-    fn leader(&self, me: &AgentState, others: &[&AgentState]) -> Option<(f64, f64)> {
-        let mut best: Option<(f64, f64)> = None;
-        for o in others {
-            let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
-            if dx.hypot(dy) > LOOKAHEAD_M + 10.0 {
-                continue;
-            }
-            let (s, d) = self.path.project(o.x_m, o.y_m, Some(self.s_m));
-            let ahead = s - self.s_m;
-            let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
-            if ahead <= 0.0 || ahead > LOOKAHEAD_M || (d - self.d_m).abs() > half {
-                continue;
-            }
-            let gap = ahead - 0.5 * f64::from(me.length_m + o.length_m);
-            let (sn, cs) = self.path.heading_at(s).sin_cos();
-            let v = (f64::from(o.velocity_x_mps) * cs + f64::from(o.velocity_y_mps) * sn).max(0.0);
-            best = closer(best, Some((gap, v)));
-        }
-        best
-    }
-
     /// One step: reacts to `others` (every other valid agent's current state), returns the
     /// new state (box from `me`).
     pub fn step(&mut self, me: &AgentState, others: &[&AgentState]) -> AgentState {
         if !self.parked {
-            let leader = self.leader(me, others);
+            let leader = leader_on_path(&self.path, self.s_m, self.d_m, me, others);
             let max_da = 25.0 * STEP_SECS;
             let a = self
                 .idm

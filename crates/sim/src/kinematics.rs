@@ -78,8 +78,9 @@ impl Bicycle {
         if let Some(p) = previous.filter(|p| p.valid) {
             accel = (speed - f64::from(p.speed_mps())) / STEP_SECS;
             if speed > 1.0 {
-                let yaw_rate = scbg_scene::wrap_angle_rad(f64::from(state.heading_rad - p.heading_rad))
-                    / STEP_SECS;
+                let yaw_rate =
+                    scbg_scene::wrap_angle_rad(f64::from(state.heading_rad - p.heading_rad))
+                        / STEP_SECS;
                 steer = (yaw_rate * wheelbase_m / speed).atan();
             }
         }

@@ -67,7 +67,10 @@ pub fn agent_metrics(
                     > 0.0;
         }
     }
-    let accel: Vec<f64> = speeds.windows(2).map(|w| (w[1] - w[0]) / STEP_SECS).collect();
+    let accel: Vec<f64> = speeds
+        .windows(2)
+        .map(|w| (w[1] - w[0]) / STEP_SECS)
+        .collect();
     let jerk: Vec<f64> = accel
         .windows(2)
         .map(|w| ((w[1] - w[0]) / STEP_SECS).abs())

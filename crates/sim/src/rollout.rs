@@ -14,7 +14,16 @@ use scbg_scene::{AgentState, Scene};
 use scbg_synth::ClosedLoop;
 use serde::{Deserialize, Serialize};
 
-use crate::idm::IdmAgent;
+use crate::idm::{IdmAgent, crossing_conflict, leader_on_path, polyline_path};
+
+/// The safety guard's IDM (a free road never limits: the desired speed is out of reach).
+const GUARD: scbg_synth::Idm = scbg_synth::Idm {
+    desired_speed_mps: 1e3,
+    max_accel_mps2: 3.0,
+    comfort_brake_mps2: 3.0,
+    time_headway_s: 1.0,
+    min_gap_m: 2.0,
+};
 use crate::kinematics::{Bicycle, STEP_SECS, VehicleLimits};
 
 /// Steps simulated after the current one (8 s at 10 Hz).
@@ -59,6 +68,14 @@ pub struct SimConfig {
     pub others: OthersMode,
     /// Limits of the controlled agents' bicycle.
     pub limits: VehicleLimits,
+    /// The safety guard of the controlled agents: the tracker's acceleration is capped by
+    /// IDM's (headway 1 s, standstill gap 2 m, comfortable braking 3 m/s²) toward the nearest
+    /// agent ahead along the current plan (the leader rule of [`crate::idm`]) and toward the
+    /// nearest crossing conflict (another agent that, at constant velocity, will be in the
+    /// plan's corridor within 1 s of when the plan gets there, up to 3 s ahead, taken as a
+    /// standing obstacle at that point), so a plan that runs into another agent is followed
+    /// at a safe distance instead. On by default.
+    pub safety_guard: bool,
 }
 
 impl Default for SimConfig {
@@ -68,6 +85,7 @@ impl Default for SimConfig {
             ego: EgoMode::Reactive,
             others: OthersMode::Log,
             limits: VehicleLimits::default(),
+            safety_guard: true,
         }
     }
 }
@@ -155,6 +173,10 @@ struct Controlled {
     track: usize,
     bicycle: Bicycle,
     plan: Vec<[f64; 2]>,
+    /// The plan as a path (from where it started), for the safety guard.
+    path: Option<scbg_synth::RefPath>,
+    /// Arclength of each plan point along `path`.
+    plan_s: Vec<f64>,
     plan_start_xy: [f64; 2],
     plan_step: usize,
 }
@@ -263,6 +285,8 @@ impl Simulation {
                 track: i,
                 bicycle,
                 plan: Vec::new(),
+                path: None,
+                plan_s: Vec::new(),
                 plan_start_xy: [states[start].x_m, states[start].y_m],
                 plan_step: start,
             });
@@ -376,7 +400,13 @@ impl Simulation {
             Vec::new()
         } else {
             (from..from + n)
-                .map(|k| self.log.signals_per_step.get(k.min(t)).cloned().unwrap_or_default())
+                .map(|k| {
+                    self.log
+                        .signals_per_step
+                        .get(k.min(t))
+                        .cloned()
+                        .unwrap_or_default()
+                })
                 .collect()
         };
         Scene {
@@ -421,7 +451,11 @@ impl Simulation {
             if c.plan.is_empty() || t - c.plan_step >= self.config.replan_every {
                 let view = view.get_or_insert_with(|| self.view());
                 let id = self.log.tracks[c.track].id;
-                let fail = |message: String| SimError::Plan { id, step: t, message };
+                let fail = |message: String| SimError::Plan {
+                    id,
+                    step: t,
+                    message,
+                };
                 let plan = self
                     .plan_checked(planner, view, id)
                     .map_err(|e| fail(e.0))?;
@@ -436,28 +470,62 @@ impl Simulation {
                 .unwrap_or_default()
         };
         let mut next: Vec<AgentState> = (0..self.states.len()).map(log_state).collect();
+        let current: Vec<&AgentState> = self.states.iter().map(|s| &s[t]).collect();
+        let others_of = |i: usize| -> Vec<&AgentState> {
+            current
+                .iter()
+                .enumerate()
+                .filter(|&(j, s)| j != i && s.valid)
+                .map(|(_, s)| *s)
+                .collect()
+        };
         for (c, plan) in self.controlled.iter_mut().zip(plans) {
             if let Some(plan) = plan {
-                c.plan = plan;
                 c.plan_start_xy = [c.bicycle.x_m, c.bicycle.y_m];
+                if self.config.safety_guard {
+                    let mut points = vec![c.plan_start_xy];
+                    points.extend_from_slice(&plan);
+                    let path = polyline_path(&points, c.bicycle.heading_rad);
+                    let mut hint = 0.0;
+                    c.plan_s = plan
+                        .iter()
+                        .map(|p| {
+                            hint = path.project(p[0], p[1], Some(hint)).0;
+                            hint
+                        })
+                        .collect();
+                    c.path = Some(path);
+                }
+                c.plan = plan;
                 c.plan_step = t;
             }
-            let (a, d) = c
-                .bicycle
-                .track(c.plan_start_xy, &c.plan, t - c.plan_step);
+            let (mut a, d) = c.bicycle.track(c.plan_start_xy, &c.plan, t - c.plan_step);
+            if let Some(path) = c.path.as_ref().filter(|_| self.config.safety_guard) {
+                let (s, _) = path.project(c.bicycle.x_m, c.bicycle.y_m, None);
+                let me = current[c.track];
+                let others = others_of(c.track);
+                // When the plan reaches each arclength of its path, seconds from now.
+                let k_now = t - c.plan_step;
+                let arrival = |s_at: f64| {
+                    c.plan_s
+                        .iter()
+                        .position(|&ps| ps >= s_at)
+                        .map(|k| (k as f64 + 1.0 - k_now as f64) * STEP_SECS)
+                };
+                let leader = scbg_synth::closer(
+                    leader_on_path(path, s, 0.0, me, &others),
+                    crossing_conflict(path, s, me, &others, arrival),
+                );
+                if leader.is_some() {
+                    a = a.min(GUARD.accel(c.bicycle.speed_mps, leader));
+                }
+            }
             c.bicycle.step(a, d, &self.config.limits);
             next[c.track] = c.bicycle.state(&self.states[c.track][t]);
         }
-        let current: Vec<&AgentState> = self.states.iter().map(|s| &s[t]).collect();
         for (i, agent) in self.idm.iter_mut().enumerate() {
             if let Some(agent) = agent {
-                let others: Vec<&AgentState> = current
-                    .iter()
-                    .enumerate()
-                    .filter(|&(j, s)| j != i && s.valid)
-                    .map(|(_, s)| *s)
-                    .collect();
-                next[i] = agent.step(current[i], &others);
+                next[i] = agent.step(current[i], &others_of(i));
             }
         }
         if let Some(syn) = &self.synthetic {
@@ -465,14 +533,11 @@ impl Simulation {
                 .iter()
                 .map(|s| [s.x_m, s.y_m])
                 .collect();
-            let tracks = syn
-                .world
-                .tracks(&b_prefix)
-                .map_err(|e| SimError::Plan {
-                    id: scbg_synth::B_ID,
-                    step: t,
-                    message: e.to_string(),
-                })?;
+            let tracks = syn.world.tracks(&b_prefix).map_err(|e| SimError::Plan {
+                id: scbg_synth::B_ID,
+                step: t,
+                message: e.to_string(),
+            })?;
             let controlled: Vec<usize> = self.controlled.iter().map(|c| c.track).collect();
             for (i, tr) in tracks.iter().enumerate() {
                 let reactive = if i == self.ego {
@@ -515,7 +580,10 @@ impl Simulation {
                 plan.len()
             )));
         }
-        if let Some(k) = plan.iter().position(|p| !(p[0].is_finite() && p[1].is_finite())) {
+        if let Some(k) = plan
+            .iter()
+            .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
             return Err(PlanError(format!("point {k} is not finite")));
         }
         Ok(plan)

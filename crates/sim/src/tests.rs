@@ -44,17 +44,25 @@ fn max_distance(a: &[scbg_scene::AgentState], b: &[scbg_scene::AgentState]) -> f
 
 #[test]
 fn following_the_logged_plan_reproduces_the_synthetic_log() {
+    // Without the guard: the log's B goes first where A yields to it, which the guard (a
+    // conflict with A ahead) would not do.
     let reactive = SimConfig {
         others: OthersMode::Reactive,
+        safety_guard: false,
         ..SimConfig::default()
     };
     let (mut worst_b, mut worst_a) = (0.0f64, 0.0f64);
     for index in 0..12 {
         let scenario = Scenario::draw(3, index, &Family::ALL);
         let log = scenario.generate().scene;
-        let mut sim =
-            Simulation::reset(&log, None, &[B_ID], reactive, Some(scenario.clone().closed_loop()))
-                .unwrap();
+        let mut sim = Simulation::reset(
+            &log,
+            None,
+            &[B_ID],
+            reactive,
+            Some(scenario.clone().closed_loop()),
+        )
+        .unwrap();
         assert_eq!(sim.ego_id(), A_ID);
         let mut planner = LogPlanner {
             log: &log,
@@ -69,7 +77,10 @@ fn following_the_logged_plan_reproduces_the_synthetic_log() {
         assert_eq!(out.tracks[0].states[..=10], log.tracks[0].states[..=10]);
         worst_b = worst_b.max(max_distance(&out.tracks[1].states, &log.tracks[1].states));
         worst_a = worst_a.max(max_distance(&out.tracks[0].states, &log.tracks[0].states));
-        assert!(matches!(sim.step(&mut planner, None), Err(SimError::Finished)));
+        assert!(matches!(
+            sim.step(&mut planner, None),
+            Err(SimError::Finished)
+        ));
     }
     // B's bicycle lags a little behind the log's hardest braking (−7 m/s² at highway speed).
     assert!(worst_b < 2.0, "B strays {worst_b} m from its logged future");
@@ -113,7 +124,9 @@ fn idm_world_and_external_ego() {
     bad.x_m = f64::NAN;
     assert!(sim.step(&mut planner, Some(bad)).is_err());
     for t in 11..=90 {
-        let snap = sim.step(&mut planner, Some(log.tracks[0].states[t])).unwrap();
+        let snap = sim
+            .step(&mut planner, Some(log.tracks[0].states[t]))
+            .unwrap();
         assert_eq!(snap[0].state, log.tracks[0].states[t]);
     }
 }

@@ -21,8 +21,8 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::{PredictionDifficulty, PredictionTarget, Scene};
 
-pub use path::RefPath;
 pub use families::{A_ID, B_ID, NUM_STEPS};
+pub use path::RefPath;
 pub use sim::{Idm, STEP_SECS, boxes_overlap, closer};
 
 use families::{BPlan, Run};
@@ -429,7 +429,11 @@ impl Scenario {
                     difficulty: PredictionDifficulty::Level1,
                 },
             ],
-            map: with_b.map,
+            map: {
+                let mut map = with_b.map;
+                families::orient_road_edges(&mut map);
+                map
+            },
             signals_per_step: Vec::new(),
             tracks,
         };

@@ -212,7 +212,11 @@ fn closed_loop_world_is_causal_and_replays_the_log() {
             .zip(&logged.scene.tracks[0].states)
             .map(|(p, q)| (p.x_m - q.x_m).hypot(p.y_m - q.y_m))
             .fold(0.0, f64::max);
-        assert!(a_err < 3.0, "{} A off the log by {a_err} m", logged.scene.scenario_id);
+        assert!(
+            a_err < 3.0,
+            "{} A off the log by {a_err} m",
+            logged.scene.scenario_id
+        );
         // A prefix of k steps fixes every agent other than B up to step CURRENT_STEP + k + 1.
         for k in [0, 1, 7, 40] {
             let part = world.tracks(&b_future[..k]).unwrap();
@@ -221,11 +225,58 @@ fn closed_loop_world_is_causal_and_replays_the_log() {
                     continue;
                 }
                 let last = CURRENT_STEP + k + 1;
-                assert_eq!(p.states[..=last], f.states[..=last], "track {i}, prefix {k}");
+                assert_eq!(
+                    p.states[..=last],
+                    f.states[..=last],
+                    "track {i}, prefix {k}"
+                );
             }
         }
     }
     let world = Scenario::draw(5, 0, &Family::ALL).closed_loop();
     assert!(world.tracks(&vec![[0.0, 0.0]; 81]).is_err());
     assert!(world.tracks(&[[f64::NAN, 0.0]]).is_err());
+}
+
+/// The logged vehicles (A, B and the others) stay on the road by the WOSAC definition (signed road-edge distance ≤ 0,
+/// road on each edge's left as in WOMD) — the synthetic maps are oriented like real ones.
+#[test]
+fn logged_agents_are_on_the_road_by_the_wosac_rule() {
+    let (mut off, mut total) = (0, 0);
+    for index in 0..60 {
+        let scene = generate(9, index, &Family::ALL).scene;
+        let edges = scbg_metrics::wosac::RoadEdges::new(&scene.map).unwrap();
+        let mut scratch = Vec::new();
+        // Pedestrians walk on the sidewalks, off the road by definition.
+        for track in scene
+            .tracks
+            .iter()
+            .filter(|t| t.object_type == scbg_scene::ObjectType::Vehicle)
+        {
+            total += 1;
+            let (worst, at) = track
+                .states
+                .iter()
+                .enumerate()
+                .map(|(t, s)| {
+                    (
+                        edges.signed_distance([s.x_m as f32, s.y_m as f32, 0.0], &mut scratch),
+                        t,
+                    )
+                })
+                .fold((f32::NEG_INFINITY, 0), |a, b| if b.0 > a.0 { b } else { a });
+            if worst > 0.0 {
+                off += 1;
+                let s = &track.states[at];
+                eprintln!(
+                    "{} track {} off-road by {worst:.2} m at step {at} ({:.1}, {:.1})",
+                    scene.scenario_id, track.id, s.x_m, s.y_m
+                );
+            }
+        }
+    }
+    assert!(
+        off * 50 <= total,
+        "{off} of {total} vehicle tracks leave the road"
+    );
 }

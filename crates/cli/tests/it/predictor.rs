@@ -1,6 +1,6 @@
 //! `scbg train predictor`, `scbg eval predictor` and `scbg eval metrics`.
 
-use crate::{real_dir, scbg, scbg_ok};
+use crate::{inspect_json, real_dir, scbg, scbg_ok};
 use serde_json::{Value, json};
 
 /// The tiny predictor config of the library's tests.
@@ -198,6 +198,11 @@ fn demo_writes_a_report() {
     let families = report["spearman_latent"].as_object().unwrap();
     assert_eq!(families.len(), 3, "{report}");
     assert!(report["checks"]["range_below_arbitrary"].is_boolean());
+    // The closed-loop stage ran on the held-out scenes.
+    let cl = &report["closed_loop"];
+    assert_eq!(cl["per_quantile"].as_array().unwrap().len(), 9);
+    assert!(cl["baselines"]["constant_velocity"]["wosac"]["metametric"].is_number());
+    assert!(report["checks"]["closed_loop_b_collision_2pct"].is_boolean());
     // Two generator seeds: seed means, their spread, each seed's numbers.
     assert_eq!(report["generator_seeds"], serde_json::json!([0, 1]));
     assert_eq!(report["variants_per_seed"].as_array().unwrap().len(), 2);
@@ -478,6 +483,97 @@ fn train_generator_saves_generator_and_range_predictor() {
         "fig5b_quantile_speed.png",
     ] {
         assert!(dir.path().join("figs").join(f).is_file(), "{f}");
+    }
+
+    // `scbg sim`: one rollout as a Scenario file, 32 as a WOSAC shard, in the synthetic world
+    // (ground_truth.jsonl beside the file); `scbg eval sim` on the synthetic folder.
+    let sim = |out: &str, rest: &[&str]| {
+        let mut args = vec![
+            "sim",
+            "--model",
+            &gen_dir,
+            "--scenario",
+            &file,
+            "--scenario-id",
+            sid,
+            "--a",
+            &a,
+            "--b",
+            &b,
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(rest);
+        scbg(&args)
+    };
+    let ok = sim(&p("sim1"), &["--quantile", "0.8"]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    assert!(String::from_utf8_lossy(&ok.stderr).contains("synthetic world"));
+    let summary = inspect_json(&[&dir.path().join("sim1/rollouts.tfrecord")]);
+    assert_eq!(summary.len(), 1);
+    assert_eq!(summary[0]["scenario_id"], sid);
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("sim1/sim.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["reports"].as_array().unwrap().len(), 1);
+    assert!(report["synthetic_world"].as_bool().unwrap());
+    let ok = sim(&p("simw"), &["--format", "wosac", "--name", "mine"]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    assert!(
+        dir.path()
+            .join("simw/mine.binproto-00000-of-00001")
+            .is_file()
+    );
+    // Bad requests: named, exit 2, nothing written.
+    for (rest, needle) in [
+        (&["--quantile", "1.5"][..], "quantile 1.5"),
+        (&["--also", "4242=0.5"][..], "4242"),
+        (&["--format", "wosac", "--rollouts", "3"][..], "32 rollouts"),
+        (&["--replan-every", "0"][..], "replan_every"),
+    ] {
+        let bad = sim(&p("simbad"), rest);
+        assert_eq!(bad.status.code(), Some(2), "{rest:?}");
+        let err = String::from_utf8_lossy(&bad.stderr);
+        assert!(err.contains(needle), "{rest:?}: {err}");
+        assert!(!dir.path().join("simbad/sim.json").exists());
+    }
+    let out = scbg_ok(&[
+        "eval",
+        "sim",
+        "--model",
+        &gen_dir,
+        "--data",
+        &p("synth"),
+        "--ground-truth",
+        &p("synth/ground_truth.jsonl"),
+        "--split",
+        "all",
+        "--scenes",
+        "2",
+        "--wosac-scenes",
+        "1",
+        "--out",
+        &p("evalsim"),
+        "--json",
+    ]);
+    let eval: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(eval["scenes"], 2);
+    assert_eq!(eval["per_quantile"].as_array().unwrap().len(), 9);
+    assert!(
+        eval["baselines"]["idm_only"]["wosac"]["metametric"]
+            .as_f64()
+            .is_some()
+    );
+    for f in ["eval_sim.json", "sim_courtesy.png", "sim_realism.png"] {
+        assert!(dir.path().join("evalsim").join(f).is_file(), "{f}");
     }
 
     // A malformed threshold is a clear error.

@@ -21,6 +21,7 @@ pub fn acceptance_checks(
     variants: &serde_json::Value,
     truth_control: &serde_json::Value,
     fidelity: Option<&crate::fidelity::Fidelity>,
+    closed_loop: Option<&crate::sim_eval::SimEval>,
 ) -> Vec<Check> {
     use crate::fidelity::POOLED;
     // A number of the report JSON by path; NaN when missing or null.
@@ -171,6 +172,60 @@ pub fn acceptance_checks(
             });
         }
     }
+    if let Some(c) = closed_loop {
+        let pooled = c
+            .spearman_quantile_a_speed
+            .get("all")
+            .copied()
+            .flatten()
+            .unwrap_or(f64::NAN);
+        out.push(Check {
+            key: "closed_loop_spearman_0_6",
+            passed: pooled >= 0.6,
+            text: format!(
+                "closed loop: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {})",
+                c.spearman_quantile_realised_courtesy
+                    .get("all")
+                    .copied()
+                    .flatten()
+                    .map_or("-".into(), |r| format!("{r:.3}"))
+            ),
+        });
+        out.push(Check {
+            key: "closed_loop_curve_rises",
+            passed: c.a_speed_curve_rises,
+            text: format!(
+                "closed loop: A's mean realised speed rises with the quantile ({})",
+                c.per_quantile
+                    .iter()
+                    .map(|r| format!("{:.2}", r.a_avg_speed_mps))
+                    .collect::<Vec<_>>()
+                    .join(" → ")
+            ),
+        });
+        out.push(Check {
+            key: "closed_loop_b_collision_2pct",
+            passed: c.max_b_collision_rate <= 0.02,
+            text: format!(
+                "closed loop: B's collision rate ≤ 2 % at every quantile (max {:.3})",
+                c.max_b_collision_rate
+            ),
+        });
+        let meta = |w: Option<&crate::sim_eval::WosacSummary>| {
+            w.map_or("-".into(), |w| format!("{:.4}", w.metametric))
+        };
+        out.push(Check {
+            key: "closed_loop_wosac_above_baselines",
+            passed: c.wosac_above_baselines == Some(true),
+            text: format!(
+                "closed loop: WOSAC meta-metric of scbg {} above constant velocity {} and IDM-only {} (log replay {})",
+                meta(c.wosac_scbg.as_ref()),
+                meta(c.baselines.get("constant_velocity").and_then(|b| b.wosac.as_ref())),
+                meta(c.baselines.get("idm_only").and_then(|b| b.wosac.as_ref())),
+                meta(c.baselines.get("log_replay").and_then(|b| b.wosac.as_ref())),
+            ),
+        });
+    }
     out
 }
 
@@ -250,7 +305,7 @@ mod tests {
             "baseline": {"courtesy_mse_data": {"mean": 2.0}, "traj_ade": {"mean": 1.0}}
         });
         let t = json!({"full": {"spearman_quantile_psi_true": {"all": 0.7, "merge": 0.5, "cutin": 0.3}}});
-        let checks: BTreeMap<&str, bool> = acceptance_checks(&v, &t, None)
+        let checks: BTreeMap<&str, bool> = acceptance_checks(&v, &t, None, None)
             .into_iter()
             .map(|c| (c.key, c.passed))
             .collect();

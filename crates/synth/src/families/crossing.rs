@@ -8,8 +8,8 @@ use scbg_scene::{
 };
 
 use super::{
-    BPlan, NUM_STEPS, PairSetup, Run, arc_path, committed_to_cross, idm, mp, noise_track, pts,
-    vehicle_size,
+    BPlan, NUM_STEPS, PairSetup, Run, STOP_LINE_TO_ZONE_M, arc_path, committed_to_cross, idm, mp,
+    noise_track, pts, vehicle_size,
 };
 use crate::CURRENT_STEP;
 use crate::path::RefPath;
@@ -115,7 +115,7 @@ pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Ru
     );
     // Half-width of the crossing road along each path (both roads have two lanes).
     let half_zone = w / p.crossing_angle_rad.sin().abs() + 1.0;
-    let stop_s = p.b_conflict_s - half_zone - 2.0;
+    let stop_s = p.b_conflict_s - half_zone - STOP_LINE_TO_ZONE_M;
     let mut agents = p.pair.agents(1, 0.0, with_b);
     let follower_idx = agents.len();
     if let Some((gap, v, size, m)) = p.follower {
@@ -184,7 +184,7 @@ pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Ru
                 let (s_b, _, v_b) = agents[1].delayed(p.pair.reaction_steps);
                 let b_len = agents[1].length_m;
                 let b_in_or_coming = s_b > p.b_conflict_s - half_zone - b_len - 25.0
-                    && committed_to_cross(s_b, v_b, stop_s);
+                    && committed_to_cross(s_b, v_b, stop_s, b_len / 2.0);
                 let b_not_cleared = s_b < p.b_conflict_s + half_zone + b_len;
                 let a_before = a.s + a.length_m / 2.0 < p.a_conflict_s - half_zone + 1.0;
                 if b_in_or_coming && b_not_cleared && a_before {

@@ -31,6 +31,26 @@ pub struct MergeParams {
     noise: Vec<Vec<f64>>,
 }
 
+/// The grass island between the main lane and the on-ramp, as a closed polygon traversed with
+/// the road on its left (as WOMD orients road edges): forward along the main lane's right
+/// edge, back along the ramp's left edge, up to the gore's tip where the two are 0.4 m apart.
+fn gore_island(path: &crate::RefPath, p: &MergeParams, ramp_start: f64) -> Vec<(f64, f64)> {
+    let w = p.lane_width_m;
+    let main_d = -w / 2.0 - 0.2;
+    let ramp_side = |s: f64| p.ramp_d(s) + w / 2.0 + 0.2;
+    let parallel_start = p.merge_end_s - p.taper_m - p.accel_lane_m;
+    let mut tip = ramp_start;
+    while tip + 0.5 < parallel_start && ramp_side(tip + 0.5) < main_d {
+        tip += 0.5;
+    }
+    let mut pts = path.offset_points(ramp_start, tip, 2.0, |_| main_d);
+    let mut back = path.offset_points(ramp_start, tip, 2.0, ramp_side);
+    back.reverse();
+    pts.extend(back);
+    pts.push(pts[0]);
+    pts
+}
+
 /// Draws the parameters of a merge scene.
 pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
     let lane_width_m = rng.random_range(3.4..3.9);
@@ -281,12 +301,7 @@ pub fn simulate_merge(p: &MergeParams, b: BPlan<'_>, with_map: bool) -> Run {
             RoadEdge {
                 id: 22,
                 edge_type: RoadEdgeType::Boundary,
-                polyline: pts(path.offset_points(
-                    ramp_start,
-                    taper_start - p.accel_lane_m,
-                    2.0,
-                    |s| p.ramp_d(s) + w / 2.0 + 0.2,
-                )),
+                polyline: pts(gore_island(&path, p, ramp_start)),
             },
         ],
         ..Default::default()

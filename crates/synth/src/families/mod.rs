@@ -145,13 +145,58 @@ pub(super) fn merging_into_lane(d: f64, d_rate: f64, lane_width_m: f64) -> bool 
     d.abs() < 0.75 * lane_width_m || (d.abs() < lane_width_m - 0.1 && d_rate * d.signum() < -0.05)
 }
 
+/// Distance from B's stop line to the conflict zone's entry along B's path (crossing family).
+pub(super) const STOP_LINE_TO_ZONE_M: f64 = 2.0;
+
 /// The documented reaction of A to B at a crossing (crossing family): B occupies the conflict
 /// zone, for A, while B is within 25 m before the zone's entry and has not cleared it, and is
-/// either past its stop line or too fast to stop at it comfortably (the deceleration it needs,
-/// `v² / 2·distance`, is over 3.5 m/s²). A then treats the zone's entry as a standing
-/// obstacle until it is clear (or A is already in it).
-pub(super) fn committed_to_cross(s: f64, v: f64, stop_s: f64) -> bool {
-    s > stop_s + 0.5 || v * v / (2.0 * (stop_s - s).max(0.1)) > 3.5
+/// either past its stop line (centre 0.5 m beyond it), with its front bumper already in the
+/// zone, or too fast to stop at the line comfortably (the deceleration it needs,
+/// `v² / 2·distance`, is over 3.5 m/s²). A then treats the zone's entry as a standing obstacle
+/// until it is clear (or A is already in it).
+pub(super) fn committed_to_cross(s: f64, v: f64, stop_s: f64, half_length_m: f64) -> bool {
+    s > stop_s + 0.5
+        || s + half_length_m > stop_s + STOP_LINE_TO_ZONE_M
+        || v * v / (2.0 * (stop_s - s).max(0.1)) > 3.5
+}
+
+/// Orients every road edge the way WOMD does — the road on its left, so that the WOSAC signed
+/// distance is negative on the road and positive off it: an edge whose nearest lane-centre
+/// point (from the middle of the edge) lies on its right is reversed. Closed polylines (islands)
+/// are drawn oriented by their family and left as they are.
+pub(crate) fn orient_road_edges(map: &mut Map) {
+    let centres: Vec<(f64, f64)> = map
+        .lanes
+        .iter()
+        .flat_map(|l| l.polyline.iter().map(|p| (p.x_m, p.y_m)))
+        .collect();
+    if centres.is_empty() {
+        return;
+    }
+    for edge in &mut map.road_edges {
+        let n = edge.polyline.len();
+        if n < 2 {
+            continue;
+        }
+        let (first, last) = (&edge.polyline[0], &edge.polyline[n - 1]);
+        if (first.x_m - last.x_m).hypot(first.y_m - last.y_m) < 1.0 {
+            continue;
+        }
+        let (a, b) = (&edge.polyline[(n - 1) / 2], &edge.polyline[(n - 1) / 2 + 1]);
+        let mid = (0.5 * (a.x_m + b.x_m), 0.5 * (a.y_m + b.y_m));
+        let nearest = centres
+            .iter()
+            .copied()
+            .min_by(|p, q| {
+                let d = |r: &(f64, f64)| (r.0 - mid.0).hypot(r.1 - mid.1);
+                d(p).total_cmp(&d(q))
+            })
+            .expect("non-empty");
+        let cross = (nearest.0 - a.x_m) * (b.y_m - a.y_m) - (nearest.1 - a.y_m) * (b.x_m - a.x_m);
+        if cross > 0.0 {
+            edge.polyline.reverse();
+        }
+    }
 }
 
 /// Vehicles A and B as every family sets them up (values drawn by the family, in its order).

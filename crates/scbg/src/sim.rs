@@ -1,0 +1,513 @@
+//! Closed-loop simulation with courtesy-controlled agents (the library behind `scbg sim`, the
+//! server's sessions and the Python `Simulation`).
+//!
+//! A controlled agent is driven by the generator: every `replan_every` steps its future is
+//! generated from the *simulated* history (features rebuilt from the simulated states) at its
+//! own quantile or ψ toward the ego, and followed through the kinematic bicycle of
+//! [`scbg_sim::kinematics`]. See [`scbg_sim::rollout`] for the ego and the other agents.
+//!
+//! **Diversity of the 32 WOSAC rollouts.** The world is deterministic (the synthetic rule and
+//! IDM have no noise of their own), so rollout `r` of 32 asks each controlled agent for the
+//! quantile `q + spread · ((r + ½)/32 − ½)` (clamped to [0, 1]; spread 0.2 by default): the
+//! rollouts spread evenly over a band around the requested quantile. An explicit ψ is used as
+//! given in every rollout.
+
+use std::path::Path;
+
+use anyhow::Context;
+use scbg_generator::Courtesy;
+use scbg_metrics::wosac::{Rollouts, SimPose};
+use scbg_scene::Scene;
+use scbg_sim::{PlanError, Planner, SimError, Simulation};
+use scbg_synth::GroundTruth;
+use serde::Serialize;
+
+use crate::generator::LoadedScbg;
+use crate::{InvalidRequest, ensure_request};
+
+pub use scbg_sim::{
+    AgentRolloutMetrics, EgoMode, HORIZON_STEPS, OthersMode, SimConfig, VehicleLimits,
+};
+
+/// An agent the generator drives, and the courtesy asked of it toward the ego.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
+pub struct ControlledAgent {
+    /// Track id.
+    pub id: i64,
+    /// Its courtesy toward the ego: a quantile in [0, 1] or an explicit ψ.
+    pub courtesy: Courtesy,
+}
+
+/// The generator as the planner of the controlled agents.
+#[derive(Debug)]
+pub struct GeneratorPlanner<'m> {
+    model: &'m LoadedScbg,
+    ego: i64,
+    controlled: Vec<ControlledAgent>,
+}
+
+impl<'m> GeneratorPlanner<'m> {
+    /// Plans `controlled` toward `ego` with `model`.
+    pub fn new(model: &'m LoadedScbg, ego: i64, controlled: Vec<ControlledAgent>) -> Self {
+        Self {
+            model,
+            ego,
+            controlled,
+        }
+    }
+}
+
+impl Planner for GeneratorPlanner<'_> {
+    fn plan(&mut self, view: &Scene, agent_id: i64) -> Result<Vec<[f64; 2]>, PlanError> {
+        let courtesy = self
+            .controlled
+            .iter()
+            .find(|c| c.id == agent_id)
+            .ok_or_else(|| PlanError(format!("agent {agent_id} is not controlled")))?
+            .courtesy;
+        crate::generate::plan(self.model, view, self.ego, agent_id, courtesy)
+            .map_err(|e| PlanError(format!("{e:#}")))
+    }
+}
+
+/// Maps a simulation error to a request error when it is the caller's fault.
+fn sim_error(err: SimError) -> anyhow::Error {
+    match err {
+        SimError::Plan { .. } => anyhow::Error::new(err),
+        other => anyhow::Error::new(InvalidRequest(other.to_string())),
+    }
+}
+
+/// Checks the controlled agents' courtesies (quantile in [0, 1], finite ψ).
+fn check_courtesy(controlled: &[ControlledAgent]) -> anyhow::Result<()> {
+    for c in controlled {
+        match c.courtesy {
+            Courtesy::Quantile(q) => ensure_request!(
+                (0.0..=1.0).contains(&q),
+                "agent {}: quantile {q} is outside [0, 1]",
+                c.id
+            ),
+            Courtesy::Psi(p) => {
+                ensure_request!(
+                    p.is_finite(),
+                    "agent {}: ψ {p} is not a finite number",
+                    c.id
+                )
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Starts a closed-loop simulation of `scene`: `ego` (default: the SDC) and the controlled
+/// agents with their courtesies; `truth` (a synthetic scene's ground truth) makes the
+/// synthetic world's rule the reactive one.
+pub fn start(
+    scene: &Scene,
+    ego: Option<i64>,
+    controlled: &[ControlledAgent],
+    config: SimConfig,
+    truth: Option<&GroundTruth>,
+) -> anyhow::Result<Simulation> {
+    check_courtesy(controlled)?;
+    let world = truth
+        .map(|t| {
+            scbg_synth::Scenario::of_truth(t)
+                .map(scbg_synth::Scenario::closed_loop)
+                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+        })
+        .transpose()?;
+    let ids: Vec<i64> = controlled.iter().map(|c| c.id).collect();
+    Simulation::reset(scene, ego, &ids, config, world).map_err(sim_error)
+}
+
+/// One whole rollout: the scene with the simulated future.
+pub fn rollout(
+    model: &LoadedScbg,
+    scene: &Scene,
+    ego: Option<i64>,
+    controlled: &[ControlledAgent],
+    config: SimConfig,
+    truth: Option<&GroundTruth>,
+) -> anyhow::Result<Scene> {
+    ensure_request!(
+        config.ego != EgoMode::External,
+        "a whole rollout cannot have an ego driven from outside (step the simulation instead)"
+    );
+    let mut sim = start(scene, ego, controlled, config, truth)?;
+    let mut planner = GeneratorPlanner::new(model, sim.ego_id(), controlled.to_vec());
+    sim.run(&mut planner).map_err(sim_error)?;
+    Ok(sim.to_scene())
+}
+
+/// The metrics of a rollout: the ego first, then each controlled agent.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RolloutReport {
+    /// The scenario.
+    pub scenario_id: String,
+    /// The ego's metrics (its `avg_speed_mps` is A's realised reward).
+    pub ego: AgentRolloutMetrics,
+    /// Each controlled agent's metrics, in the order asked.
+    pub controlled: Vec<AgentRolloutMetrics>,
+}
+
+/// Metrics of a simulated scene for the ego and the controlled agents.
+pub fn report(simulated: &Scene, ego: i64, controlled: &[i64]) -> anyhow::Result<RolloutReport> {
+    let edges = scbg_metrics::wosac::RoadEdges::new(&simulated.map);
+    let metrics = |id: i64| {
+        simulated
+            .track_index(id)
+            .map(|i| scbg_sim::agent_metrics(simulated, i, edges.as_ref()))
+            .ok_or_else(|| anyhow::Error::new(InvalidRequest(format!("no agent with id {id}"))))
+    };
+    Ok(RolloutReport {
+        scenario_id: simulated.scenario_id.clone(),
+        ego: metrics(ego)?,
+        controlled: controlled
+            .iter()
+            .map(|&c| metrics(c))
+            .collect::<anyhow::Result<_>>()?,
+    })
+}
+
+/// The quantiles of the `n` rollouts around `q` (see the module docs).
+pub fn rollout_quantiles(q: f32, n: usize, spread: f32) -> Vec<f32> {
+    (0..n)
+        .map(|r| (q + spread * ((r as f32 + 0.5) / n as f32 - 0.5)).clamp(0.0, 1.0))
+        .collect()
+}
+
+/// The WOSAC form of simulated scenes of one scenario: every sim agent of `log` (valid at the
+/// current step), 80 poses per rollout; a pose the simulation left invalid (an agent replayed
+/// past the end of its log) repeats the last valid one.
+pub fn wosac_rollouts(log: &Scene, simulated: &[Scene]) -> Rollouts {
+    let object_ids = scbg_metrics::wosac::sim_agent_ids(log);
+    let start = log.current_step;
+    let trajectories = simulated
+        .iter()
+        .map(|scene| {
+            object_ids
+                .iter()
+                .map(|&id| {
+                    let states = scene
+                        .track_index(id)
+                        .map(|i| &scene.tracks[i].states[..])
+                        .unwrap_or_default();
+                    let mut last = states.get(start).copied().unwrap_or_default();
+                    (start + 1..=start + HORIZON_STEPS)
+                        .map(|t| {
+                            if let Some(s) = states.get(t).filter(|s| s.valid) {
+                                last = *s;
+                            }
+                            SimPose {
+                                x_m: last.x_m as f32,
+                                y_m: last.y_m as f32,
+                                z_m: last.z_m as f32,
+                                heading_rad: last.heading_rad,
+                            }
+                        })
+                        .collect()
+                })
+                .collect()
+        })
+        .collect();
+    Rollouts {
+        object_ids,
+        trajectories,
+    }
+}
+
+/// `log` with one rollout's poses as its future (velocities by finite differences), for the
+/// rollout metrics of a baseline given as WOSAC rollouts.
+pub fn scene_of_rollout(log: &Scene, rollouts: &Rollouts, r: usize) -> Scene {
+    let start = log.current_step;
+    let mut scene = log.clone();
+    let len = start + 1 + HORIZON_STEPS;
+    for tr in &mut scene.tracks {
+        tr.states.truncate(start + 1);
+        tr.states.resize(len, scbg_scene::AgentState::default());
+    }
+    scene.timestamps_secs = (0..len)
+        .map(|k| log.timestamps_secs.first().copied().unwrap_or(0.0) + k as f64 * 0.1)
+        .collect();
+    if !scene.signals_per_step.is_empty() {
+        scene.signals_per_step.resize(len, Vec::new());
+    }
+    for (o, &id) in rollouts.object_ids.iter().enumerate() {
+        let Some(i) = scene.track_index(id) else {
+            continue;
+        };
+        let tr = &mut scene.tracks[i];
+        for (k, p) in rollouts.trajectories[r][o].iter().enumerate() {
+            let prev = tr.states[start + k];
+            let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
+            tr.states[start + k + 1] = scbg_scene::AgentState {
+                x_m: x,
+                y_m: y,
+                z_m: f64::from(p.z_m),
+                heading_rad: p.heading_rad,
+                velocity_x_mps: ((x - prev.x_m) / 0.1) as f32,
+                velocity_y_mps: ((y - prev.y_m) / 0.1) as f32,
+                valid: true,
+                ..prev
+            };
+        }
+    }
+    scene
+}
+
+/// Writes simulated scenes as WOMD Scenario TFRecords (the simulated future in place of the
+/// logged one), atomically.
+pub fn write_scenarios(path: &Path, scenes: &[Scene]) -> anyhow::Result<usize> {
+    scbg_womd::write_scenes(path, scenes).with_context(|| format!("writing {}", path.display()))
+}
+
+/// Writes WOSAC submission shards (`name.binproto-0000i-of-0000N` in `dir`) for scenarios with
+/// 32 rollouts each, after checking each against the challenge's rules.
+pub fn write_wosac(
+    dir: &Path,
+    name: &str,
+    header: &scbg_womd::wosac::SubmissionHeader,
+    scenarios: &[(Scene, Rollouts)],
+    shards: usize,
+) -> anyhow::Result<Vec<std::path::PathBuf>> {
+    let inputs = scenarios
+        .iter()
+        .map(|(log, r)| {
+            let input = scbg_womd::wosac::ScenarioRolloutsInput {
+                scenario_id: log.scenario_id.clone(),
+                joint_scenes: r
+                    .trajectories
+                    .iter()
+                    .map(|joint| {
+                        r.object_ids
+                            .iter()
+                            .zip(joint)
+                            .map(|(&id, poses)| scbg_womd::wosac::ObjectTrajectory {
+                                object_id: id,
+                                x_m: poses.iter().map(|p| p.x_m).collect(),
+                                y_m: poses.iter().map(|p| p.y_m).collect(),
+                                z_m: poses.iter().map(|p| p.z_m).collect(),
+                                heading_rad: poses.iter().map(|p| p.heading_rad).collect(),
+                            })
+                            .collect()
+                    })
+                    .collect(),
+            };
+            scbg_womd::wosac::validate_rollouts(log, &input)
+                .with_context(|| format!("rollouts of {}", log.scenario_id))?;
+            Ok(input)
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    scbg_womd::wosac::write_submission_shards(dir, name, header, &inputs, shards)
+        .with_context(|| format!("writing WOSAC shards into {}", dir.display()))
+}
+
+/// What `scbg sim` writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+#[serde(rename_all = "snake_case")]
+pub enum ExportFormat {
+    /// WOMD Scenario TFRecord (`rollouts.tfrecord`, one scenario per rollout).
+    #[default]
+    Scenario,
+    /// WOSAC submission shard (`NAME.binproto-00000-of-00001`, 32 rollouts).
+    Wosac,
+}
+
+/// One `scbg sim` run.
+#[derive(Debug, Clone)]
+pub struct SimRun {
+    /// Generator folder.
+    pub model: std::path::PathBuf,
+    /// Predictor folder overriding generator.json's.
+    pub predictor: Option<std::path::PathBuf>,
+    /// WOMD file holding the scenario.
+    pub scenario: std::path::PathBuf,
+    /// Which scenario (default: the first with A and the first controlled agent).
+    pub scenario_id: Option<String>,
+    /// A, the ego (whose reward courtesy is about).
+    pub ego: i64,
+    /// The controlled agents (at least one).
+    pub controlled: Vec<ControlledAgent>,
+    /// Closed-loop settings.
+    pub config: SimConfig,
+    /// Synthetic ground truth: the synthetic world's rule drives the reactive agents. Default:
+    /// `ground_truth.jsonl` beside the scenario file, when it describes the scenario.
+    pub ground_truth: Option<std::path::PathBuf>,
+    /// Do not look for a ground truth beside the file (IDM everywhere).
+    pub no_synthetic_world: bool,
+    /// Rollouts (32 for WOSAC).
+    pub rollouts: usize,
+    /// Band of quantiles the rollouts spread over.
+    pub spread: f32,
+    /// Output folder.
+    pub out: std::path::PathBuf,
+    /// Export format.
+    pub format: ExportFormat,
+    /// Method name of a WOSAC submission.
+    pub name: String,
+}
+
+/// What `scbg sim` did (also `sim.json`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SimOutput {
+    /// The scenario.
+    pub scenario_id: String,
+    /// Whether the synthetic world's rule drove the reactive agents.
+    pub synthetic_world: bool,
+    /// Quantile each rollout asked of each controlled agent (`[rollout][agent]`; ψ requests
+    /// are `null`).
+    pub quantiles: Vec<Vec<Option<f32>>>,
+    /// Metrics per rollout.
+    pub reports: Vec<RolloutReport>,
+    /// Files written.
+    pub files: Vec<std::path::PathBuf>,
+}
+
+/// The ground truth of `scenario_id` from `path`, or from `ground_truth.jsonl` beside `file`.
+fn truth_for(
+    file: &Path,
+    explicit: Option<&Path>,
+    scenario_id: &str,
+) -> anyhow::Result<Option<GroundTruth>> {
+    let path = match explicit {
+        Some(p) => p.to_path_buf(),
+        None => match file
+            .parent()
+            .map(|d| d.join(crate::synth::GROUND_TRUTH_FILE))
+        {
+            Some(p) if p.is_file() => p,
+            _ => return Ok(None),
+        },
+    };
+    let truth = crate::synth::read_ground_truth(&path)?;
+    let found = truth.into_iter().find(|t| t.scenario_id == scenario_id);
+    ensure_request!(
+        found.is_some() || explicit.is_none(),
+        "{}: no ground truth for scenario {scenario_id}",
+        path.display()
+    );
+    Ok(found)
+}
+
+/// Runs `scbg sim`: `rollouts` closed-loop rollouts of one scenario, exported as Scenario
+/// TFRecords or a WOSAC shard, with `sim.json` (metrics per rollout) beside them.
+pub fn run_sim(run: &SimRun, progress: &dyn crate::Progress) -> anyhow::Result<SimOutput> {
+    ensure_request!(
+        !run.controlled.is_empty(),
+        "at least one controlled agent (--b)"
+    );
+    ensure_request!(run.rollouts >= 1, "at least one rollout");
+    ensure_request!(
+        run.format != ExportFormat::Wosac
+            || run.rollouts == scbg_metrics::wosac::ROLLOUTS_PER_SCENARIO,
+        "a WOSAC submission needs {} rollouts per scenario (got {})",
+        scbg_metrics::wosac::ROLLOUTS_PER_SCENARIO,
+        run.rollouts
+    );
+    check_courtesy(&run.controlled)?;
+    let model = crate::generator::load_scbg(&run.model, run.predictor.as_deref())?;
+    let (_, scene) = crate::generate::find_scene(
+        &run.scenario,
+        run.scenario_id.as_deref(),
+        run.ego,
+        run.controlled[0].id,
+    )?;
+    let truth = if run.no_synthetic_world {
+        None
+    } else {
+        truth_for(
+            &run.scenario,
+            run.ground_truth.as_deref(),
+            &scene.scenario_id,
+        )?
+    };
+    let bar = progress.bar("closed-loop rollouts", run.rollouts as u64);
+    let mut scenes = Vec::with_capacity(run.rollouts);
+    let mut quantiles = Vec::with_capacity(run.rollouts);
+    for r in 0..run.rollouts {
+        let controlled: Vec<ControlledAgent> = run
+            .controlled
+            .iter()
+            .map(|c| ControlledAgent {
+                courtesy: match c.courtesy {
+                    Courtesy::Quantile(q) if run.rollouts > 1 => {
+                        Courtesy::Quantile(rollout_quantiles(q, run.rollouts, run.spread)[r])
+                    }
+                    other => other,
+                },
+                ..*c
+            })
+            .collect();
+        quantiles.push(
+            controlled
+                .iter()
+                .map(|c| match c.courtesy {
+                    Courtesy::Quantile(q) => Some(q),
+                    Courtesy::Psi(_) => None,
+                })
+                .collect(),
+        );
+        scenes.push(rollout(
+            &model,
+            &scene,
+            Some(run.ego),
+            &controlled,
+            run.config,
+            truth.as_ref(),
+        )?);
+        bar.inc(1);
+    }
+    drop(bar);
+    let ids: Vec<i64> = run.controlled.iter().map(|c| c.id).collect();
+    let reports = scenes
+        .iter()
+        .map(|s| report(s, run.ego, &ids))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    std::fs::create_dir_all(&run.out).with_context(|| format!("creating {}", run.out.display()))?;
+    let files = match run.format {
+        ExportFormat::Scenario => {
+            let path = run.out.join("rollouts.tfrecord");
+            write_scenarios(&path, &scenes)?;
+            vec![path]
+        }
+        ExportFormat::Wosac => {
+            let header = scbg_womd::wosac::SubmissionHeader {
+                account_name: String::new(),
+                unique_method_name: run.name.clone(),
+                authors: vec!["scbg".into()],
+                affiliation: String::new(),
+                description: format!(
+                    "scbg: courtesy-controlled agents (generator re-planning every {} steps, kinematic bicycle), reactive others",
+                    run.config.replan_every
+                ),
+                method_link: String::new(),
+                uses_lidar_data: false,
+                uses_camera_data: false,
+                uses_public_model_pretraining: false,
+                num_model_parameters: String::new(),
+                public_model_names: Vec::new(),
+                // The challenge asks for a policy that acts on the simulated state every step.
+                acknowledge_closed_loop: run.config.replan_every == 1,
+            };
+            let rollouts = wosac_rollouts(&scene, &scenes);
+            write_wosac(
+                &run.out,
+                &run.name,
+                &header,
+                &[(scene.clone(), rollouts)],
+                1,
+            )?
+        }
+    };
+    let output = SimOutput {
+        scenario_id: scene.scenario_id.clone(),
+        synthetic_world: truth.is_some(),
+        quantiles,
+        reports,
+        files,
+    };
+    crate::write_json(run.out.join("sim.json"), &output)?;
+    Ok(output)
+}

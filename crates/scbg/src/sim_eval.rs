@@ -1,0 +1,680 @@
+//! `scbg eval sim`: the courtesy knob in closed loop. For each scene and quantile, a rollout
+//! with the controlled agent (B) driven by the generator and A reactive: A's realised average
+//! speed, *realised courtesy* (A's realised speed minus A's realised speed in the same scene
+//! with B at quantile 0.5 — the world is deterministic, so "same seeds" holds by
+//! construction), B's collision, off-road, jerk and progress; on a subset of scenes the WOSAC
+//! realism of 32 rollouts per quantile, beside log replay, constant velocity and IDM-only
+//! agents on the same scenes.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use rayon::prelude::*;
+use scbg_generator::Courtesy;
+use scbg_metrics::wosac::{DatasetMetrics, Rollouts, ScenarioMetrics, WosacConfig};
+use scbg_scene::Scene;
+use scbg_sim::{SimConfig, Simulation};
+use scbg_synth::GroundTruth;
+use serde::Serialize;
+
+use crate::generator::LoadedScbg;
+use crate::sim::{
+    AgentRolloutMetrics, ControlledAgent, EgoMode, OthersMode, report, rollout, rollout_quantiles,
+    scene_of_rollout, wosac_rollouts,
+};
+
+/// What `eval sim` runs.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SimEvalOptions {
+    /// Quantiles of the courtesy curve (0.5 is added for realised courtesy when missing).
+    pub quantiles: Vec<f32>,
+    /// Scenes of the courtesy curve (the first ones given).
+    pub scenes: usize,
+    /// Scenes (of those) scored with WOSAC realism.
+    pub wosac_scenes: usize,
+    /// Quantiles scored with WOSAC (32 rollouts each).
+    pub wosac_quantiles: Vec<f32>,
+    /// Rollouts per scene and quantile for WOSAC.
+    pub rollouts: usize,
+    /// Width of the band of quantiles the rollouts spread over.
+    pub spread: f32,
+    /// Closed-loop settings (default: re-plan every 10 steps, A and the others reactive).
+    pub config: SimConfig,
+    /// The WOSAC definition.
+    pub wosac: WosacConfig,
+}
+
+impl Default for SimEvalOptions {
+    fn default() -> Self {
+        Self {
+            quantiles: (1..=9).map(|k| k as f32 / 10.0).collect(),
+            scenes: 40,
+            wosac_scenes: 8,
+            wosac_quantiles: vec![0.1, 0.5, 0.9],
+            rollouts: scbg_metrics::wosac::ROLLOUTS_PER_SCENARIO,
+            spread: 0.2,
+            config: SimConfig {
+                others: OthersMode::Reactive,
+                ..SimConfig::default()
+            },
+            wosac: WosacConfig::V2025,
+        }
+    }
+}
+
+/// WOSAC numbers of one method over the WOSAC scenes.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WosacSummary {
+    /// Scenes scored.
+    pub scenes: usize,
+    /// Mean realism meta-metric.
+    pub metametric: f32,
+    /// Kinematic bucket.
+    pub kinematic: f32,
+    /// Interactive bucket.
+    pub interactive: f32,
+    /// Map-based bucket.
+    pub map_based: f32,
+    /// Mean minADE, m.
+    pub min_ade_m: f32,
+    /// Simulated collision rate (evaluated objects).
+    pub collision_rate: f32,
+    /// Simulated off-road rate (evaluated objects).
+    pub offroad_rate: f32,
+}
+
+impl WosacSummary {
+    fn of(m: &DatasetMetrics) -> Self {
+        Self {
+            scenes: m.num_scenarios,
+            metametric: m.metametric,
+            kinematic: m.buckets.kinematic,
+            interactive: m.buckets.interactive,
+            map_based: m.buckets.map_based,
+            min_ade_m: m.min_average_displacement_error_m,
+            collision_rate: m.simulated_collision_rate,
+            offroad_rate: m.simulated_offroad_rate,
+        }
+    }
+}
+
+/// The closed-loop numbers at one quantile (means over scenes).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct QuantileSim {
+    /// The quantile asked of B.
+    pub quantile: f32,
+    /// A's realised average speed, m/s.
+    pub a_avg_speed_mps: f64,
+    /// Its standard deviation over scenes.
+    pub a_avg_speed_std_mps: f64,
+    /// Realised courtesy: A's realised speed minus A's at quantile 0.5, m/s.
+    pub realised_courtesy_mps: f64,
+    /// Its standard deviation over scenes.
+    pub realised_courtesy_std_mps: f64,
+    /// Fraction of scenes in which B collides.
+    pub b_collision_rate: f64,
+    /// Fraction of scenes in which B goes off-road.
+    pub b_offroad_rate: f64,
+    /// B's mean |jerk|, m/s³.
+    pub b_mean_abs_jerk_mps3: f64,
+    /// B's distance travelled, m.
+    pub b_progress_m: f64,
+    /// WOSAC realism of 32 rollouts around this quantile (WOSAC quantiles only).
+    pub wosac: Option<WosacSummary>,
+}
+
+/// A baseline on the WOSAC scenes.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BaselineSim {
+    /// A's realised average speed, m/s.
+    pub a_avg_speed_mps: f64,
+    /// Fraction of scenes in which B collides.
+    pub b_collision_rate: f64,
+    /// Fraction of scenes in which B goes off-road.
+    pub b_offroad_rate: f64,
+    /// WOSAC realism.
+    pub wosac: Option<WosacSummary>,
+}
+
+/// Spearman correlations per family and pooled (`all`).
+pub type PerFamily = BTreeMap<String, Option<f64>>;
+
+/// Everything `eval sim` measures (`eval_sim.json`; the demo's `closed_loop`).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SimEval {
+    /// Scenes of the courtesy curve.
+    pub scenes: usize,
+    /// Scenes skipped, with why.
+    pub skipped: BTreeMap<String, usize>,
+    /// Steps between plans.
+    pub replan_every: usize,
+    /// Per quantile.
+    pub per_quantile: Vec<QuantileSim>,
+    /// Spearman(quantile, A's realised average speed) over every (scene, quantile).
+    pub spearman_quantile_a_speed: PerFamily,
+    /// Spearman(quantile, realised courtesy) over every (scene, quantile): the same, with
+    /// each scene's own level removed.
+    pub spearman_quantile_realised_courtesy: PerFamily,
+    /// Whether the mean of A's realised speed never falls from one quantile to the next.
+    pub a_speed_curve_rises: bool,
+    /// The largest B collision rate over the quantiles.
+    pub max_b_collision_rate: f64,
+    /// scbg over every WOSAC quantile together.
+    pub wosac_scbg: Option<WosacSummary>,
+    /// Baselines on the WOSAC scenes: `log_replay`, `constant_velocity`, `idm_only`.
+    pub baselines: BTreeMap<String, BaselineSim>,
+    /// Whether scbg's WOSAC meta-metric beats constant velocity and IDM-only.
+    pub wosac_above_baselines: Option<bool>,
+    /// Mean wall time of one courtesy-curve rollout, ms (all threads busy).
+    pub rollout_ms: f64,
+    /// Wall time of the whole evaluation, s.
+    pub seconds: f64,
+}
+
+/// One scene to evaluate: the scene, its ego and controlled agent, its family.
+#[derive(Debug, Clone)]
+pub struct SimScene {
+    /// The scene (WOSAC layout for the realism part: 91 steps, current step 10).
+    pub scene: Scene,
+    /// A.
+    pub ego: i64,
+    /// B.
+    pub controlled: i64,
+    /// The synthetic ground truth (the reactive rule, and the family).
+    pub truth: Option<GroundTruth>,
+}
+
+impl SimScene {
+    /// A (the SDC) and B (the first other object of interest valid at the current step) of a
+    /// scene; `None` when it has no such pair.
+    pub fn of(scene: Scene, truth: Option<GroundTruth>) -> Option<Self> {
+        let sdc = scene.sdc_track_index?;
+        let ego = scene.tracks[sdc].id;
+        let valid = |id: i64| {
+            scene
+                .track_index(id)
+                .is_some_and(|i| scene.tracks[i].states[scene.current_step].valid)
+        };
+        let controlled = scene
+            .objects_of_interest
+            .iter()
+            .copied()
+            .find(|&id| id != ego && valid(id))?;
+        Some(Self {
+            scene,
+            ego,
+            controlled,
+            truth,
+        })
+    }
+
+    fn family(&self) -> String {
+        self.truth
+            .as_ref()
+            .map_or_else(|| "womd".into(), |t| t.family.name().to_string())
+    }
+}
+
+struct SceneResult {
+    family: String,
+    /// `[quantile]` (ego, B) metrics.
+    curve: Vec<(AgentRolloutMetrics, AgentRolloutMetrics)>,
+    base_a_speed: f64,
+}
+
+fn mean_std(v: &[f64]) -> (f64, f64) {
+    if v.is_empty() {
+        return (f64::NAN, f64::NAN);
+    }
+    let m = v.iter().sum::<f64>() / v.len() as f64;
+    let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64;
+    (m, var.sqrt())
+}
+
+fn rate(v: impl Iterator<Item = bool>) -> f64 {
+    let (n, k) = v.fold((0usize, 0usize), |(n, k), b| (n + 1, k + usize::from(b)));
+    if n == 0 {
+        f64::NAN
+    } else {
+        k as f64 / n as f64
+    }
+}
+
+fn one_rollout(
+    model: &LoadedScbg,
+    s: &SimScene,
+    q: f32,
+    config: SimConfig,
+) -> anyhow::Result<(AgentRolloutMetrics, AgentRolloutMetrics)> {
+    let controlled = [ControlledAgent {
+        id: s.controlled,
+        courtesy: Courtesy::Quantile(q),
+    }];
+    let out = rollout(
+        model,
+        &s.scene,
+        Some(s.ego),
+        &controlled,
+        config,
+        s.truth.as_ref(),
+    )?;
+    let r = report(&out, s.ego, &[s.controlled])?;
+    Ok((r.ego, r.controlled[0]))
+}
+
+/// 32 rollouts of scbg around `q`, as WOSAC rollouts.
+fn scbg_rollouts(
+    model: &LoadedScbg,
+    s: &SimScene,
+    q: f32,
+    options: &SimEvalOptions,
+) -> anyhow::Result<Rollouts> {
+    let scenes = rollout_quantiles(q, options.rollouts, options.spread)
+        .into_iter()
+        .map(|qr| {
+            let controlled = [ControlledAgent {
+                id: s.controlled,
+                courtesy: Courtesy::Quantile(qr),
+            }];
+            rollout(
+                model,
+                &s.scene,
+                Some(s.ego),
+                &controlled,
+                options.config,
+                s.truth.as_ref(),
+            )
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    Ok(wosac_rollouts(&s.scene, &scenes))
+}
+
+/// IDM-only agents: nobody controlled, A and the others IDM along their logged paths.
+fn idm_only(s: &SimScene) -> anyhow::Result<Scene> {
+    let config = SimConfig {
+        ego: EgoMode::Reactive,
+        others: OthersMode::Reactive,
+        ..SimConfig::default()
+    };
+    let mut sim = Simulation::reset(&s.scene, Some(s.ego), &[], config, None)?;
+    struct Nobody;
+    impl scbg_sim::Planner for Nobody {
+        fn plan(&mut self, _: &Scene, id: i64) -> Result<Vec<[f64; 2]>, scbg_sim::PlanError> {
+            Err(scbg_sim::PlanError(format!("agent {id} is not controlled")))
+        }
+    }
+    sim.run(&mut Nobody)?;
+    Ok(sim.to_scene())
+}
+
+type Scored = (
+    BTreeMap<String, (AgentRolloutMetrics, AgentRolloutMetrics)>,
+    BTreeMap<String, ScenarioMetrics>,
+);
+
+/// The WOSAC part of one scene: metrics per method (`q=0.1`, …, baselines) and the baselines'
+/// rollout metrics (ego, B).
+fn wosac_scene(
+    model: &LoadedScbg,
+    s: &SimScene,
+    options: &SimEvalOptions,
+) -> anyhow::Result<Scored> {
+    let n = options.rollouts;
+    let mut metrics = BTreeMap::new();
+    let mut rollout_metrics = BTreeMap::new();
+    let score = |r: &Rollouts| scbg_metrics::wosac::scenario_metrics(&s.scene, r, options.wosac);
+    for &q in &options.wosac_quantiles {
+        let r = scbg_rollouts(model, s, q, options)?;
+        metrics.insert(format!("q={q:.1}"), score(&r)?);
+    }
+    let idm_scene = idm_only(s)?;
+    let idm = wosac_rollouts(&s.scene, &vec![idm_scene; n]);
+    for (name, r) in [
+        (
+            "log_replay",
+            scbg_metrics::wosac::log_replay_rollouts(&s.scene, n)?,
+        ),
+        (
+            "constant_velocity",
+            scbg_metrics::wosac::constant_velocity_rollouts(&s.scene, n)?,
+        ),
+        ("idm_only", idm),
+    ] {
+        metrics.insert(name.to_string(), score(&r)?);
+        let scene = scene_of_rollout(&s.scene, &r, 0);
+        let rep = report(&scene, s.ego, &[s.controlled])?;
+        rollout_metrics.insert(name.to_string(), (rep.ego, rep.controlled[0]));
+    }
+    Ok((rollout_metrics, metrics))
+}
+
+fn spearman_per_family(points: &[(String, f64, f64)]) -> PerFamily {
+    let mut out = PerFamily::new();
+    let mut families: Vec<&str> = points.iter().map(|p| p.0.as_str()).collect();
+    families.sort_unstable();
+    families.dedup();
+    let corr = |f: Option<&str>| {
+        let (x, y): (Vec<f64>, Vec<f64>) = points
+            .iter()
+            .filter(|p| f.is_none_or(|f| p.0 == f))
+            .map(|p| (p.1, p.2))
+            .unzip();
+        scbg_metrics::spearman(&x, &y)
+    };
+    out.insert("all".into(), corr(None));
+    for f in families {
+        out.insert(f.to_string(), corr(Some(f)));
+    }
+    out
+}
+
+/// Runs the closed-loop evaluation over `scenes` (the first `options.scenes` of them).
+pub fn evaluate_sim(
+    model: &LoadedScbg,
+    scenes: &[SimScene],
+    options: &SimEvalOptions,
+) -> anyhow::Result<SimEval> {
+    let started = std::time::Instant::now();
+    let mut quantiles = options.quantiles.clone();
+    crate::ensure_request!(
+        quantiles
+            .iter()
+            .chain(&options.wosac_quantiles)
+            .all(|q| (0.0..=1.0).contains(q)),
+        "every quantile must be in [0, 1]"
+    );
+    if !quantiles.iter().any(|&q| (q - 0.5).abs() < 1e-6) {
+        quantiles.push(0.5);
+    }
+    quantiles.sort_by(f32::total_cmp);
+    let base = quantiles
+        .iter()
+        .position(|&q| (q - 0.5).abs() < 1e-6)
+        .expect("0.5 is there");
+    let scenes = &scenes[..scenes.len().min(options.scenes)];
+    let curve_started = std::time::Instant::now();
+    let results: Vec<anyhow::Result<SceneResult>> = scenes
+        .par_iter()
+        .map(|s| {
+            let curve = quantiles
+                .iter()
+                .map(|&q| one_rollout(model, s, q, options.config))
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            Ok(SceneResult {
+                family: s.family(),
+                base_a_speed: curve[base].0.avg_speed_mps,
+                curve,
+            })
+        })
+        .collect();
+    let curve_seconds = curve_started.elapsed().as_secs_f64();
+    let mut skipped = BTreeMap::new();
+    let mut done = Vec::new();
+    for r in results {
+        match r {
+            Ok(r) => done.push(r),
+            Err(e) => {
+                let why = format!("{e:#}");
+                let key = why.split(':').next().unwrap_or("error").to_string();
+                *skipped.entry(key).or_insert(0) += 1;
+            }
+        }
+    }
+    anyhow::ensure!(
+        !done.is_empty(),
+        "no scene could be simulated (skipped: {skipped:?})"
+    );
+    let mut speed_points = Vec::new();
+    let mut courtesy_points = Vec::new();
+    let mut per_quantile = Vec::new();
+    for (k, &q) in quantiles.iter().enumerate() {
+        let speeds: Vec<f64> = done.iter().map(|r| r.curve[k].0.avg_speed_mps).collect();
+        let realised: Vec<f64> = done
+            .iter()
+            .map(|r| r.curve[k].0.avg_speed_mps - r.base_a_speed)
+            .collect();
+        for (r, (&v, &c)) in done.iter().zip(speeds.iter().zip(&realised)) {
+            speed_points.push((r.family.clone(), f64::from(q), v));
+            courtesy_points.push((r.family.clone(), f64::from(q), c));
+        }
+        let (a_avg_speed_mps, a_avg_speed_std_mps) = mean_std(&speeds);
+        let (realised_courtesy_mps, realised_courtesy_std_mps) = mean_std(&realised);
+        let b = || done.iter().map(|r| &r.curve[k].1);
+        per_quantile.push(QuantileSim {
+            quantile: q,
+            a_avg_speed_mps,
+            a_avg_speed_std_mps,
+            realised_courtesy_mps,
+            realised_courtesy_std_mps,
+            b_collision_rate: rate(b().map(|m| m.collision)),
+            b_offroad_rate: rate(b().map(|m| m.offroad.unwrap_or(false))),
+            b_mean_abs_jerk_mps3: mean_std(&b().map(|m| m.mean_abs_jerk_mps3).collect::<Vec<_>>())
+                .0,
+            b_progress_m: mean_std(&b().map(|m| m.progress_m).collect::<Vec<_>>()).0,
+            wosac: None,
+        });
+    }
+
+    // WOSAC realism on the first scenes.
+    let wosac_scenes = &scenes[..scenes.len().min(options.wosac_scenes)];
+    let scored: Vec<Scored> = wosac_scenes
+        .par_iter()
+        .filter_map(|s| wosac_scene(model, s, options).ok())
+        .collect();
+    let aggregate = |name: &str| {
+        let m: Vec<ScenarioMetrics> = scored
+            .iter()
+            .filter_map(|s| s.1.get(name).cloned())
+            .collect();
+        scbg_metrics::wosac::aggregate(&m, options.wosac)
+    };
+    for row in &mut per_quantile {
+        row.wosac = aggregate(&format!("q={:.1}", row.quantile)).map(|m| WosacSummary::of(&m));
+    }
+    let all_scbg: Vec<ScenarioMetrics> = scored
+        .iter()
+        .flat_map(|s| {
+            s.1.iter()
+                .filter(|(k, _)| k.starts_with("q="))
+                .map(|(_, v)| v.clone())
+        })
+        .collect();
+    let wosac_scbg =
+        scbg_metrics::wosac::aggregate(&all_scbg, options.wosac).map(|m| WosacSummary::of(&m));
+    let mut baselines = BTreeMap::new();
+    for name in ["log_replay", "constant_velocity", "idm_only"] {
+        let rm: Vec<&(AgentRolloutMetrics, AgentRolloutMetrics)> =
+            scored.iter().filter_map(|s| s.0.get(name)).collect();
+        baselines.insert(
+            name.to_string(),
+            BaselineSim {
+                a_avg_speed_mps: mean_std(
+                    &rm.iter().map(|m| m.0.avg_speed_mps).collect::<Vec<_>>(),
+                )
+                .0,
+                b_collision_rate: rate(rm.iter().map(|m| m.1.collision)),
+                b_offroad_rate: rate(rm.iter().map(|m| m.1.offroad.unwrap_or(false))),
+                wosac: aggregate(name).map(|m| WosacSummary::of(&m)),
+            },
+        );
+    }
+    let wosac_above_baselines = wosac_scbg.as_ref().and_then(|w| {
+        let cv = baselines["constant_velocity"].wosac.as_ref()?.metametric;
+        let idm = baselines["idm_only"].wosac.as_ref()?.metametric;
+        Some(w.metametric > cv && w.metametric > idm)
+    });
+    let a_speed_curve_rises = per_quantile
+        .windows(2)
+        .all(|w| w[1].a_avg_speed_mps >= w[0].a_avg_speed_mps);
+    let max_b_collision_rate = per_quantile
+        .iter()
+        .map(|r| r.b_collision_rate)
+        .fold(0.0, f64::max);
+    let rollouts_done = done.len() * quantiles.len();
+    Ok(SimEval {
+        scenes: done.len(),
+        skipped,
+        replan_every: options.config.replan_every,
+        per_quantile,
+        spearman_quantile_a_speed: spearman_per_family(&speed_points),
+        spearman_quantile_realised_courtesy: spearman_per_family(&courtesy_points),
+        a_speed_curve_rises,
+        max_b_collision_rate,
+        wosac_scbg,
+        baselines,
+        wosac_above_baselines,
+        rollout_ms: 1e3 * curve_seconds / rollouts_done.max(1) as f64,
+        seconds: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// The figures: A's realised speed and realised courtesy against the quantile
+/// (`sim_courtesy.png`), WOSAC meta-metric against the quantile with the baselines
+/// (`sim_realism.png`).
+pub fn write_figures(eval: &SimEval, dir: &Path) -> anyhow::Result<()> {
+    use scbg_plot::Series;
+    std::fs::create_dir_all(dir)?;
+    let q = |f: &dyn Fn(&QuantileSim) -> f64| -> Vec<(f64, f64)> {
+        eval.per_quantile
+            .iter()
+            .map(|r| (f64::from(r.quantile), f(r)))
+            .collect()
+    };
+    scbg_plot::line_chart(
+        &[
+            Series {
+                label: "A's realised avg speed − at q=0.5 (m/s)".into(),
+                points: q(&|r| r.realised_courtesy_mps),
+                band: Some(
+                    eval.per_quantile
+                        .iter()
+                        .map(|r| r.realised_courtesy_std_mps)
+                        .collect(),
+                ),
+            },
+            Series {
+                label: "B collision rate".into(),
+                points: q(&|r| r.b_collision_rate),
+                band: None,
+            },
+        ],
+        "courtesy quantile of B",
+        "m/s  |  rate",
+        "closed loop: realised courtesy toward A",
+        &dir.join("sim_courtesy.png"),
+    )?;
+    let mut series = vec![Series {
+        label: "scbg (32 rollouts around q)".into(),
+        points: eval
+            .per_quantile
+            .iter()
+            .filter_map(|r| {
+                r.wosac
+                    .as_ref()
+                    .map(|w| (f64::from(r.quantile), f64::from(w.metametric)))
+            })
+            .collect(),
+        band: None,
+    }];
+    for (name, b) in &eval.baselines {
+        if let Some(w) = &b.wosac {
+            series.push(Series {
+                label: name.clone(),
+                points: vec![
+                    (0.1, f64::from(w.metametric)),
+                    (0.9, f64::from(w.metametric)),
+                ],
+                band: None,
+            });
+        }
+    }
+    if series[0].points.is_empty() {
+        return Ok(());
+    }
+    scbg_plot::line_chart(
+        &series,
+        "courtesy quantile of B",
+        "WOSAC meta-metric",
+        "closed loop: realism against the courtesy knob",
+        &dir.join("sim_realism.png"),
+    )?;
+    Ok(())
+}
+
+/// The scenes of WOMD files for `eval sim`: each scene with its A (SDC) and B (first other
+/// object of interest), its synthetic ground truth when `truth` has it, on the split asked
+/// (by scenario id, with the predictor's validation fraction). Returns the scenes and the
+/// count of scenes without such a pair.
+pub fn load_scenes(
+    inputs: &[String],
+    truth: Option<&[GroundTruth]>,
+    split: crate::predictor::SplitSelection,
+    validation_fraction: f64,
+    max: usize,
+) -> anyhow::Result<(Vec<SimScene>, usize)> {
+    let index = truth.map(crate::fidelity::TruthIndex::new);
+    let mut scenes = Vec::new();
+    let mut no_pair = 0;
+    'files: for file in crate::inputs::expand(inputs)? {
+        for scene in scbg_womd::WomdFile::open(&file)?.scenes() {
+            let scene = scene?;
+            if split == crate::predictor::SplitSelection::Validation
+                && scbg_train::data::split_of(&scene.scenario_id, validation_fraction)
+                    != scbg_train::data::Split::Validation
+            {
+                continue;
+            }
+            let t = index
+                .as_ref()
+                .and_then(|i| i.get(&scene.scenario_id))
+                .cloned();
+            match SimScene::of(scene, t) {
+                Some(s) => scenes.push(s),
+                None => no_pair += 1,
+            }
+            if scenes.len() >= max {
+                break 'files;
+            }
+        }
+    }
+    Ok((scenes, no_pair))
+}
+
+/// `scbg eval sim`: loads the model and the scenes, evaluates, writes `eval_sim.json` and the
+/// figures into `out`.
+#[allow(clippy::too_many_arguments)]
+pub fn eval_sim_files(
+    model: &Path,
+    predictor: Option<&Path>,
+    inputs: &[String],
+    ground_truth: Option<&Path>,
+    split: crate::predictor::SplitSelection,
+    options: &SimEvalOptions,
+    out: &Path,
+    progress: &dyn crate::Progress,
+) -> anyhow::Result<SimEval> {
+    let model = crate::generator::load_scbg(model, predictor)?;
+    let truth = ground_truth
+        .map(crate::synth::read_ground_truth)
+        .transpose()?;
+    let (scenes, no_pair) = load_scenes(
+        inputs,
+        truth.as_deref(),
+        split,
+        model.predictor.train_config.validation_fraction,
+        options.scenes,
+    )?;
+    progress.note(&format!(
+        "closed loop on {} scenes ({} without an SDC and another object of interest)",
+        scenes.len(),
+        no_pair
+    ));
+    let mut eval = evaluate_sim(&model, &scenes, options)?;
+    if no_pair > 0 {
+        eval.skipped.insert("no A–B pair".into(), no_pair);
+    }
+    std::fs::create_dir_all(out)?;
+    crate::write_json(out.join("eval_sim.json"), &eval)?;
+    write_figures(&eval, out)?;
+    Ok(eval)
+}
