@@ -36,6 +36,9 @@ pub enum Command {
     /// Closed-loop simulation: courtesy-controlled agents re-planned by the generator, A and
     /// the others reactive; rollouts exported as Scenario TFRecords or a WOSAC shard.
     Sim(SimArgs),
+    /// Serve a model over HTTP to simulators: generate, courtesy, closed-loop sessions
+    /// (OpenAPI at /openapi.json, docs at /docs).
+    Serve(ServeArgs),
     /// Evaluate models and predictions.
     #[command(subcommand)]
     Eval(EvalCommand),
@@ -500,6 +503,58 @@ pub enum BenchCommand {
     Wosac(BenchWosacArgs),
     /// Closed-loop rollout time with one generator agent, and WOSAC of 32 rollouts (1 thread).
     Sim(BenchSimArgs),
+    /// Loopback load test of `POST /v1/generate` (latency percentiles, errors, peak RSS).
+    Serve(BenchServeArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct ServeArgs {
+    /// Generator folder (e.g. out/demo/generator_full).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
+    /// Address to bind; anything but loopback needs --token.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub addr: std::net::SocketAddr,
+    /// Bearer token every API request must carry (also from SCBG_TOKEN).
+    #[arg(long, env = "SCBG_TOKEN", hide_env_values = true)]
+    pub token: Option<String>,
+    /// Folder whose WOMD files `POST /v1/scenarios/open` may read (nothing outside it).
+    #[arg(long)]
+    pub data_dir: Option<PathBuf>,
+    /// Inference jobs at once (default: the number of cores).
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// Largest request body, MiB.
+    #[arg(long, default_value_t = 16)]
+    pub max_body_mib: usize,
+    /// Time limit of one request's inference, seconds.
+    #[arg(long, default_value_t = 30)]
+    pub timeout_s: u64,
+    /// Close sessions idle this long, seconds.
+    #[arg(long, default_value_t = 600)]
+    pub session_ttl_s: u64,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchServeArgs {
+    /// Generator folder (e.g. out/demo/generator_full).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Requests per second.
+    #[arg(long, default_value_t = 200.0)]
+    pub rate: f64,
+    /// Seconds of load.
+    #[arg(long, default_value_t = 60.0)]
+    pub seconds: f64,
+    /// Inference workers of the server (default: the number of cores).
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Clone, Args)]

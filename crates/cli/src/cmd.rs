@@ -103,6 +103,41 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             println!();
         }
         Command::Sim(a) => sim(&a, progress)?,
+        Command::Serve(a) => {
+            let model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
+            let defaults = scbg_serve::ServeConfig::default();
+            scbg_serve::run(
+                model,
+                scbg_serve::ServeConfig {
+                    addr: a.addr,
+                    token: a.token,
+                    data_dir: a.data_dir,
+                    max_body_bytes: a.max_body_mib << 20,
+                    request_timeout: std::time::Duration::from_secs(a.timeout_s),
+                    workers: a.workers.unwrap_or(defaults.workers),
+                    session_ttl: std::time::Duration::from_secs(a.session_ttl_s),
+                    ..defaults
+                },
+            )?;
+        }
+        Command::Bench(BenchCommand::Serve(a)) => {
+            let model = scbg::generator::load_scbg(&a.model, None)?;
+            let (bytes, truth) = scbg::synth::scenario_bytes(0, 2)?;
+            let report = scbg_serve::load::load_test(
+                model,
+                bytes,
+                (truth.a_id, truth.b_id),
+                a.rate,
+                a.seconds,
+                a.workers
+                    .unwrap_or_else(|| scbg_serve::ServeConfig::default().workers),
+            )?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{}", report.to_text());
+            }
+        }
         Command::Eval(EvalCommand::Sim(a)) => {
             let options = scbg::sim_eval::SimEvalOptions {
                 scenes: a.scenes,

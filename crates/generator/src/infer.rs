@@ -45,6 +45,21 @@ pub struct Scbg {
     pub labels: LabelOptions,
 }
 
+/// What every generation for one (scene, A, B) shares ([`Scbg::pair_context`]).
+#[derive(Debug, Clone)]
+pub struct PairContext {
+    example: Example,
+    low: f32,
+    high: f32,
+}
+
+impl PairContext {
+    /// The predicted 0.1 and 0.9 quantiles of ψ.
+    pub fn range(&self) -> (f32, f32) {
+        (self.low, self.high)
+    }
+}
+
 /// Why a trajectory could not be generated.
 #[derive(Debug, thiserror::Error)]
 pub enum GenerateError {
@@ -60,6 +75,9 @@ pub enum GenerateError {
     /// A and B are the same track (its id).
     #[error("A and B are the same track ({0})")]
     SameTrack(i64),
+    /// A given future of B is malformed (what is wrong).
+    #[error("B's future: {0}")]
+    Future(String),
     /// The sample of A or B could not be built (e.g. the track is not valid at the window's
     /// current step).
     #[error("track {id}: {error}")]
@@ -97,7 +115,7 @@ pub struct Generated {
 
 impl Scbg {
     /// B's futures for each requested courtesy, for the pair (A = `a_id`, B = `b_id`) at
-    /// `window`.
+    /// `window`: [`Scbg::pair_context`] then [`Scbg::generate_in`].
     pub fn generate(
         &self,
         scene: &PreparedScene,
@@ -107,7 +125,23 @@ impl Scbg {
         courtesy: &[Courtesy],
         device: &Device,
     ) -> Result<Vec<Generated>, GenerateError> {
-        let (ia, ib) = check_request(scene, a_id, b_id, courtesy)?;
+        check_request(scene, a_id, b_id, courtesy)?;
+        let ctx = self.pair_context(scene, window, a_id, b_id, device)?;
+        self.generate_in(&ctx, courtesy, device)
+    }
+
+    /// What every generation for one pair shares (its samples, B's frozen embedding,
+    /// E[r(Y_A) | x] and the predicted range of ψ): computed once, a front end can keep it
+    /// and generate at many courtesies for the cost of the generator and J_φ alone.
+    pub fn pair_context(
+        &self,
+        scene: &PreparedScene,
+        window: &Window,
+        a_id: i64,
+        b_id: i64,
+        device: &Device,
+    ) -> Result<PairContext, GenerateError> {
+        let (ia, ib) = check_request(scene, a_id, b_id, &[])?;
         let mut builder = SampleBuilder::new(scene, &self.features);
         let mut a = builder
             .sample(window, ia, Some(ib))
@@ -142,6 +176,18 @@ impl Scbg {
             b,
         };
         let (low, high) = predicted_ranges(&self.range, &[&example], device)[0];
+        Ok(PairContext { example, low, high })
+    }
+
+    /// B's futures for each requested courtesy of a pair whose context is known.
+    pub fn generate_in(
+        &self,
+        ctx: &PairContext,
+        courtesy: &[Courtesy],
+        device: &Device,
+    ) -> Result<Vec<Generated>, GenerateError> {
+        check_courtesy(courtesy)?;
+        let (example, low, high) = (&ctx.example, ctx.low, ctx.high);
         let (psi, quantiles): (Vec<f32>, Vec<f32>) = courtesy
             .iter()
             .map(|c| match *c {
@@ -152,7 +198,7 @@ impl Scbg {
         let measured = generate_and_measure(
             &self.generator,
             &self.predictor,
-            &[&example],
+            &[example],
             std::slice::from_ref(&psi),
             self.labels.reward,
             device,
@@ -182,6 +228,20 @@ impl Scbg {
     }
 }
 
+/// Quantiles in [0, 1], finite ψ.
+fn check_courtesy(courtesy: &[Courtesy]) -> Result<(), GenerateError> {
+    for c in courtesy {
+        match *c {
+            Courtesy::Quantile(q) if !(0.0..=1.0).contains(&q) => {
+                return Err(GenerateError::Quantile(q));
+            }
+            Courtesy::Psi(p) if !p.is_finite() => return Err(GenerateError::Psi(p)),
+            _ => {}
+        }
+    }
+    Ok(())
+}
+
 /// Checks a request (distinct tracks that exist, quantiles in [0, 1], finite ψ): the track
 /// indices of A and B.
 fn check_request(
@@ -193,15 +253,7 @@ fn check_request(
     if a_id == b_id {
         return Err(GenerateError::SameTrack(a_id));
     }
-    for c in courtesy {
-        match *c {
-            Courtesy::Quantile(q) if !(0.0..=1.0).contains(&q) => {
-                return Err(GenerateError::Quantile(q));
-            }
-            Courtesy::Psi(p) if !p.is_finite() => return Err(GenerateError::Psi(p)),
-            _ => {}
-        }
-    }
+    check_courtesy(courtesy)?;
     let index = |id: i64| {
         scene
             .track_index(id)
@@ -267,5 +319,91 @@ impl Scbg {
                 [x, y]
             })
             .collect())
+    }
+}
+
+/// ψ of a given future of B (paper eq. 2), as `scbg generate` reports it for its own futures.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CourtesyOf {
+    /// ψ = E[r(Y_A) | x, y_B] − E[r(Y_A) | x].
+    pub psi: f32,
+    /// E[r(Y_A) | x, y_B].
+    pub a_expected_reward_conditional: f32,
+    /// E[r(Y_A) | x], estimated as in the labels.
+    pub a_expected_reward_marginal: f32,
+}
+
+impl Scbg {
+    /// ψ of `future_world` (B's world-frame positions at the 80 steps after the window's
+    /// current step) toward A.
+    pub fn courtesy_of(
+        &self,
+        scene: &PreparedScene,
+        window: &Window,
+        a_id: i64,
+        b_id: i64,
+        future_world: &[[f64; 2]],
+        device: &Device,
+    ) -> Result<CourtesyOf, GenerateError> {
+        let (ia, ib) = check_request(scene, a_id, b_id, &[])?;
+        let mut builder = SampleBuilder::new(scene, &self.features);
+        let mut a = builder
+            .sample(window, ia, Some(ib))
+            .map_err(|error| GenerateError::Sample { id: a_id, error })?;
+        let mut b = builder
+            .sample(window, ib, None)
+            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
+        let t = a.condition_future_valid.len();
+        if future_world.len() != t {
+            return Err(GenerateError::Future(format!(
+                "{} points, expected {t}",
+                future_world.len()
+            )));
+        }
+        if let Some(k) = future_world
+            .iter()
+            .position(|p| !(p[0].is_finite() && p[1].is_finite()))
+        {
+            return Err(GenerateError::Future(format!("point {k} is not finite")));
+        }
+        self.stats.normalize(&mut a);
+        self.stats.normalize(&mut b);
+        let mixture = marginal_mixtures(&self.predictor, &[&b], device).remove(0);
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0x5cb6);
+        let e_marg = label_pair(
+            &self.predictor,
+            &a,
+            &b,
+            &mixture,
+            self.labels,
+            &mut rng,
+            device,
+        )
+        .e_marg;
+        let pose = a.world_from_agent;
+        let cond: Vec<f32> = future_world
+            .iter()
+            .flat_map(|p| {
+                let (x, y) = pose.agent_from_world(p[0], p[1]);
+                [x as f32, y as f32, 1.0]
+            })
+            .collect();
+        let batch = scbg_model::Batch::for_mode(&[&a], scbg_model::Mode::Conditional, device);
+        let condition = burn::tensor::Tensor::<3>::from_data(
+            burn::tensor::TensorData::new(cond, [1, t, 3]),
+            device,
+        );
+        let e_cond = crate::eval::to_vec(scbg_courtesy::expected_reward(
+            &self.predictor,
+            &batch,
+            Some(condition),
+            self.labels.reward,
+            crate::train::STEP_SECS,
+        ))[0];
+        Ok(CourtesyOf {
+            psi: e_cond - e_marg,
+            a_expected_reward_conditional: e_cond,
+            a_expected_reward_marginal: e_marg,
+        })
     }
 }

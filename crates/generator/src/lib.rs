@@ -22,7 +22,7 @@ mod range;
 mod train;
 
 pub use data::{Example, a_from_b, build_examples, marginal_embedding};
-pub use infer::{Courtesy, GenerateError, Generated, Scbg};
+pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Scbg};
 pub use model::{Generator, GeneratorConfig};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,

@@ -71,6 +71,32 @@ pub struct SceneSummary {
     pub tracks_to_predict: Vec<usize>,
 }
 
+/// Every scene of a WOMD file (Scenario or tf.Example TFRecord); errors name the file, record
+/// and field.
+pub fn read_scenes(path: &Path) -> anyhow::Result<Vec<Scene>> {
+    let womd = scbg_womd::WomdFile::open(path)?;
+    Ok(womd.scenes().collect::<Result<Vec<_>, _>>()?)
+}
+
+/// Every scene of uploaded bytes: a TFRecord file (Scenario or tf.Example records) or one bare
+/// serialized `Scenario` message. Malformed bytes are an [`crate::InvalidRequest`] saying what
+/// is wrong.
+pub fn scenes_from_bytes(bytes: Vec<u8>) -> anyhow::Result<Vec<Scene>> {
+    let bare = scbg_womd::decode_record(&bytes, scbg_womd::Format::Scenario).ok();
+    let file = scbg_womd::WomdFile::from_bytes("upload", bytes)
+        .and_then(|f| f.scenes().collect::<Result<Vec<_>, _>>());
+    match (file, bare) {
+        (Ok(scenes), _) if !scenes.is_empty() => Ok(scenes),
+        (_, Some(scene)) => Ok(vec![scene]),
+        (Ok(_), None) => Err(anyhow::Error::new(crate::InvalidRequest(
+            "the upload holds no scenario".into(),
+        ))),
+        (Err(e), None) => Err(anyhow::Error::new(crate::InvalidRequest(format!(
+            "the upload is neither a WOMD TFRecord file nor a Scenario message: {e}"
+        )))),
+    }
+}
+
 /// Summaries of every scenario of a WOMD file (Scenario or tf.Example TFRecords).
 pub fn inspect(path: &Path) -> anyhow::Result<Vec<SceneSummary>> {
     let file = WomdFile::open(path)?;

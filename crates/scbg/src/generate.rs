@@ -4,6 +4,8 @@
 use std::path::Path;
 
 use scbg_generator::{Courtesy, Generated};
+
+pub use scbg_generator::PairContext;
 use scbg_scene::Scene;
 use serde::Serialize;
 
@@ -53,6 +55,44 @@ pub fn find_scene(
             file.display()
         ),
     })))
+}
+
+/// The context every generation for (scene, A, B) shares (samples, B's embedding, E[r(Y_A) |
+/// x], the predicted range): keep it to generate at many courtesies cheaply
+/// ([`generate_in`]).
+pub fn pair_context(
+    model: &LoadedScbg,
+    scene: &Scene,
+    a: i64,
+    b: i64,
+) -> anyhow::Result<PairContext> {
+    let prepared = scbg_features::PreparedScene::for_inference(
+        scene,
+        &scbg_features::WindowConfig::default(),
+        ROAD_SUBSAMPLE,
+    );
+    let window = prepared.windows.first().ok_or_else(|| {
+        anyhow::Error::new(InvalidRequest(format!(
+            "scenario {}: too short for one window (11 history steps)",
+            scene.scenario_id
+        )))
+    })?;
+    model
+        .scbg
+        .pair_context(&prepared, window, a, b, &model.device)
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+}
+
+/// B's futures at each courtesy for a pair whose context is known ([`pair_context`]).
+pub fn generate_in(
+    model: &LoadedScbg,
+    context: &PairContext,
+    courtesy: &[Courtesy],
+) -> anyhow::Result<Vec<Generated>> {
+    model
+        .scbg
+        .generate_in(context, courtesy, &model.device)
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 
 /// B's futures for each requested courtesy (a quantile in [0, 1] of the predicted range, or
@@ -113,6 +153,32 @@ pub fn plan(
     model
         .scbg
         .plan(&prepared, window, a, b, courtesy, &model.device)
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+}
+
+/// ψ of a given world-frame future of B (80 points after the scene's current step) toward A,
+/// with both expectations (paper eq. 2).
+pub fn courtesy(
+    model: &LoadedScbg,
+    scene: &Scene,
+    a: i64,
+    b: i64,
+    future_world: &[[f64; 2]],
+) -> anyhow::Result<scbg_generator::CourtesyOf> {
+    let prepared = scbg_features::PreparedScene::for_inference(
+        scene,
+        &scbg_features::WindowConfig::default(),
+        ROAD_SUBSAMPLE,
+    );
+    let window = prepared.windows.first().ok_or_else(|| {
+        anyhow::Error::new(InvalidRequest(format!(
+            "scenario {}: too short for one window (11 history steps)",
+            scene.scenario_id
+        )))
+    })?;
+    model
+        .scbg
+        .courtesy_of(&prepared, window, a, b, future_world, &model.device)
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 

@@ -18,7 +18,7 @@ use anyhow::Context;
 use scbg_generator::Courtesy;
 use scbg_metrics::wosac::{Rollouts, SimPose};
 use scbg_scene::Scene;
-use scbg_sim::{PlanError, Planner, SimError, Simulation};
+use scbg_sim::{PlanError, Planner, SimError};
 use scbg_synth::GroundTruth;
 use serde::Serialize;
 
@@ -26,7 +26,8 @@ use crate::generator::LoadedScbg;
 use crate::{InvalidRequest, ensure_request};
 
 pub use scbg_sim::{
-    AgentRolloutMetrics, EgoMode, HORIZON_STEPS, OthersMode, SimConfig, VehicleLimits,
+    AgentRolloutMetrics, AgentSnapshot, EgoMode, HORIZON_STEPS, OthersMode, SimConfig, Simulation,
+    VehicleLimits,
 };
 
 /// An agent the generator drives, and the courtesy asked of it toward the ego.
@@ -119,6 +120,19 @@ pub fn start(
         .transpose()?;
     let ids: Vec<i64> = controlled.iter().map(|c| c.id).collect();
     Simulation::reset(scene, ego, &ids, config, world).map_err(sim_error)
+}
+
+/// One step of a started simulation with the generator planning its controlled agents;
+/// `ego_state` when the ego is driven from outside. Errors that are the caller's fault (no
+/// ego state, finished) are [`InvalidRequest`]s.
+pub fn step(
+    model: &LoadedScbg,
+    sim: &mut Simulation,
+    controlled: &[ControlledAgent],
+    ego_state: Option<scbg_scene::AgentState>,
+) -> anyhow::Result<Vec<AgentSnapshot>> {
+    let mut planner = GeneratorPlanner::new(model, sim.ego_id(), controlled.to_vec());
+    sim.step(&mut planner, ego_state).map_err(sim_error)
 }
 
 /// One whole rollout: the scene with the simulated future.

@@ -6,7 +6,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use rayon::prelude::*;
-use scbg_synth::{Family, GroundTruth, generate};
+use scbg_synth::{Family, generate};
+
+pub use scbg_synth::GroundTruth;
 
 use crate::Progress;
 
@@ -110,4 +112,12 @@ pub fn read_ground_truth(path: &Path) -> anyhow::Result<Vec<GroundTruth>> {
         );
     }
     Ok(out)
+}
+
+/// Synthetic scenario `index` of the run with `seed` as the bytes of a one-record WOMD
+/// Scenario TFRecord file, with its ground truth (what a client would upload).
+pub fn scenario_bytes(seed: u64, index: u64) -> anyhow::Result<(Vec<u8>, GroundTruth)> {
+    let g = generate(seed, index, &Family::ALL);
+    let bytes = scbg_womd::scenes_to_tfrecord_bytes([&g.scene])?;
+    Ok((bytes, g.truth))
 }

@@ -1,0 +1,481 @@
+//! The route handlers and the OpenAPI description generated from them.
+
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+use axum::Json;
+use axum::body::Bytes;
+use axum::extract::rejection::{BytesRejection, JsonRejection};
+use axum::extract::{Path, State};
+use axum::http::{StatusCode, header};
+use axum::response::{Html, IntoResponse, Response};
+use utoipa::OpenApi;
+
+use crate::api::*;
+use crate::{ApiError, AppState, Session};
+
+type Body<T> = Result<Json<T>, JsonRejection>;
+
+fn body<T>(b: Body<T>) -> Result<T, ApiError> {
+    b.map(|Json(v)| v).map_err(ApiError::from)
+}
+
+/// The OpenAPI 3.1 description of the API.
+#[derive(Debug, OpenApi)]
+#[openapi(
+    info(
+        title = "scbg",
+        description = "Socially-controllable behaviour generation: courtesy-controlled agents for traffic simulators."
+    ),
+    paths(
+        healthz,
+        upload,
+        open,
+        generate,
+        courtesy,
+        create_session,
+        step_session,
+        close_session
+    ),
+    components(schemas(
+        ErrorBody,
+        Health,
+        TrackSummary,
+        ScenarioSummary,
+        Uploaded,
+        OpenScenario,
+        GenerateRequest,
+        GenerateResponse,
+        CourtesyRequest,
+        CourtesyResponse,
+        ControlledAsk,
+        CreateSession,
+        AgentStateBody,
+        SessionState,
+        StepRequest
+    ))
+)]
+pub struct ApiDoc;
+
+pub(crate) async fn index() -> Html<&'static str> {
+    Html(include_str!("index.html"))
+}
+
+pub(crate) async fn docs() -> Html<&'static str> {
+    Html(include_str!("docs.html"))
+}
+
+pub(crate) async fn openapi() -> Response {
+    (
+        [(header::CONTENT_TYPE, "application/json")],
+        ApiDoc::openapi().to_pretty_json().unwrap_or_default(),
+    )
+        .into_response()
+}
+
+pub(crate) async fn metrics(State(state): State<Arc<AppState>>) -> Response {
+    let scenarios = state.scenarios.lock().expect("scenarios lock").0.len();
+    let sessions = state.expire_sessions();
+    (
+        [(header::CONTENT_TYPE, "text/plain; version=0.0.4")],
+        state.metrics.render(scenarios, sessions),
+    )
+        .into_response()
+}
+
+pub(crate) async fn not_found() -> ApiError {
+    ApiError::not_found("no such route (see /openapi.json)")
+}
+
+pub(crate) async fn method_not_allowed() -> ApiError {
+    ApiError::new(
+        StatusCode::METHOD_NOT_ALLOWED,
+        "method not allowed on this route (see /openapi.json)",
+    )
+}
+
+/// Liveness and what is loaded.
+#[utoipa::path(get, path = "/healthz", responses((status = 200, body = Health)))]
+pub(crate) async fn healthz(State(state): State<Arc<AppState>>) -> Json<Health> {
+    Json(Health {
+        status: "ok".into(),
+        variant: state.model.checkpoint.variant.name().to_string(),
+        scenarios: state.scenarios.lock().expect("scenarios lock").0.len(),
+        sessions: state.expire_sessions(),
+    })
+}
+
+/// Upload WOMD bytes: a TFRecord file (Scenario or tf.Example records) or one serialized
+/// `Scenario` message. Every scenario in it is held under its id.
+#[utoipa::path(
+    post,
+    path = "/v1/scenarios",
+    request_body(content = Vec<u8>, content_type = "application/octet-stream"),
+    responses(
+        (status = 200, body = Uploaded),
+        (status = 400, body = ErrorBody, description = "not WOMD bytes"),
+        (status = 413, body = ErrorBody, description = "body too large")
+    )
+)]
+pub(crate) async fn upload(
+    State(state): State<Arc<AppState>>,
+    bytes: Result<Bytes, BytesRejection>,
+) -> Result<Json<Uploaded>, ApiError> {
+    let bytes = bytes?;
+    if bytes.is_empty() {
+        return Err(ApiError::bad("empty body: send the WOMD file's bytes"));
+    }
+    let scenes = state
+        .blocking(move |_| scbg::data::scenes_from_bytes(bytes.to_vec()).map_err(ApiError::from))
+        .await?;
+    Ok(Json(hold(&state, scenes)))
+}
+
+fn hold(state: &AppState, scenes: Vec<scbg::Scene>) -> Uploaded {
+    let scenarios = scenes.iter().map(ScenarioSummary::of).collect();
+    for s in scenes {
+        state.put_scenario(s);
+    }
+    Uploaded { scenarios }
+}
+
+/// Open a WOMD file inside the server's data folder (nothing outside it is readable).
+#[utoipa::path(
+    post,
+    path = "/v1/scenarios/open",
+    request_body = OpenScenario,
+    responses(
+        (status = 200, body = Uploaded),
+        (status = 400, body = ErrorBody),
+        (status = 403, body = ErrorBody, description = "outside the data folder, or none configured"),
+        (status = 404, body = ErrorBody)
+    )
+)]
+pub(crate) async fn open(
+    State(state): State<Arc<AppState>>,
+    req: Body<OpenScenario>,
+) -> Result<Json<Uploaded>, ApiError> {
+    let req = body(req)?;
+    let Some(root) = state.data_dir.clone() else {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            "the server has no data folder (start it with --data-dir)",
+        ));
+    };
+    let rel = std::path::Path::new(&req.file);
+    if req.file.is_empty()
+        || rel.is_absolute()
+        || rel
+            .components()
+            .any(|c| !matches!(c, std::path::Component::Normal(_)))
+    {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            format!(
+                "file {:?}: give a path relative to the data folder, without `..`",
+                req.file
+            ),
+        ));
+    }
+    let path = root
+        .join(rel)
+        .canonicalize()
+        .map_err(|_| ApiError::not_found(format!("file {:?}: not in the data folder", req.file)))?;
+    if !path.starts_with(&root) {
+        return Err(ApiError::new(
+            StatusCode::FORBIDDEN,
+            format!("file {:?}: outside the data folder", req.file),
+        ));
+    }
+    let wanted = req.scenario_id.clone();
+    let file = req.file.clone();
+    let scenes = state
+        .blocking(move |_| {
+            let scenes = scbg::data::read_scenes(&path)
+                .map_err(|e| ApiError::bad(format!("file {file:?}: {e:#}")))?;
+            let scenes: Vec<_> = match &wanted {
+                Some(id) => scenes
+                    .into_iter()
+                    .filter(|s| &s.scenario_id == id)
+                    .collect(),
+                None => scenes,
+            };
+            if scenes.is_empty() {
+                return Err(ApiError::not_found(format!(
+                    "file {file:?}: no scenario{}",
+                    wanted.map_or(String::new(), |id| format!(" {id:?}"))
+                )));
+            }
+            Ok(scenes)
+        })
+        .await?;
+    Ok(Json(hold(&state, scenes)))
+}
+
+/// B's future in the world frame at a courtesy quantile (or ψ) toward A.
+#[utoipa::path(
+    post,
+    path = "/v1/generate",
+    request_body = GenerateRequest,
+    responses(
+        (status = 200, body = GenerateResponse),
+        (status = 400, body = ErrorBody, description = "unknown track, quantile outside [0, 1], …"),
+        (status = 404, body = ErrorBody, description = "unknown scenario"),
+        (status = 422, body = ErrorBody, description = "wrong JSON types or missing fields")
+    )
+)]
+pub(crate) async fn generate(
+    State(state): State<Arc<AppState>>,
+    req: Body<GenerateRequest>,
+) -> Result<Json<GenerateResponse>, ApiError> {
+    let req = body(req)?;
+    let courtesy = CourtesyAsk {
+        quantile: req.quantile,
+        psi: req.psi,
+    }
+    .to_courtesy()
+    .map_err(ApiError::bad)?;
+    let scene = state.scenario(&req.scenario_id)?;
+    let shared = state.clone();
+    let out = state
+        .blocking(move |model| {
+            let ctx = shared.context(model, &scene, req.a, req.b)?;
+            scbg::generate::generate_in(model, &ctx, &[courtesy]).map_err(ApiError::from)
+        })
+        .await?;
+    let g = out
+        .into_iter()
+        .next()
+        .ok_or_else(|| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "no trajectory"))?;
+    Ok(Json(GenerateResponse {
+        quantile: g.quantile,
+        psi: g.psi,
+        psi_low: g.psi_low,
+        psi_high: g.psi_high,
+        achieved_psi: g.achieved_psi,
+        a_expected_speed_mps: g.a_expected_reward_conditional,
+        a_expected_speed_marginal_mps: g.a_expected_reward_marginal,
+        world_xy_m: g.world_xy_m,
+    }))
+}
+
+/// ψ of a given future of B toward A, with both expectations.
+#[utoipa::path(
+    post,
+    path = "/v1/courtesy",
+    request_body = CourtesyRequest,
+    responses(
+        (status = 200, body = CourtesyResponse),
+        (status = 400, body = ErrorBody),
+        (status = 404, body = ErrorBody),
+        (status = 422, body = ErrorBody)
+    )
+)]
+pub(crate) async fn courtesy(
+    State(state): State<Arc<AppState>>,
+    req: Body<CourtesyRequest>,
+) -> Result<Json<CourtesyResponse>, ApiError> {
+    let req = body(req)?;
+    let scene = state.scenario(&req.scenario_id)?;
+    let c = state
+        .blocking(move |model| {
+            scbg::generate::courtesy(model, &scene, req.a, req.b, &req.future_xy_m)
+                .map_err(ApiError::from)
+        })
+        .await?;
+    Ok(Json(CourtesyResponse {
+        psi: c.psi,
+        a_expected_reward_conditional: c.a_expected_reward_conditional,
+        a_expected_reward_marginal: c.a_expected_reward_marginal,
+    }))
+}
+
+fn session_state(id: &str, sim: &scbg::sim::Simulation) -> SessionState {
+    SessionState {
+        session_id: id.to_string(),
+        step: sim.step_index(),
+        finished: sim.finished(),
+        agents: sim
+            .snapshot()
+            .iter()
+            .map(|a| AgentStateBody::of(a.id, &a.state))
+            .collect(),
+    }
+}
+
+fn new_session_id() -> String {
+    use std::hash::{BuildHasher, Hasher};
+    let mut h = std::collections::hash_map::RandomState::new().build_hasher();
+    h.write_u128(
+        std::time::SystemTime::now()
+            .duration_since(std::time::UNIX_EPOCH)
+            .map_or(0, |d| d.as_nanos()),
+    );
+    format!("s{:016x}", h.finish())
+}
+
+/// Start a closed-loop simulation: the controlled agents are driven by the generator (each
+/// toward the ego), the ego by the caller (default), the others by their logs or IDM.
+#[utoipa::path(
+    post,
+    path = "/v1/sessions",
+    request_body = CreateSession,
+    responses(
+        (status = 200, body = SessionState),
+        (status = 400, body = ErrorBody, description = "unknown agent, agent not valid now, bad quantile or mode, scenario too short"),
+        (status = 404, body = ErrorBody),
+        (status = 422, body = ErrorBody),
+        (status = 503, body = ErrorBody, description = "too many sessions")
+    )
+)]
+pub(crate) async fn create_session(
+    State(state): State<Arc<AppState>>,
+    req: Body<CreateSession>,
+) -> Result<Json<SessionState>, ApiError> {
+    let req = body(req)?;
+    let scene = state.scenario(&req.scenario_id)?;
+    let ego = match req.ego_mode.as_deref().unwrap_or("external") {
+        "external" => scbg::sim::EgoMode::External,
+        "reactive" => scbg::sim::EgoMode::Reactive,
+        "log" => scbg::sim::EgoMode::Log,
+        other => {
+            return Err(ApiError::bad(format!(
+                "ego_mode {other:?}: expected external, reactive or log"
+            )));
+        }
+    };
+    let others = match req.others.as_deref().unwrap_or("log") {
+        "log" => scbg::sim::OthersMode::Log,
+        "reactive" => scbg::sim::OthersMode::Reactive,
+        other => {
+            return Err(ApiError::bad(format!(
+                "others {other:?}: expected log or reactive"
+            )));
+        }
+    };
+    let controlled = req
+        .controlled
+        .iter()
+        .map(|c| {
+            CourtesyAsk {
+                quantile: c.quantile,
+                psi: c.psi,
+            }
+            .to_courtesy()
+            .map(|courtesy| scbg::sim::ControlledAgent { id: c.id, courtesy })
+            .map_err(|e| ApiError::bad(format!("controlled agent {}: {e}", c.id)))
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    if state.expire_sessions() >= state.config.max_sessions {
+        return Err(ApiError::new(
+            StatusCode::SERVICE_UNAVAILABLE,
+            format!(
+                "{} sessions are open; close one (DELETE /v1/sessions/{{id}})",
+                state.config.max_sessions
+            ),
+        ));
+    }
+    let config = scbg::sim::SimConfig {
+        replan_every: req.replan_every.unwrap_or(10),
+        ego,
+        others,
+        ..Default::default()
+    };
+    let ego_id = req.ego;
+    let ctl = controlled.clone();
+    let sim = state
+        .blocking(move |_| {
+            scbg::sim::start(&scene, ego_id, &ctl, config, None).map_err(ApiError::from)
+        })
+        .await?;
+    let id = new_session_id();
+    let answer = session_state(&id, &sim);
+    state.sessions.lock().expect("sessions lock").insert(
+        id,
+        Arc::new(Mutex::new(Session {
+            sim,
+            controlled,
+            last_used: Instant::now(),
+        })),
+    );
+    Ok(Json(answer))
+}
+
+/// One step: the ego's new state in (when the caller drives it), every agent's state out.
+#[utoipa::path(
+    post,
+    path = "/v1/sessions/{id}/step",
+    params(("id" = String, Path, description = "the session")),
+    request_body = StepRequest,
+    responses(
+        (status = 200, body = SessionState),
+        (status = 400, body = ErrorBody, description = "no ego state, a non-finite field, finished"),
+        (status = 404, body = ErrorBody),
+        (status = 422, body = ErrorBody)
+    )
+)]
+pub(crate) async fn step_session(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+    req: Body<StepRequest>,
+) -> Result<Json<SessionState>, ApiError> {
+    let req = body(req)?;
+    let session = state
+        .sessions
+        .lock()
+        .expect("sessions lock")
+        .get(&id)
+        .cloned()
+        .ok_or_else(|| ApiError::not_found(format!("no session {id:?} (closed or expired)")))?;
+    let answer = state
+        .blocking(move |model| {
+            let mut s = session.lock().map_err(|_| {
+                ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "the session is broken")
+            })?;
+            let s = &mut *s;
+            let ego_state = req.ego.map(|e| {
+                let ego_id = s.sim.ego_id();
+                let now = s
+                    .sim
+                    .snapshot()
+                    .into_iter()
+                    .find(|a| a.id == ego_id)
+                    .map(|a| a.state)
+                    .unwrap_or_default();
+                scbg::AgentState {
+                    x_m: e.x_m,
+                    y_m: e.y_m,
+                    heading_rad: e.heading_rad,
+                    velocity_x_mps: e.velocity_x_mps,
+                    velocity_y_mps: e.velocity_y_mps,
+                    valid: true,
+                    ..now
+                }
+            });
+            scbg::sim::step(model, &mut s.sim, &s.controlled, ego_state).map_err(ApiError::from)?;
+            s.last_used = Instant::now();
+            Ok(session_state(&id, &s.sim))
+        })
+        .await?;
+    Ok(Json(answer))
+}
+
+/// Close a session.
+#[utoipa::path(
+    delete,
+    path = "/v1/sessions/{id}",
+    params(("id" = String, Path, description = "the session")),
+    responses((status = 204), (status = 404, body = ErrorBody))
+)]
+pub(crate) async fn close_session(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<StatusCode, ApiError> {
+    state
+        .sessions
+        .lock()
+        .expect("sessions lock")
+        .remove(&id)
+        .map(|_| StatusCode::NO_CONTENT)
+        .ok_or_else(|| ApiError::not_found(format!("no session {id:?}")))
+}
