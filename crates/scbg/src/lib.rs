@@ -49,7 +49,7 @@ pub mod synth;
 
 pub use progress::{Bar, Progress, Quiet};
 pub use scbg_base::atomic::{write as write_atomic, write_json};
-pub use scbg_scene::{AgentState, ObjectType, Scene};
+pub use scbg_scene::{AgentState, MapPoint, ObjectType, Scene};
 
 /// The road subsampling of the Multipath++ features: every 4th polyline point is kept.
 pub const ROAD_SUBSAMPLE: usize = 4;

@@ -280,3 +280,93 @@ pub struct StepRequest {
     #[serde(default)]
     pub ego: Option<AgentStateBody>,
 }
+
+/// `GET /v1/scenarios`: every scenario held.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct ScenarioList {
+    /// Their summaries, oldest first.
+    pub scenarios: Vec<ScenarioSummary>,
+}
+
+/// `GET /v1/files`: the WOMD files of the data folder (paths relative to it).
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct FileList {
+    /// Relative paths, sorted.
+    pub files: Vec<String>,
+}
+
+/// One drawn track: its states as `[x, y, heading, valid]` per step.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct TrackGeometry {
+    /// Track id.
+    pub id: i64,
+    /// Object type name.
+    pub object_type: String,
+    /// Box length, m (at the current step).
+    pub length_m: f32,
+    /// Box width, m.
+    pub width_m: f32,
+    /// `[x m, y m, heading rad, valid 0/1]` per step.
+    pub states: Vec<[f64; 4]>,
+}
+
+/// `GET /v1/scenarios/{id}/geometry`: what a viewer draws.
+#[derive(Debug, Clone, Serialize, ToSchema)]
+pub struct SceneGeometry {
+    /// The scenario.
+    pub scenario_id: String,
+    /// The current step.
+    pub current_step: usize,
+    /// The SDC's id.
+    pub sdc_id: Option<i64>,
+    /// Objects of interest.
+    pub objects_of_interest: Vec<i64>,
+    /// Lane centre lines, `[[x, y], …]` each.
+    pub lanes: Vec<Vec<[f64; 2]>>,
+    /// Road lines.
+    pub road_lines: Vec<Vec<[f64; 2]>>,
+    /// Road edges.
+    pub road_edges: Vec<Vec<[f64; 2]>>,
+    /// Crosswalk polygons.
+    pub crosswalks: Vec<Vec<[f64; 2]>>,
+    /// Every track.
+    pub tracks: Vec<TrackGeometry>,
+}
+
+impl SceneGeometry {
+    /// The geometry of a scene.
+    pub fn of(scene: &Scene) -> Self {
+        let line = |pts: &[scbg::MapPoint]| pts.iter().map(|p| [p.x_m, p.y_m]).collect();
+        let now = scene.current_step;
+        Self {
+            scenario_id: scene.scenario_id.clone(),
+            current_step: now,
+            sdc_id: scene.sdc_track_index.map(|i| scene.tracks[i].id),
+            objects_of_interest: scene.objects_of_interest.clone(),
+            lanes: scene.map.lanes.iter().map(|l| line(&l.polyline)).collect(),
+            road_lines: scene.map.road_lines.iter().map(|l| line(&l.polyline)).collect(),
+            road_edges: scene.map.road_edges.iter().map(|l| line(&l.polyline)).collect(),
+            crosswalks: scene.map.crosswalks.iter().map(|c| line(&c.polygon)).collect(),
+            tracks: scene
+                .tracks
+                .iter()
+                .map(|t| {
+                    let at = t.states.get(now).copied().unwrap_or_default();
+                    TrackGeometry {
+                        id: t.id,
+                        object_type: t.object_type.name().to_string(),
+                        length_m: at.length_m,
+                        width_m: at.width_m,
+                        states: t
+                            .states
+                            .iter()
+                            .map(|s| {
+                                [s.x_m, s.y_m, f64::from(s.heading_rad), f64::from(u8::from(s.valid))]
+                            })
+                            .collect(),
+                    }
+                })
+                .collect(),
+        }
+    }
+}

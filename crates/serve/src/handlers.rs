@@ -29,6 +29,9 @@ fn body<T>(b: Body<T>) -> Result<T, ApiError> {
     ),
     paths(
         healthz,
+        list_scenarios,
+        geometry,
+        list_files,
         upload,
         open,
         generate,
@@ -40,6 +43,10 @@ fn body<T>(b: Body<T>) -> Result<T, ApiError> {
     components(schemas(
         ErrorBody,
         Health,
+        ScenarioList,
+        FileList,
+        TrackGeometry,
+        SceneGeometry,
         TrackSummary,
         ScenarioSummary,
         Uploaded,
@@ -103,6 +110,64 @@ pub(crate) async fn healthz(State(state): State<Arc<AppState>>) -> Json<Health> 
         scenarios: state.scenarios.lock().expect("scenarios lock").0.len(),
         sessions: state.expire_sessions(),
     })
+}
+
+/// Every scenario the server holds.
+#[utoipa::path(get, path = "/v1/scenarios", responses((status = 200, body = ScenarioList)))]
+pub(crate) async fn list_scenarios(State(state): State<Arc<AppState>>) -> Json<ScenarioList> {
+    let guard = state.scenarios.lock().expect("scenarios lock");
+    let (map, order) = &*guard;
+    Json(ScenarioList {
+        scenarios: order
+            .iter()
+            .filter_map(|id| map.get(id))
+            .map(|s| ScenarioSummary::of(s))
+            .collect(),
+    })
+}
+
+/// A scenario's map and tracks, for drawing.
+#[utoipa::path(
+    get,
+    path = "/v1/scenarios/{id}/geometry",
+    params(("id" = String, Path, description = "the scenario id")),
+    responses((status = 200, body = SceneGeometry), (status = 404, body = ErrorBody))
+)]
+pub(crate) async fn geometry(
+    State(state): State<Arc<AppState>>,
+    Path(id): Path<String>,
+) -> Result<Json<SceneGeometry>, ApiError> {
+    Ok(Json(SceneGeometry::of(&*state.scenario(&id)?)))
+}
+
+/// The WOMD files of the data folder (`.tfrecord` in their names, two levels deep at most).
+#[utoipa::path(get, path = "/v1/files", responses((status = 200, body = FileList)))]
+pub(crate) async fn list_files(State(state): State<Arc<AppState>>) -> Json<FileList> {
+    let mut files = Vec::new();
+    if let Some(root) = &state.data_dir {
+        let mut dirs = vec![(root.clone(), 0)];
+        while let Some((dir, depth)) = dirs.pop() {
+            let Ok(entries) = std::fs::read_dir(&dir) else {
+                continue;
+            };
+            for e in entries.flatten() {
+                let path = e.path();
+                if path.is_dir() && depth < 1 {
+                    dirs.push((path, depth + 1));
+                } else if path.is_file()
+                    && path
+                        .file_name()
+                        .is_some_and(|n| n.to_string_lossy().contains(".tfrecord"))
+                {
+                    if let Ok(rel) = path.strip_prefix(root) {
+                        files.push(rel.to_string_lossy().into_owned());
+                    }
+                }
+            }
+        }
+    }
+    files.sort();
+    Json(FileList { files })
 }
 
 /// Upload WOMD bytes: a TFRecord file (Scenario or tf.Example records) or one serialized

@@ -6,9 +6,11 @@
 //! | method | path | what |
 //! |---|---|---|
 //! | GET | `/healthz` | liveness and what is loaded |
-//! | GET | `/openapi.json`, `/docs`, `/` | the API description, its page, the index (no token needed for these four) |
+//! | GET | `/openapi.json`, `/docs`, `/` | the API description, its page, the web viewer (no token needed for these four) |
 //! | GET | `/metrics` | Prometheus counters |
 //! | POST | `/v1/scenarios` | upload WOMD bytes (a TFRecord file or one `Scenario` message) |
+//! | GET | `/v1/scenarios`, `/v1/scenarios/{id}/geometry` | the scenarios held; one's map and tracks |
+//! | GET | `/v1/files` | the WOMD files of the data folder |
 //! | POST | `/v1/scenarios/open` | open a file inside the configured data folder |
 //! | POST | `/v1/generate` | B's world-frame future at a quantile or ψ toward A |
 //! | POST | `/v1/courtesy` | ψ of a given future of B, with both expectations |
@@ -311,7 +313,12 @@ pub fn router(state: Arc<AppState>) -> Router {
         .route("/metrics", get(handlers::metrics))
         .route("/openapi.json", get(handlers::openapi))
         .route("/docs", get(handlers::docs))
-        .route("/v1/scenarios", post(handlers::upload))
+        .route(
+            "/v1/scenarios",
+            post(handlers::upload).get(handlers::list_scenarios),
+        )
+        .route("/v1/scenarios/{id}/geometry", get(handlers::geometry))
+        .route("/v1/files", get(handlers::list_files))
         .route("/v1/scenarios/open", post(handlers::open))
         .route("/v1/generate", post(handlers::generate))
         .route("/v1/courtesy", post(handlers::courtesy))

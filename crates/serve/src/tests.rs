@@ -563,3 +563,81 @@ fn scenario_paths_are_checked_before_reading() {
             .any(|c| !matches!(c, std::path::Component::Normal(_)))
     );
 }
+
+/// The browser to drive (`SCBG_CHROMIUM`, else chromium on the PATH); `None` prints why. Under
+/// CI (`CI` set) a missing browser is a failure, never a silent pass.
+fn chromium() -> Option<std::path::PathBuf> {
+    if let Some(p) = std::env::var_os("SCBG_CHROMIUM") {
+        return Some(p.into());
+    }
+    for name in ["chromium", "chromium-browser", "google-chrome"] {
+        if let Ok(out) = std::process::Command::new("which").arg(name).output() {
+            if out.status.success() {
+                let path = String::from_utf8_lossy(&out.stdout).trim().to_string();
+                if !path.is_empty() {
+                    return Some(path.into());
+                }
+            }
+        }
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "no chromium in CI (.ci/run installs Debian's chromium; or set SCBG_CHROMIUM)"
+    );
+    eprintln!("SKIPPED: no chromium found (install Debian's chromium or set SCBG_CHROMIUM)");
+    None
+}
+
+/// The web viewer in a real headless browser: the page loads a scenario from the data folder,
+/// the slider moves from 0.1 to 0.9 and the drawn trajectory changes, and a closed-loop
+/// session plays three steps.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn viewer_in_a_headless_browser() {
+    let Some(browser) = chromium() else {
+        return;
+    };
+    let st = state(None, 16 << 20);
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(serve(st, listener, async move {
+        let _ = stop_rx.await;
+    }));
+    let profile = tempfile::tempdir().unwrap();
+    let url = format!("http://{addr}/?selftest=1");
+    let out = tokio::task::spawn_blocking(move || {
+        std::process::Command::new(browser)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-dev-shm-usage",
+                "--window-size=1200,800",
+                "--virtual-time-budget=20000",
+                &format!("--user-data-dir={}", profile.path().display()),
+                "--dump-dom",
+                &url,
+            ])
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    stop_tx.send(()).unwrap();
+    server.await.unwrap().unwrap();
+    let dom = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        dom.contains("data-result=\"changed\""),
+        "the viewer's self-test did not see the trajectory change:\n{}\nstderr: {}",
+        dom.lines()
+            .filter(|l| l.contains("selftest") || l.contains("error"))
+            .collect::<Vec<_>>()
+            .join("\n"),
+        String::from_utf8_lossy(&out.stderr)
+            .lines()
+            .take(20)
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    assert!(dom.contains("data-steps=\"13\""), "the closed loop did not step");
+}
