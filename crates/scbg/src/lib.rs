@@ -51,6 +51,11 @@ pub use progress::{Bar, Progress, Quiet};
 pub use scbg_base::atomic::{write as write_atomic, write_json};
 pub use scbg_scene::{AgentState, MapPoint, ObjectType, Scene};
 
+/// The scene value types (tracks, map features), for front ends that build scenes themselves.
+pub mod scene {
+    pub use scbg_scene::*;
+}
+
 /// The road subsampling of the Multipath++ features: every 4th polyline point is kept.
 pub const ROAD_SUBSAMPLE: usize = 4;
 

@@ -344,9 +344,24 @@ impl SceneGeometry {
             sdc_id: scene.sdc_track_index.map(|i| scene.tracks[i].id),
             objects_of_interest: scene.objects_of_interest.clone(),
             lanes: scene.map.lanes.iter().map(|l| line(&l.polyline)).collect(),
-            road_lines: scene.map.road_lines.iter().map(|l| line(&l.polyline)).collect(),
-            road_edges: scene.map.road_edges.iter().map(|l| line(&l.polyline)).collect(),
-            crosswalks: scene.map.crosswalks.iter().map(|c| line(&c.polygon)).collect(),
+            road_lines: scene
+                .map
+                .road_lines
+                .iter()
+                .map(|l| line(&l.polyline))
+                .collect(),
+            road_edges: scene
+                .map
+                .road_edges
+                .iter()
+                .map(|l| line(&l.polyline))
+                .collect(),
+            crosswalks: scene
+                .map
+                .crosswalks
+                .iter()
+                .map(|c| line(&c.polygon))
+                .collect(),
             tracks: scene
                 .tracks
                 .iter()
@@ -361,7 +376,12 @@ impl SceneGeometry {
                             .states
                             .iter()
                             .map(|s| {
-                                [s.x_m, s.y_m, f64::from(s.heading_rad), f64::from(u8::from(s.valid))]
+                                [
+                                    s.x_m,
+                                    s.y_m,
+                                    f64::from(s.heading_rad),
+                                    f64::from(u8::from(s.valid)),
+                                ]
                             })
                             .collect(),
                     }

@@ -158,10 +158,9 @@ pub(crate) async fn list_files(State(state): State<Arc<AppState>>) -> Json<FileL
                     && path
                         .file_name()
                         .is_some_and(|n| n.to_string_lossy().contains(".tfrecord"))
+                    && let Ok(rel) = path.strip_prefix(root)
                 {
-                    if let Ok(rel) = path.strip_prefix(root) {
-                        files.push(rel.to_string_lossy().into_owned());
-                    }
+                    files.push(rel.to_string_lossy().into_owned());
                 }
             }
         }

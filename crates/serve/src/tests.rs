@@ -571,12 +571,12 @@ fn chromium() -> Option<std::path::PathBuf> {
         return Some(p.into());
     }
     for name in ["chromium", "chromium-browser", "google-chrome"] {
-        if let Ok(out) = std::process::Command::new("which").arg(name).output() {
-            if out.status.success() {
-                let path = String::from_utf8_lossy(&out.stdout).trim().to_string();
-                if !path.is_empty() {
-                    return Some(path.into());
-                }
+        if let Ok(out) = std::process::Command::new("which").arg(name).output()
+            && out.status.success()
+        {
+            let path = String::from_utf8_lossy(&out.stdout).trim().to_string();
+            if !path.is_empty() {
+                return Some(path.into());
             }
         }
     }
@@ -639,5 +639,8 @@ async fn viewer_in_a_headless_browser() {
             .collect::<Vec<_>>()
             .join("\n")
     );
-    assert!(dom.contains("data-steps=\"13\""), "the closed loop did not step");
+    assert!(
+        dom.contains("data-steps=\"13\""),
+        "the closed loop did not step"
+    );
 }

@@ -1,0 +1,111 @@
+from typing import Optional, Sequence, TypedDict
+
+import numpy as np
+import numpy.typing as npt
+
+class Generation(TypedDict):
+    quantile: float
+    psi: float
+    psi_low: float
+    psi_high: float
+    achieved_psi: float
+    a_expected_speed_mps: float
+    a_expected_speed_marginal_mps: float
+    world_xy_m: npt.NDArray[np.float64]  # [80, 2]
+
+class CourtesyScore(TypedDict):
+    psi: float
+    a_expected_reward_conditional: float
+    a_expected_reward_marginal: float
+
+class Scene:
+    """One traffic scenario: tracks over time and the map."""
+
+    @staticmethod
+    def from_arrays(
+        scenario_id: str,
+        ids: npt.NDArray[np.int64],
+        states: npt.NDArray[np.float64],
+        valid: npt.NDArray[np.bool_],
+        object_types: Optional[Sequence[str]] = None,
+        current_step: int = 10,
+        sdc_id: Optional[int] = None,
+        objects_of_interest: Sequence[int] = (),
+        lanes: Sequence[npt.NDArray[np.float64]] = (),
+        road_edges: Sequence[npt.NDArray[np.float64]] = (),
+        road_lines: Sequence[npt.NDArray[np.float64]] = (),
+    ) -> "Scene":
+        """A scene from arrays: ``states [agents, steps, 7]`` = x, y, heading, vx, vy,
+        length, width (metres, radians, m/s, world frame); ``valid [agents, steps]``;
+        polylines ``[n, 2]``."""
+    @property
+    def scenario_id(self) -> str: ...
+    @property
+    def current_step(self) -> int: ...
+    @property
+    def num_steps(self) -> int: ...
+    @property
+    def sdc_id(self) -> Optional[int]: ...
+    @property
+    def ids(self) -> npt.NDArray[np.int64]: ...
+    @property
+    def objects_of_interest(self) -> list[int]: ...
+    def states(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+        """``([agents, steps, 7], [agents, steps])`` as in :meth:`from_arrays`."""
+
+class Simulation:
+    """A closed-loop simulation (controlled agents driven by the generator)."""
+
+    def reset(self) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+        """Back to the scene's current step: ``(ids, states [agents, 5], valid)`` with
+        states x, y, heading, vx, vy."""
+    def step(
+        self, ego_state: Optional[npt.NDArray[np.float64]] = None
+    ) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
+        """One step; ``ego_state`` = x, y, heading, vx, vy when the ego is driven from
+        outside."""
+    @property
+    def step_index(self) -> int: ...
+    @property
+    def finished(self) -> bool: ...
+    @property
+    def ego_id(self) -> int: ...
+    def scene(self) -> Scene:
+        """The scene with the simulated steps as its future."""
+
+class Model:
+    """A trained generator folder (``scbg train generator`` / the demo's ``generator_full``)."""
+
+    def __init__(self, path: str, predictor: Optional[str] = None) -> None: ...
+    @property
+    def variant(self) -> str: ...
+    def generate(
+        self,
+        scene: Scene,
+        a: int,
+        b: int,
+        quantile: Optional[float] = None,
+        psi: Optional[float] = None,
+    ) -> Generation:
+        """B's future at a courtesy quantile in [0, 1] (or an explicit ψ) toward A."""
+    def courtesy(
+        self, scene: Scene, a: int, b: int, future_xy_m: npt.NDArray[np.float64]
+    ) -> CourtesyScore:
+        """ψ of a future of B ``[80, 2]`` (world frame) toward A."""
+    def simulation(
+        self,
+        scene: Scene,
+        controlled: dict[int, float],
+        ego: Optional[int] = None,
+        ego_mode: str = "external",
+        others: str = "log",
+        replan_every: int = 10,
+    ) -> Simulation:
+        """A closed-loop simulation: ``controlled`` maps track ids to courtesy quantiles
+        toward the ego; ``ego_mode`` external | reactive | log; ``others`` log | reactive."""
+
+def read_scenarios(path: str) -> list[Scene]:
+    """Every scenario of a WOMD file (Scenario or tf.Example TFRecord)."""
+
+def scenarios_from_bytes(data: bytes) -> list[Scene]:
+    """Every scenario of WOMD bytes (a TFRecord file or one Scenario message)."""

@@ -1,0 +1,117 @@
+"""The scbg Python module against a tiny model trained by the scbg binary."""
+
+import os
+import subprocess
+
+import numpy as np
+import pytest
+
+import scbg
+
+
+def _scbg(*args):
+    subprocess.run([os.environ.get("SCBG_BIN", "scbg"), *args], check=True, capture_output=True)
+
+
+@pytest.fixture(scope="session")
+def trained(tmp_path_factory):
+    d = tmp_path_factory.mktemp("scbg")
+    data, cache, model, gen = (str(d / n) for n in ("data", "cache", "model", "gen"))
+    _scbg("synth", "--scenarios", "12", "--seed", "4", "--out", data, "--scenarios-per-file", "12")
+    _scbg("data", "prepare", "--input", data, "--out", cache)
+    _scbg("train", "predictor", "--config", os.environ["SCBG_TINY_CONFIG"], "--data", cache,
+          "--out", model)
+    _scbg("train", "generator", "--predictor", model, "--data", cache, "--out", gen,
+          "--epochs", "1", "--samples", "2", "--batch-size", "8", "--range-steps", "5")
+    return scbg.Model(gen), os.path.join(data, "synth-00000.tfrecord")
+
+
+def _pair(scene):
+    return scene.sdc_id, [i for i in scene.objects_of_interest if i != scene.sdc_id][0]
+
+
+def test_generate_and_courtesy(trained):
+    model, file = trained
+    assert model.variant == "full"
+    scene = scbg.read_scenarios(file)[0]
+    a, b = _pair(scene)
+    low = model.generate(scene, a, b, quantile=0.1)
+    high = model.generate(scene, a, b, quantile=0.9)
+    assert high["world_xy_m"].shape == (80, 2) and np.isfinite(high["world_xy_m"]).all()
+    assert low["psi"] <= high["psi"]
+    # The courtesy of a generated future is what generate's J_φ measured.
+    c = model.courtesy(scene, a, b, high["world_xy_m"])
+    assert abs(c["psi"] - high["achieved_psi"]) < 1e-3
+    # An explicit ψ at the 0.9 quantile's value gives the same future.
+    again = model.generate(scene, a, b, psi=high["psi"])
+    np.testing.assert_allclose(again["world_xy_m"], high["world_xy_m"])
+
+
+def test_scenes_from_bytes_and_arrays(trained):
+    model, file = trained
+    with open(file, "rb") as f:
+        scenes = scbg.scenarios_from_bytes(f.read())
+    assert len(scenes) == 12
+    scene = scenes[0]
+    states, valid = scene.states()
+    assert states.shape == (len(scene.ids), 91, 7) and valid.shape == states.shape[:2]
+    lane = np.stack([np.linspace(-50, 400, 200), np.zeros(200)], axis=1)
+    rebuilt = scbg.Scene.from_arrays(
+        "from-arrays", scene.ids, states, valid, sdc_id=scene.sdc_id,
+        objects_of_interest=scene.objects_of_interest, lanes=[lane], road_edges=[lane + [0, 5]])
+    assert rebuilt.num_steps == 91 and rebuilt.current_step == 10
+    back, back_valid = rebuilt.states()
+    np.testing.assert_allclose(back[valid], states[valid], rtol=1e-6, atol=1e-6)
+    a, b = _pair(rebuilt)
+    out = model.generate(rebuilt, a, b, quantile=0.5)
+    assert out["world_xy_m"].shape == (80, 2)
+
+
+def test_simulation_reset_and_step(trained):
+    model, file = trained
+    scene = scbg.read_scenarios(file)[0]
+    a, b = _pair(scene)
+    states, valid = scene.states()
+    ia = list(scene.ids).index(a)
+    sim = model.simulation(scene, {b: 0.9}, ego=a)  # the ego is driven from here
+    ids, st, ok = sim.reset()
+    assert sim.step_index == 10 and st.shape == (len(ids), 5) and ok.all()
+    for t in range(11, 16):
+        ego = states[ia, t, :5]
+        ids, st, ok = sim.step(ego)
+        np.testing.assert_allclose(st[list(ids).index(a), :2], ego[:2])
+    assert sim.step_index == 15
+    ib = list(ids).index(b)
+    assert np.hypot(*(st[ib, :2] - states[ib, 10, :2])) > 0.1, "B did not move"
+    reactive = model.simulation(scene, {b: 0.5}, ego=a, ego_mode="reactive", others="reactive")
+    while not reactive.finished:
+        reactive.step()
+    assert reactive.scene().num_steps == 91
+    # reset() starts over.
+    reactive.reset()
+    assert reactive.step_index == 10 and not reactive.finished
+
+
+def test_bad_inputs_raise_value_errors(trained):
+    model, file = trained
+    scene = scbg.read_scenarios(file)[0]
+    a, b = _pair(scene)
+    with pytest.raises(ValueError, match="quantile 1.5"):
+        model.generate(scene, a, b, quantile=1.5)
+    with pytest.raises(ValueError, match="987654"):
+        model.generate(scene, a, 987654, quantile=0.5)
+    with pytest.raises(ValueError, match="not both"):
+        model.generate(scene, a, b, quantile=0.5, psi=0.1)
+    with pytest.raises(ValueError, match="80"):
+        model.courtesy(scene, a, b, np.zeros((3, 2)))
+    with pytest.raises(ValueError, match="shape"):
+        scbg.Scene.from_arrays("x", np.array([1]), np.zeros((1, 91, 3)), np.ones((1, 91), bool))
+    with pytest.raises(ValueError, match="ego_mode"):
+        model.simulation(scene, {b: 0.5}, ego_mode="flying")
+    with pytest.raises(ValueError, match="no agent with id 4242"):
+        model.simulation(scene, {4242: 0.5})
+    sim = model.simulation(scene, {b: 0.5}, ego=a)
+    with pytest.raises(ValueError, match="ego"):
+        sim.step()
+    with pytest.raises(ValueError):
+        scbg.read_scenarios("/nonexistent.tfrecord")
