@@ -274,13 +274,19 @@ impl Scene {
     }
 }
 
+type Contexts = HashMap<(usize, i64, i64), (Arc<RustScene>, Arc<PairContext>)>;
+
+/// Pair contexts kept per model.
+const MAX_CONTEXTS: usize = 256;
+
 /// A trained generator folder.
 #[pyclass(module = "scbg", frozen)]
 struct Model {
     inner: Arc<LoadedScbg>,
-    /// Pair contexts by (scenario, A, B): repeated generation on a loaded scene costs the
-    /// generator and J_φ only.
-    contexts: Mutex<HashMap<(String, i64, i64), Arc<PairContext>>>,
+    /// Pair contexts by (scene object, A, B): repeated generation on a loaded scene costs the
+    /// generator and J_φ only. The entry holds the scene, so its address names it while
+    /// cached (another scene with the same id gets its own context).
+    contexts: Mutex<Contexts>,
 }
 
 fn courtesy_of(quantile: Option<f32>, psi: Option<f32>) -> PyResult<Courtesy> {
@@ -328,8 +334,13 @@ impl Model {
         psi: Option<f32>,
     ) -> PyResult<Bound<'py, PyDict>> {
         let courtesy = courtesy_of(quantile, psi)?;
-        let key = (scene.inner.scenario_id.clone(), a, b);
-        let cached = self.contexts.lock().expect("contexts").get(&key).cloned();
+        let key = (Arc::as_ptr(&scene.inner) as usize, a, b);
+        let cached = self
+            .contexts
+            .lock()
+            .expect("contexts")
+            .get(&key)
+            .map(|(_, c)| c.clone());
         let (model, s) = (self.inner.clone(), scene.inner.clone());
         let (ctx, out) = py
             .detach(move || -> anyhow::Result<_> {
@@ -341,7 +352,11 @@ impl Model {
                 Ok((ctx, out))
             })
             .map_err(py_err)?;
-        self.contexts.lock().expect("contexts").insert(key, ctx);
+        let mut contexts = self.contexts.lock().expect("contexts");
+        if contexts.len() >= MAX_CONTEXTS {
+            contexts.clear();
+        }
+        contexts.insert(key, (scene.inner.clone(), ctx));
         let g = &out[0];
         let d = PyDict::new(py);
         d.set_item("quantile", g.quantile)?;

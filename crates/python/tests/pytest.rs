@@ -51,7 +51,7 @@ fn build_venv(root: &Path, venv: &Path) {
             "numpy",
             "pytest",
         ]),
-        "pip install maturin numpy pytest",
+        "pip install maturin numpy pytest highway-env",
     );
     let wheels = root.join("target/wheels");
     run(

@@ -1,0 +1,25 @@
+"""A tiny model trained by the scbg binary, shared by the test files."""
+
+import os
+import subprocess
+
+import pytest
+
+import scbg
+
+
+def _scbg(*args):
+    subprocess.run([os.environ.get("SCBG_BIN", "scbg"), *args], check=True, capture_output=True)
+
+
+@pytest.fixture(scope="session")
+def trained(tmp_path_factory):
+    d = tmp_path_factory.mktemp("scbg")
+    data, cache, model, gen = (str(d / n) for n in ("data", "cache", "model", "gen"))
+    _scbg("synth", "--scenarios", "12", "--seed", "4", "--out", data, "--scenarios-per-file", "12")
+    _scbg("data", "prepare", "--input", data, "--out", cache)
+    _scbg("train", "predictor", "--config", os.environ["SCBG_TINY_CONFIG"], "--data", cache,
+          "--out", model)
+    _scbg("train", "generator", "--predictor", model, "--data", cache, "--out", gen,
+          "--epochs", "1", "--samples", "2", "--batch-size", "8", "--range-steps", "5")
+    return scbg.Model(gen), os.path.join(data, "synth-00000.tfrecord")
