@@ -24,7 +24,7 @@ fn run(cmd: &mut Command, what: &str) {
 
 fn imports_scbg(python: &Path) -> bool {
     Command::new(python)
-        .args(["-c", "import scbg, numpy, pytest"])
+        .args(["-c", "import scbg, numpy, pytest, highway_env"])
         .output()
         .is_ok_and(|o| o.status.success())
 }
@@ -50,6 +50,7 @@ fn build_venv(root: &Path, venv: &Path) {
             "maturin>=1.5,<2",
             "numpy",
             "pytest",
+            "highway-env",
         ]),
         "pip install maturin numpy pytest highway-env",
     );
