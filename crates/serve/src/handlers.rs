@@ -140,7 +140,8 @@ pub(crate) async fn geometry(
     Ok(Json(SceneGeometry::of(&*state.scenario(&id)?)))
 }
 
-/// The WOMD files of the data folder (`.tfrecord` in their names, two levels deep at most).
+/// The WOMD files of the data folder (`.tfrecord` in their names, two levels deep at most;
+/// links leading outside it are not listed).
 #[utoipa::path(get, path = "/v1/files", responses((status = 200, body = FileList)))]
 pub(crate) async fn list_files(State(state): State<Arc<AppState>>) -> Json<FileList> {
     let mut files = Vec::new();
@@ -152,6 +153,10 @@ pub(crate) async fn list_files(State(state): State<Arc<AppState>>) -> Json<FileL
             };
             for e in entries.flatten() {
                 let path = e.path();
+                // Only what `open` would read: nothing that resolves outside the folder.
+                if !path.canonicalize().is_ok_and(|p| p.starts_with(root)) {
+                    continue;
+                }
                 if path.is_dir() && depth < 1 {
                     dirs.push((path, depth + 1));
                 } else if path.is_file()

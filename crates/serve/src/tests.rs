@@ -323,8 +323,21 @@ async fn bad_inputs_are_4xx_json_errors() {
     )
     .await;
     assert_error(status, &v, StatusCode::BAD_REQUEST, "1 points, expected 80");
-    // The data folder's fence.
+    // The data folder's fence, a symlink that leads out of it included.
+    let (dir, _, _) = fixture();
+    let escape = dir.path().join("data/escape.tfrecord");
+    if !escape.exists() {
+        std::os::unix::fs::symlink("/etc/hostname", &escape).unwrap();
+    }
+    let (status, files) = json_call(&app, "GET", "/v1/files", Value::Null).await;
+    assert_eq!(status, StatusCode::OK);
+    assert_eq!(
+        files["files"],
+        json!(["synth-00000.tfrecord"]),
+        "the link is not listed"
+    );
     for (file, want) in [
+        ("escape.tfrecord", StatusCode::FORBIDDEN),
         ("../data/synth-00000.tfrecord", StatusCode::FORBIDDEN),
         ("/etc/passwd", StatusCode::FORBIDDEN),
         ("missing.tfrecord", StatusCode::NOT_FOUND),
