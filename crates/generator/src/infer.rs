@@ -345,14 +345,9 @@ impl Scbg {
         future_world: &[[f64; 2]],
         device: &Device,
     ) -> Result<CourtesyOf, GenerateError> {
-        let (ia, ib) = check_request(scene, a_id, b_id, &[])?;
-        let mut builder = SampleBuilder::new(scene, &self.features);
-        let mut a = builder
-            .sample(window, ia, Some(ib))
-            .map_err(|error| GenerateError::Sample { id: a_id, error })?;
-        let mut b = builder
-            .sample(window, ib, None)
-            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
+        // The same samples and E[r(Y_A) | x] as every generation for this pair.
+        let ctx = self.pair_context(scene, window, a_id, b_id, device)?;
+        let (a, e_marg) = (&ctx.example.a, ctx.example.e_marg);
         let t = a.condition_future_valid.len();
         if future_world.len() != t {
             return Err(GenerateError::Future(format!(
@@ -366,20 +361,6 @@ impl Scbg {
         {
             return Err(GenerateError::Future(format!("point {k} is not finite")));
         }
-        self.stats.normalize(&mut a);
-        self.stats.normalize(&mut b);
-        let mixture = marginal_mixtures(&self.predictor, &[&b], device).remove(0);
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0x5cb6);
-        let e_marg = label_pair(
-            &self.predictor,
-            &a,
-            &b,
-            &mixture,
-            self.labels,
-            &mut rng,
-            device,
-        )
-        .e_marg;
         let pose = a.world_from_agent;
         let cond: Vec<f32> = future_world
             .iter()
@@ -388,7 +369,7 @@ impl Scbg {
                 [x as f32, y as f32, 1.0]
             })
             .collect();
-        let batch = scbg_model::Batch::for_mode(&[&a], scbg_model::Mode::Conditional, device);
+        let batch = scbg_model::Batch::for_mode(&[a], scbg_model::Mode::Conditional, device);
         let condition = burn::tensor::Tensor::<3>::from_data(
             burn::tensor::TensorData::new(cond, [1, t, 3]),
             device,

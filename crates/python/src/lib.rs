@@ -405,6 +405,7 @@ impl Model {
     }
 
     #[pyo3(signature = (scene, controlled, ego=None, ego_mode="external", others="log", replan_every=10))]
+    #[allow(clippy::too_many_arguments)]
     fn simulation(
         &self,
         py: Python<'_>,
@@ -415,25 +416,8 @@ impl Model {
         others: &str,
         replan_every: usize,
     ) -> PyResult<Simulation> {
-        let ego_mode = match ego_mode {
-            "external" => scbg::sim::EgoMode::External,
-            "reactive" => scbg::sim::EgoMode::Reactive,
-            "log" => scbg::sim::EgoMode::Log,
-            other => {
-                return Err(PyValueError::new_err(format!(
-                    "ego_mode {other:?}: expected external, reactive or log"
-                )));
-            }
-        };
-        let others = match others {
-            "log" => scbg::sim::OthersMode::Log,
-            "reactive" => scbg::sim::OthersMode::Reactive,
-            other => {
-                return Err(PyValueError::new_err(format!(
-                    "others {other:?}: expected log or reactive"
-                )));
-            }
-        };
+        let ego_mode: scbg::sim::EgoMode = ego_mode.parse().map_err(PyValueError::new_err)?;
+        let others: scbg::sim::OthersMode = others.parse().map_err(PyValueError::new_err)?;
         let mut controlled: Vec<scbg::sim::ControlledAgent> = controlled
             .into_iter()
             .map(|(id, q)| scbg::sim::ControlledAgent {

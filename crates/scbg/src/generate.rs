@@ -57,6 +57,22 @@ pub fn find_scene(
     })))
 }
 
+/// The scene's inference features, checked to hold one window (11 history steps).
+fn prepare(scene: &Scene) -> anyhow::Result<scbg_features::PreparedScene> {
+    let prepared = scbg_features::PreparedScene::for_inference(
+        scene,
+        &scbg_features::WindowConfig::default(),
+        ROAD_SUBSAMPLE,
+    );
+    if prepared.windows.is_empty() {
+        return Err(anyhow::Error::new(InvalidRequest(format!(
+            "scenario {}: too short for one window (11 history steps)",
+            scene.scenario_id
+        ))));
+    }
+    Ok(prepared)
+}
+
 /// The context every generation for (scene, A, B) shares (samples, B's embedding, E[r(Y_A) |
 /// x], the predicted range): keep it to generate at many courtesies cheaply
 /// ([`generate_in`]).
@@ -66,17 +82,8 @@ pub fn pair_context(
     a: i64,
     b: i64,
 ) -> anyhow::Result<PairContext> {
-    let prepared = scbg_features::PreparedScene::for_inference(
-        scene,
-        &scbg_features::WindowConfig::default(),
-        ROAD_SUBSAMPLE,
-    );
-    let window = prepared.windows.first().ok_or_else(|| {
-        anyhow::Error::new(InvalidRequest(format!(
-            "scenario {}: too short for one window (11 history steps)",
-            scene.scenario_id
-        )))
-    })?;
+    let prepared = prepare(scene)?;
+    let window = &prepared.windows[0];
     model
         .scbg
         .pair_context(&prepared, window, a, b, &model.device)
@@ -104,17 +111,8 @@ pub fn generate(
     b: i64,
     courtesy: &[Courtesy],
 ) -> anyhow::Result<Generation> {
-    let prepared = scbg_features::PreparedScene::for_inference(
-        scene,
-        &scbg_features::WindowConfig::default(),
-        ROAD_SUBSAMPLE,
-    );
-    let window = prepared.windows.first().ok_or_else(|| {
-        anyhow::Error::new(InvalidRequest(format!(
-            "scenario {}: too short for one window (11 history steps)",
-            scene.scenario_id
-        )))
-    })?;
+    let prepared = prepare(scene)?;
+    let window = &prepared.windows[0];
     let trajectories = model
         .scbg
         .generate(&prepared, window, a, b, courtesy, &model.device)
@@ -139,17 +137,8 @@ pub fn plan(
     b: i64,
     courtesy: Courtesy,
 ) -> anyhow::Result<Vec<[f64; 2]>> {
-    let prepared = scbg_features::PreparedScene::for_inference(
-        scene,
-        &scbg_features::WindowConfig::default(),
-        ROAD_SUBSAMPLE,
-    );
-    let window = prepared.windows.first().ok_or_else(|| {
-        anyhow::Error::new(InvalidRequest(format!(
-            "scenario {}: too short for one window (11 history steps)",
-            scene.scenario_id
-        )))
-    })?;
+    let prepared = prepare(scene)?;
+    let window = &prepared.windows[0];
     model
         .scbg
         .plan(&prepared, window, a, b, courtesy, &model.device)
@@ -165,17 +154,8 @@ pub fn courtesy(
     b: i64,
     future_world: &[[f64; 2]],
 ) -> anyhow::Result<scbg_generator::CourtesyOf> {
-    let prepared = scbg_features::PreparedScene::for_inference(
-        scene,
-        &scbg_features::WindowConfig::default(),
-        ROAD_SUBSAMPLE,
-    );
-    let window = prepared.windows.first().ok_or_else(|| {
-        anyhow::Error::new(InvalidRequest(format!(
-            "scenario {}: too short for one window (11 history steps)",
-            scene.scenario_id
-        )))
-    })?;
+    let prepared = prepare(scene)?;
+    let window = &prepared.windows[0];
     model
         .scbg
         .courtesy_of(&prepared, window, a, b, future_world, &model.device)

@@ -403,25 +403,18 @@ pub(crate) async fn create_session(
 ) -> Result<Json<SessionState>, ApiError> {
     let req = body(req)?;
     let scene = state.scenario(&req.scenario_id)?;
-    let ego = match req.ego_mode.as_deref().unwrap_or("external") {
-        "external" => scbg::sim::EgoMode::External,
-        "reactive" => scbg::sim::EgoMode::Reactive,
-        "log" => scbg::sim::EgoMode::Log,
-        other => {
-            return Err(ApiError::bad(format!(
-                "ego_mode {other:?}: expected external, reactive or log"
-            )));
-        }
-    };
-    let others = match req.others.as_deref().unwrap_or("log") {
-        "log" => scbg::sim::OthersMode::Log,
-        "reactive" => scbg::sim::OthersMode::Reactive,
-        other => {
-            return Err(ApiError::bad(format!(
-                "others {other:?}: expected log or reactive"
-            )));
-        }
-    };
+    let ego: scbg::sim::EgoMode = req
+        .ego_mode
+        .as_deref()
+        .unwrap_or("external")
+        .parse()
+        .map_err(ApiError::bad)?;
+    let others: scbg::sim::OthersMode = req
+        .others
+        .as_deref()
+        .unwrap_or("log")
+        .parse()
+        .map_err(ApiError::bad)?;
     let controlled = req
         .controlled
         .iter()

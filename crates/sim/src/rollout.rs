@@ -57,6 +57,35 @@ pub enum OthersMode {
     Reactive,
 }
 
+impl std::str::FromStr for EgoMode {
+    type Err = String;
+
+    /// `reactive`, `log` or `external`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "reactive" => Ok(Self::Reactive),
+            "log" => Ok(Self::Log),
+            "external" => Ok(Self::External),
+            other => Err(format!(
+                "ego_mode {other:?}: expected external, reactive or log"
+            )),
+        }
+    }
+}
+
+impl std::str::FromStr for OthersMode {
+    type Err = String;
+
+    /// `log` or `reactive`.
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "log" => Ok(Self::Log),
+            "reactive" => Ok(Self::Reactive),
+            other => Err(format!("others {other:?}: expected log or reactive")),
+        }
+    }
+}
+
 /// Settings of one closed-loop simulation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SimConfig {
