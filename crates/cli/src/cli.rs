@@ -58,6 +58,10 @@ pub struct DemoArgs {
     /// Synthetic scenarios to generate when --data is not given.
     #[arg(long, default_value_t = 1500)]
     pub scenarios: usize,
+    /// Counterfactual siblings per synthetic scenario (B's future re-drawn, everyone else
+    /// reacting) added to the predictor's training as conditional samples of A.
+    #[arg(long, default_value_t = 0)]
+    pub counterfactuals: usize,
     /// Predictor training epochs.
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
@@ -489,6 +493,11 @@ pub struct SynthArgs {
     /// Scenarios per output TFRecord file.
     #[arg(long, default_value_t = 250)]
     pub scenarios_per_file: usize,
+    /// Counterfactual siblings per scenario (B's future re-drawn from its courtesy prior,
+    /// everyone else reacting), written to OUT/counterfactual/ for `scbg train`'s
+    /// `counterfactual_cache`.
+    #[arg(long, default_value_t = 0)]
+    pub counterfactuals: usize,
 }
 
 #[derive(Debug, Subcommand)]

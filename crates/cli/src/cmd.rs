@@ -24,6 +24,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     out: a.out,
                     data: a.data,
                     scenarios: a.scenarios,
+                    counterfactuals: a.counterfactuals,
                     epochs: a.epochs,
                     generator_epochs: a.generator_epochs,
                     generator_seeds: a.generator_seeds,
@@ -77,6 +78,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     out: a.out,
                     families: a.families,
                     scenarios_per_file: a.scenarios_per_file,
+                    counterfactuals: a.counterfactuals,
                 },
                 progress,
             )?;

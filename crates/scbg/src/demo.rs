@@ -38,6 +38,9 @@ pub struct DemoOptions {
     pub data: Vec<String>,
     /// Synthetic scenarios to generate when `data` is empty.
     pub scenarios: usize,
+    /// Counterfactual siblings per synthetic scenario for the predictor's training
+    /// ([`scbg_train::TrainConfig::counterfactual_cache`]; 0: none, ignored with `data`).
+    pub counterfactuals: usize,
     /// Predictor training epochs.
     pub epochs: usize,
     /// Training epochs of each generator variant.
@@ -177,6 +180,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 out: synth_dir.clone(),
                 families: scbg_synth::Family::ALL.to_vec(),
                 scenarios_per_file: 250,
+                counterfactuals: options.counterfactuals,
             },
             progress,
         )?;
@@ -203,9 +207,31 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             options.epochs
         ),
     );
+    let counterfactual_cache = if options.data.is_empty() && options.counterfactuals > 0 {
+        let dir = out.join("cache_counterfactual");
+        crate::data::prepare(
+            &PrepareOptions {
+                files_per_shard: 4,
+                ..PrepareOptions::new(
+                    vec![
+                        out.join("synth")
+                            .join(crate::synth::COUNTERFACTUAL_DIR)
+                            .display()
+                            .to_string(),
+                    ],
+                    dir.clone(),
+                )
+            },
+            progress,
+        )?;
+        Some(dir)
+    } else {
+        None
+    };
     let config = scbg_train::TrainConfig {
         epochs: options.epochs,
         seed: options.seed,
+        counterfactual_cache,
         ..Default::default()
     };
     let predictor_dir = out.join("predictor");

@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use rayon::prelude::*;
-use scbg_synth::{Family, generate};
+use scbg_synth::{Family, Scenario, generate};
 
 pub use scbg_synth::GroundTruth;
 
@@ -28,7 +28,14 @@ pub struct SynthOptions {
     pub families: Vec<Family>,
     /// Scenarios per output TFRecord file.
     pub scenarios_per_file: usize,
+    /// Counterfactual siblings per scenario ([`scbg_synth::Scenario::counterfactual`]),
+    /// written to the [`COUNTERFACTUAL_DIR`] subfolder (0: none). A folder input does not
+    /// descend into it, so siblings only reach a cache prepared from that subfolder.
+    pub counterfactuals: usize,
 }
+
+/// Subfolder of the synthetic output holding the counterfactual siblings.
+pub const COUNTERFACTUAL_DIR: &str = "counterfactual";
 
 /// What `write_synthetic` wrote.
 #[derive(Debug, Clone, PartialEq)]
@@ -48,6 +55,10 @@ pub fn write_synthetic(
 ) -> anyhow::Result<SynthSummary> {
     std::fs::create_dir_all(&options.out)
         .with_context(|| format!("creating {}", options.out.display()))?;
+    if options.counterfactuals > 0 {
+        let dir = options.out.join(COUNTERFACTUAL_DIR);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
     let per_file = options.scenarios_per_file.max(1);
     let n_files = options.scenarios.div_ceil(per_file);
     let pb = progress.bar("synth", options.scenarios as u64);
@@ -56,11 +67,24 @@ pub fn write_synthetic(
         .into_par_iter()
         .map(|f| {
             let range = f * per_file..((f + 1) * per_file).min(options.scenarios);
-            let generated: Vec<_> = range
-                .map(|i| generate(options.seed, i as u64, &options.families))
+            let drawn: Vec<_> = range
+                .map(|i| Scenario::draw(options.seed, i as u64, &options.families))
                 .collect();
+            let generated: Vec<_> = drawn.iter().map(Scenario::generate).collect();
             let path = options.out.join(format!("synth-{f:05}.tfrecord"));
             scbg_womd::write_scenes(&path, generated.iter().map(|g| &g.scene))?;
+            if options.counterfactuals > 0 {
+                let k = options.counterfactuals;
+                let siblings: Vec<_> = drawn
+                    .iter()
+                    .flat_map(|s| (0..k).map(move |j| s.counterfactual(j, k)))
+                    .collect();
+                let path = options
+                    .out
+                    .join(COUNTERFACTUAL_DIR)
+                    .join(format!("synth-cf-{f:05}.tfrecord"));
+                scbg_womd::write_scenes(&path, siblings.iter())?;
+            }
             pb.inc(generated.len() as u64);
             Ok(generated.into_iter().map(|g| g.truth).collect())
         })

@@ -19,6 +19,7 @@ fn label_train_and_generate_through_the_library() {
             out: p("synth"),
             families: Family::ALL.to_vec(),
             scenarios_per_file: 8,
+            counterfactuals: 0,
         },
         &Quiet,
     )

@@ -31,6 +31,7 @@ fn fixture() -> &'static (tempfile::TempDir, Vec<u8>, scbg::synth::GroundTruth) 
                 out: p("data"),
                 families: Family::ALL.to_vec(),
                 scenarios_per_file: 12,
+                counterfactuals: 0,
             },
             &Quiet,
         )

@@ -375,30 +375,27 @@ impl Scenario {
     pub fn generate(&self) -> Generated {
         let with_b = self.simulate_with(self.logged_plan(), true);
         let alone = self.simulate(BPlan::Absent);
-        let tracks: Vec<_> = with_b
-            .agents
-            .iter()
-            .map(|a| sim::record_track(a, &with_b.paths, NUM_STEPS))
-            .collect();
         let alone_a = sim::record_track(&alone.agents[0], &alone.paths, NUM_STEPS);
-        let a = &tracks[0];
-        let b = &tracks[1];
+        // B's logged future as written (the recorded track), as a reader of the file sees it.
+        let logged_future: Vec<[f64; 2]> =
+            sim::record_track(&with_b.agents[1], &with_b.paths, NUM_STEPS).states
+                [CURRENT_STEP + 1..NUM_STEPS]
+                .iter()
+                .map(|s| [s.x_m, s.y_m])
+                .collect();
+        let replayed = self
+            .a_avg_speed_given(&with_b, &logged_future)
+            .expect("a logged future is complete and finite");
+        let expected = self.expected_given(&with_b, PRIOR_DRAWS);
+        let scene = self.scene_of(with_b, self.scenario_id());
+        let (a, b) = (&scene.tracks[0], &scene.tracks[1]);
         let collision = a
             .states
             .iter()
             .zip(&b.states)
             .any(|(sa, sb)| boxes_overlap(sa, sb));
-        let logged_future: Vec<[f64; 2]> = b.states[CURRENT_STEP + 1..NUM_STEPS]
-            .iter()
-            .map(|s| [s.x_m, s.y_m])
-            .collect();
-        let replayed = self
-            .a_avg_speed_given(&with_b, &logged_future)
-            .expect("a logged future is complete and finite");
-        let expected = self.expected_given(&with_b, PRIOR_DRAWS);
-        let scenario_id = self.scenario_id();
         let truth = GroundTruth {
-            scenario_id: scenario_id.clone(),
+            scenario_id: scene.scenario_id.clone(),
             seed: self.seed,
             index: self.index,
             families: self.families.clone(),
@@ -413,7 +410,39 @@ impl Scenario {
             psi_true: replayed - expected,
             collision,
         };
-        let scene = Scene {
+        Generated { scene, truth }
+    }
+
+    /// Counterfactual sibling `k` of `of` of the scene: the same history and every draw
+    /// unchanged, but B continuing from the current step with courtesy `c' = (k + 0.5) / of`
+    /// (the midpoints of `of` equal bins of its prior, as in ψ_true's expectation), and
+    /// everyone else reacting to that B. Its id is the scene's with `~cf<k>` appended, so it
+    /// lands in the scene's split. These are interventions on B's future: where the logged
+    /// data only shows how A's and B's futures co-vary, siblings show what A does when B's
+    /// future alone is changed.
+    ///
+    /// # Panics
+    /// If `k >= of`.
+    pub fn counterfactual(&self, k: usize, of: usize) -> Scene {
+        assert!(k < of, "sibling {k} of {of}");
+        let run = self.simulate_with(
+            BPlan::Simulated {
+                history: self.courtesy,
+                future: (k as f64 + 0.5) / of as f64,
+            },
+            true,
+        );
+        self.scene_of(run, format!("{}{COUNTERFACTUAL_MARK}cf{k}", self.scenario_id()))
+    }
+
+    /// The scene of a run with the map.
+    fn scene_of(&self, run: Run, scenario_id: String) -> Scene {
+        let tracks: Vec<_> = run
+            .agents
+            .iter()
+            .map(|a| sim::record_track(a, &run.paths, NUM_STEPS))
+            .collect();
+        Scene {
             scenario_id,
             timestamps_secs: (0..NUM_STEPS).map(|i| i as f64 * STEP_SECS).collect(),
             current_step: CURRENT_STEP,
@@ -430,16 +459,18 @@ impl Scenario {
                 },
             ],
             map: {
-                let mut map = with_b.map;
+                let mut map = run.map;
                 families::orient_road_edges(&mut map);
                 map
             },
             signals_per_step: Vec::new(),
             tracks,
-        };
-        Generated { scene, truth }
+        }
     }
 }
+
+/// Separates a counterfactual sibling's id from its scene's id (`<scene id>~cf<k>`).
+pub const COUNTERFACTUAL_MARK: char = '~';
 
 /// The oracle of one scenario with its logged run and `E_c'[r_A(y_B(c'))]` computed once
 /// ([`Scenario::oracle`]).

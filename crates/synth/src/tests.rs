@@ -280,3 +280,47 @@ fn logged_agents_are_on_the_road_by_the_wosac_rule() {
         "{off} of {total} vehicle tracks leave the road"
     );
 }
+
+#[test]
+fn counterfactual_siblings_share_the_history_and_intervene_on_b_only() {
+    // Each sibling keeps every track's history, draws B's future from another courtesy, and
+    // A reacts to it (A's future is the oracle's reward for that future of B).
+    let (mut a_changed, mut scenes, mut b_differs) = (0, 0, 0);
+    for index in 0..30 {
+        let scenario = Scenario::draw(8, index, &Family::ALL);
+        let g = scenario.generate();
+        let oracle = scenario.oracle();
+        let mut b_futures = Vec::new();
+        for k in 0..3 {
+            let sib = scenario.counterfactual(k, 3);
+            assert_eq!(sib.scenario_id, format!("{}~cf{k}", g.scene.scenario_id));
+            assert_eq!(sib.tracks.len(), g.scene.tracks.len());
+            assert_eq!(sib.map, g.scene.map);
+            for (s, o) in sib.tracks.iter().zip(&g.scene.tracks) {
+                assert_eq!(s.id, o.id);
+                // Heading and velocity at the current step are central differences (they see
+                // step 11); positions up to it and full states before it are the scene's.
+                assert_eq!(s.states[..CURRENT_STEP], o.states[..CURRENT_STEP]);
+                let (sc, oc) = (&s.states[CURRENT_STEP], &o.states[CURRENT_STEP]);
+                assert_eq!((sc.x_m, sc.y_m), (oc.x_m, oc.y_m));
+            }
+            let b: Vec<[f64; 2]> = sib.tracks[1].states[CURRENT_STEP + 1..]
+                .iter()
+                .map(|s| [s.x_m, s.y_m])
+                .collect();
+            let a_speed = a_future_speed(&sib.tracks[0]);
+            // A's logged reaction in the sibling is what the oracle says for B's future.
+            assert!(
+                (oracle.a_avg_speed_mps(&b).unwrap() - a_speed).abs() < 0.25,
+                "scene {index} sibling {k}"
+            );
+            scenes += 1;
+            a_changed += usize::from((a_speed - g.truth.a_avg_speed_mps).abs() > 0.05);
+            b_futures.push(b);
+        }
+        b_differs += usize::from(b_futures[0] != b_futures[2]);
+    }
+    eprintln!("A's future changed in {a_changed} of {scenes} siblings; B's c' 1/6 and 5/6 futures differ in {b_differs} of 30 scenes");
+    assert!(b_differs >= 20, "{b_differs}");
+    assert!(a_changed * 4 >= scenes, "{a_changed} of {scenes}");
+}

@@ -50,6 +50,13 @@ pub struct TrainConfig {
     pub classification_weight: f32,
     /// `flex`, `tch` or `cuda`.
     pub backend: String,
+    /// A second prepared cache of *counterfactual siblings* (scenes whose id is a training
+    /// scene's id + `~…`, sharing its history, with another future of one agent, e.g.
+    /// `scbg synth --counterfactuals K` → `counterfactual/`). From each sibling of a
+    /// training-split scene, only the SDC's sample conditioned on the other member of each of
+    /// its pairs is used: interventions on the condition, which the logged data alone cannot
+    /// show. Siblings of validation scenes are left out.
+    pub counterfactual_cache: Option<std::path::PathBuf>,
 }
 
 impl Default for TrainConfig {
@@ -74,6 +81,7 @@ impl Default for TrainConfig {
             lr_schedule: "cosine".into(),
             classification_weight: 1.0,
             backend: "flex".into(),
+            counterfactual_cache: None,
         }
     }
 }

@@ -18,10 +18,12 @@ pub enum Split {
 
 /// The split of a scenario: [`Split::Validation`] for about `validation_fraction` of the ids.
 /// FNV-1a (then SplitMix-mixed) of the scenario id: a stable split that does not depend on file
-/// order.
+/// order. A variant of a scene (its id + `~…`, e.g. a counterfactual sibling) shares the
+/// scene's split: only the part before the first `~` counts.
 pub fn split_of(scenario_id: &str, validation_fraction: f64) -> Split {
+    let base = scenario_id.split('~').next().unwrap_or(scenario_id);
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in scenario_id.bytes() {
+    for b in base.bytes() {
         h ^= u64::from(b);
         h = h.wrapping_mul(0x0000_0100_0000_01b3);
     }
@@ -108,7 +110,54 @@ pub fn load_samples(
             Split::Validation => val.samples.extend(samples),
         }
     }
+    if let Some(dir) = &config.counterfactual_cache {
+        let siblings = PreparedDataset::open(dir)?;
+        train
+            .samples
+            .extend(counterfactual_samples(&siblings, config)?);
+    }
     Ok((train, val))
+}
+
+/// The training samples of a cache of counterfactual siblings (see
+/// [`TrainConfig::counterfactual_cache`]): for each sibling of a training-split scene, the SDC
+/// conditioned on the other member of each pair it is in.
+pub fn counterfactual_samples(
+    siblings: &PreparedDataset,
+    config: &TrainConfig,
+) -> Result<Vec<AgentSample>, CacheError> {
+    let features = config.feature_config();
+    let per_scene: Vec<Vec<AgentSample>> = (0..siblings.len())
+        .into_par_iter()
+        .map(|i| {
+            let scene = siblings.scene(i)?;
+            if split_of(&scene.scenario_id, config.validation_fraction) != Split::Train {
+                return Ok(Vec::new());
+            }
+            let mut builder = SampleBuilder::new(&scene, &features);
+            let mut out = Vec::new();
+            for (w, pairs) in scene.windows.iter().zip(&scene.pairs) {
+                for p in pairs {
+                    let (target, condition) = match (
+                        scene.tracks[p.first].is_sdc,
+                        scene.tracks[p.second].is_sdc,
+                    ) {
+                        (true, false) => (p.first, p.second),
+                        (false, true) => (p.second, p.first),
+                        _ => continue,
+                    };
+                    if let Ok(s) = builder.sample(w, target, Some(condition))
+                        && s.future_valid.iter().filter(|&&v| v).count()
+                            >= config.min_future_valid_steps
+                    {
+                        out.push(s);
+                    }
+                }
+            }
+            Ok(out)
+        })
+        .collect::<Result<_, CacheError>>()?;
+    Ok(per_scene.into_iter().flatten().collect())
 }
 
 /// Fits standardisation statistics on (up to 4,000 of) the training samples and applies them.
@@ -133,5 +182,8 @@ mod tests {
             .count();
         assert!((1700..2300).contains(&val), "{val}");
         assert!((0..100).all(|i| split_of(&format!("s{i}"), 0.0) == Split::Train));
+        // A variant shares its scene's split.
+        assert!((0..100).all(|i| split_of(&format!("s{i}~cf3"), 0.2)
+            == split_of(&format!("s{i}"), 0.2)));
     }
 }

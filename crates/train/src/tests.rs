@@ -11,12 +11,21 @@ use crate::{Checkpoint, NoProgress, Progress, train};
 
 /// Writes a prepared cache of `n` synthetic scenarios.
 pub(crate) fn tiny_cache(dir: &Path, n: u64) {
+    cache_of(
+        dir,
+        (0..n).map(|i| scbg_synth::generate(42, i, &scbg_synth::Family::ALL).scene),
+    );
+}
+
+/// Writes a prepared cache of these scenes.
+fn cache_of(dir: &Path, scenes: impl Iterator<Item = scbg_scene::Scene>) {
     std::fs::create_dir_all(dir).unwrap();
     let mut w = ShardWriter::create(&dir.join("shard-00000.bin")).unwrap();
-    for i in 0..n {
-        let g = scbg_synth::generate(42, i, &scbg_synth::Family::ALL);
+    let mut n = 0;
+    for scene in scenes {
+        n += 1;
         let p = PreparedScene::from_scene(
-            &g.scene,
+            &scene,
             &WindowConfig::default(),
             &PairConfig::default(),
             4,
@@ -27,7 +36,7 @@ pub(crate) fn tiny_cache(dir: &Path, n: u64) {
     let bytes = w.finish().unwrap();
     let shard = ShardSummary {
         file: "shard-00000.bin".into(),
-        scenarios: n as usize,
+        scenarios: n,
         bytes,
         ..Default::default()
     };
@@ -152,4 +161,53 @@ fn resume_refuses_a_different_config() {
         train(&data, &out, &other, true, &NoProgress),
         Err(crate::TrainError::ConfigMismatch(_))
     ));
+}
+
+#[test]
+fn counterfactual_siblings_add_conditional_samples_of_the_sdc_in_the_training_split() {
+    let dir = tempfile::tempdir().unwrap();
+    let cf = dir.path().join("cf");
+    let n = 24;
+    cache_of(
+        &cf,
+        (0..n).flat_map(|i| {
+            let s = scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::ALL);
+            (0..2).map(move |k| s.counterfactual(k, 2))
+        }),
+    );
+    let config = TrainConfig {
+        counterfactual_cache: Some(cf.clone()),
+        ..tiny_config(1)
+    };
+    let dataset = scbg_features::cache::PreparedDataset::open(&cf).unwrap();
+    let samples = crate::data::counterfactual_samples(&dataset, &config).unwrap();
+    let train_ids: Vec<String> = (0..n)
+        .map(|i| scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::ALL).scenario_id())
+        .filter(|id| {
+            crate::data::split_of(id, config.validation_fraction) == crate::data::Split::Train
+        })
+        .collect();
+    assert!(!train_ids.is_empty() && train_ids.len() < n as usize);
+    // One sample per sibling of a training scene: A (the SDC) conditioned on B.
+    assert_eq!(samples.len(), 2 * train_ids.len());
+    for s in &samples {
+        assert_eq!(s.target_track_id, scbg_synth::A_ID);
+        assert_eq!(s.condition_track_id, Some(scbg_synth::B_ID));
+        let base = s.scenario_id.split('~').next().unwrap();
+        assert!(train_ids.iter().any(|id| id == base), "{}", s.scenario_id);
+    }
+    // The loader adds them to the training set only.
+    tiny_cache(&dir.path().join("data"), 8);
+    let data = scbg_features::cache::PreparedDataset::open(&dir.path().join("data")).unwrap();
+    let (with, val_with) = crate::data::load_samples(&data, &config).unwrap();
+    let (without, val_without) = crate::data::load_samples(
+        &data,
+        &TrainConfig {
+            counterfactual_cache: None,
+            ..config.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(with.len(), without.len() + samples.len());
+    assert_eq!(val_with.len(), val_without.len());
 }
