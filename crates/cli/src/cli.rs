@@ -124,6 +124,13 @@ pub struct LabelArgs {
     /// report against the simulator's ψ_true (psi_fidelity.png).
     #[arg(long)]
     pub ground_truth: Option<PathBuf>,
+    /// Label only the cache shards with `shard % num_shards == shard_index` (several workers
+    /// sharing --out; no summary). Run again without --num-shards to merge: every table is read
+    /// back and the summary written.
+    #[arg(long, default_value_t = 0)]
+    pub shard_index: usize,
+    #[arg(long, default_value_t = 1)]
+    pub num_shards: usize,
 }
 
 #[derive(Debug, Subcommand)]

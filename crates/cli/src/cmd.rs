@@ -46,6 +46,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     options,
                     seed: a.seed,
                     ground_truth: a.ground_truth,
+                    shard_index: a.shard_index,
+                    num_shards: a.num_shards,
                 },
                 progress,
             )?;

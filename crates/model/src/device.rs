@@ -17,11 +17,15 @@ pub fn available_backends() -> Vec<&'static str> {
     if cfg!(feature = "cuda") {
         v.push("cuda");
     }
+    if cfg!(feature = "vulkan") {
+        v.push("vulkan");
+    }
     v
 }
 
 /// The inference device for a backend name: `flex` (pure Rust CPU, default), `tch`
-/// (LibTorch CPU, `--features tch`), `cuda` (`--features cuda`, untested here).
+/// (LibTorch CPU, `--features tch`), `cuda` (`--features cuda`, needs network to build),
+/// `vulkan` (`--features vulkan`: the default GPU adapter through wgpu's Vulkan path).
 pub fn device(name: &str) -> Result<Device, UnknownBackend> {
     match name {
         "flex" => Ok(Device::flex()),
@@ -29,6 +33,8 @@ pub fn device(name: &str) -> Result<Device, UnknownBackend> {
         "tch" => Ok(Device::libtorch()),
         #[cfg(feature = "cuda")]
         "cuda" => Ok(Device::cuda(burn::tensor::DeviceIndex::Default)),
+        #[cfg(feature = "vulkan")]
+        "vulkan" => Ok(Device::vulkan(Default::default())),
         other => Err(UnknownBackend(
             other.to_string(),
             available_backends().join(", "),

@@ -15,6 +15,7 @@ pub mod batch;
 pub mod blocks;
 pub mod config;
 pub mod device;
+pub mod fixtures;
 pub mod loss;
 pub mod lstm_kernel;
 pub mod model;
@@ -25,6 +26,38 @@ pub use config::{MultipathConfig, Preset};
 pub use loss::gmm_nll;
 pub use model::Multipath;
 pub use output::{GmmOutput, Mixture};
+
+/// Draws every lazily initialised parameter of `module` now (burn initialises parameters at
+/// first use): call it right after `init` where the draws must come from a seeded stream.
+pub fn materialize<M: burn::module::Module>(module: &M) {
+    module.visit(&mut Materialize);
+}
+
+/// Reads every parameter, which makes burn draw the lazy ones.
+struct Materialize;
+
+impl burn::module::ModuleVisitor for Materialize {
+    fn visit_float<const D: usize>(
+        &mut self,
+        param: &burn::module::Param<burn::tensor::Tensor<D>>,
+    ) {
+        let _ = param.val();
+    }
+
+    fn visit_int<const D: usize>(
+        &mut self,
+        param: &burn::module::Param<burn::tensor::Tensor<D, burn::tensor::Int>>,
+    ) {
+        let _ = param.val();
+    }
+
+    fn visit_bool<const D: usize>(
+        &mut self,
+        param: &burn::module::Param<burn::tensor::Tensor<D, burn::tensor::Bool>>,
+    ) {
+        let _ = param.val();
+    }
+}
 
 /// Tests that seed burn's process-global RNG hold this lock, so concurrent tests do not draw
 /// from the stream between `seed` and `init`.

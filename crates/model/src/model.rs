@@ -334,48 +334,9 @@ mod tests {
     use crate::loss::gmm_nll;
     use burn::optim::{AdamConfig, GradientsParams};
     use rand::SeedableRng;
-    use scbg_features::{AgentSample, FeatureConfig, Window};
+    use scbg_features::{AgentSample, FeatureConfig};
 
-    /// A sample of a target driving straight at 10 m/s (features as `scbg-features` makes them).
-    pub(crate) fn straight_sample(cfg: &FeatureConfig, with_condition: bool) -> AgentSample {
-        let h = cfg.history_steps;
-        let mut target_history = vec![0.0; h * AGENT_FEATURES];
-        for s in 0..h {
-            let row = &mut target_history[s * AGENT_FEATURES..(s + 1) * AGENT_FEATURES];
-            row[0] = (s as f32 - (h - 1) as f32) * 1.0;
-            row[3] = 10.0;
-            row[6] = 1.0;
-            row[8] = 1.0;
-        }
-        let mut target_diffs = vec![0.0; (h - 1) * DIFF_FEATURES];
-        for s in 0..h - 1 {
-            target_diffs[s * DIFF_FEATURES] = 1.0;
-            target_diffs[s * DIFF_FEATURES + 4] = 1.0;
-        }
-        let f = cfg.future_steps;
-        AgentSample {
-            scenario_id: "t".into(),
-            window: Window {
-                current_step: h - 1,
-            },
-            target_track_id: 1,
-            condition_track_id: with_condition.then_some(2),
-            world_from_agent: scbg_scene::Pose2::default(),
-            target_history,
-            target_diffs,
-            others_history: vec![0.0; cfg.max_other_agents * h * AGENT_FEATURES],
-            others_diffs: vec![0.0; cfg.max_other_agents * (h - 1) * DIFF_FEATURES],
-            others_valid: vec![false; cfg.max_other_agents],
-            road_segments: vec![0.1; cfg.max_road_segments * ROAD_FEATURES],
-            road_valid: vec![true; cfg.max_road_segments],
-            condition_future_xy_m: (0..f).flat_map(|i| [i as f32, 3.5]).collect(),
-            condition_future_valid: vec![with_condition; f],
-            future_xy_m: (0..f).flat_map(|i| [(i + 1) as f32, 0.0]).collect(),
-            future_heading_rad: vec![0.0; f],
-            future_valid: vec![true; f],
-            current_velocity_mps: [10.0, 0.0],
-        }
-    }
+    use crate::fixtures::straight_sample;
 
     #[test]
     fn shapes_param_counts_and_a_learning_step() {

@@ -286,8 +286,8 @@ pub fn train_variant(
         let range =
             RangePredictor::init(p.ckpt.model_config.embedding_width(), range_hidden, device);
         // burn initialises parameters lazily, at first use: draw them now, inside the lock.
-        generator.visit(&mut Materialize);
-        range.visit(&mut Materialize);
+        scbg_model::materialize(&generator);
+        scbg_model::materialize(&range);
         (generator, range)
     };
     let mut optim = burn::optim::AdamConfig::new().init();
@@ -407,32 +407,6 @@ pub fn train_variant(
 
 /// Guards the backend's shared random stream while a model is seeded and initialised.
 static DEVICE_STREAM: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-/// Forces every lazily initialised parameter of a module to be drawn.
-struct Materialize;
-
-impl burn::module::ModuleVisitor for Materialize {
-    fn visit_float<const D: usize>(
-        &mut self,
-        param: &burn::module::Param<burn::tensor::Tensor<D>>,
-    ) {
-        let _ = param.val();
-    }
-
-    fn visit_int<const D: usize>(
-        &mut self,
-        param: &burn::module::Param<burn::tensor::Tensor<D, burn::tensor::Int>>,
-    ) {
-        let _ = param.val();
-    }
-
-    fn visit_bool<const D: usize>(
-        &mut self,
-        param: &burn::module::Param<burn::tensor::Tensor<D, burn::tensor::Bool>>,
-    ) {
-        let _ = param.val();
-    }
-}
 
 /// What `scbg train generator` does: labels the training split of `data` with the predictor
 /// in `predictor` and trains one variant into `out`.

@@ -297,6 +297,12 @@ pub struct LabelRun {
     pub seed: u64,
     /// A synthetic `ground_truth.jsonl` for the latent-courtesy check.
     pub ground_truth: Option<PathBuf>,
+    /// Label only the cache shards with `shard % num_shards == shard_index` (several workers
+    /// sharing `out`). Such a run writes its shards' tables and no summary; a run with
+    /// `num_shards = 1` afterwards reads every table back and writes the summary (the merge).
+    pub shard_index: usize,
+    /// Number of workers sharing the cache (1: everything, with the summary).
+    pub num_shards: usize,
 }
 
 /// The labelling options, checked: `sample_noise` must be finite and ≥ 0.
@@ -410,6 +416,12 @@ pub fn label_cache(
     run: &LabelRun,
     progress: &dyn Progress,
 ) -> anyhow::Result<(Vec<LabelRow>, LabelSummary)> {
+    ensure_request!(
+        run.num_shards > 0 && run.shard_index < run.num_shards,
+        "shard index {} is not below the number of shards {}",
+        run.shard_index,
+        run.num_shards
+    );
     let ckpt = Checkpoint::read(&run.model)?;
     let device = scbg_model::device::device(&ckpt.train_config.backend)?;
     let model = ckpt.load_model(&run.model, &device)?;
@@ -423,6 +435,9 @@ pub fn label_cache(
     let index = truth.as_deref().map(crate::fidelity::TruthIndex::new);
     let mut rows = Vec::new();
     for (si, range) in shard_ranges(&dataset).into_iter().enumerate() {
+        if si % run.num_shards != run.shard_index {
+            continue;
+        }
         let path = run.out.join(shard_table_name(si));
         if path.is_file() {
             rows.extend(read_label_table(&path)?);
@@ -443,6 +458,17 @@ pub fn label_cache(
         let shard_rows = scored_rows(&scenes, index.as_ref());
         write_label_table(&path, &shard_rows)?;
         rows.extend(shard_rows);
+    }
+    if run.num_shards > 1 {
+        progress.note(&format!(
+            "labelled shard(s) {} of every {} of {}: {} rows; the summary is written by a run without --num-shards",
+            run.shard_index,
+            run.num_shards,
+            run.data.display(),
+            rows.len()
+        ));
+        let summary = LabelSummary::of(&rows, run.options, None);
+        return Ok((rows, summary));
     }
     ensure_request!(
         !rows.is_empty(),

@@ -46,6 +46,8 @@ fn label_train_and_generate_through_the_library() {
             options,
             seed: 0,
             ground_truth: Some(p("synth").join(synth::GROUND_TRUTH_FILE)),
+            shard_index: 0,
+            num_shards: 1,
         },
         &Quiet,
     )

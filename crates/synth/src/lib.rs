@@ -432,7 +432,10 @@ impl Scenario {
             },
             true,
         );
-        self.scene_of(run, format!("{}{COUNTERFACTUAL_MARK}cf{k}", self.scenario_id()))
+        self.scene_of(
+            run,
+            format!("{}{COUNTERFACTUAL_MARK}cf{k}", self.scenario_id()),
+        )
     }
 
     /// The scene of a run with the map.

@@ -320,7 +320,9 @@ fn counterfactual_siblings_share_the_history_and_intervene_on_b_only() {
         }
         b_differs += usize::from(b_futures[0] != b_futures[2]);
     }
-    eprintln!("A's future changed in {a_changed} of {scenes} siblings; B's c' 1/6 and 5/6 futures differ in {b_differs} of 30 scenes");
+    eprintln!(
+        "A's future changed in {a_changed} of {scenes} siblings; B's c' 1/6 and 5/6 futures differ in {b_differs} of 30 scenes"
+    );
     assert!(b_differs >= 20, "{b_differs}");
     assert!(a_changed * 4 >= scenes, "{a_changed} of {scenes}");
 }

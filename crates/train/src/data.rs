@@ -138,14 +138,12 @@ pub fn counterfactual_samples(
             let mut out = Vec::new();
             for (w, pairs) in scene.windows.iter().zip(&scene.pairs) {
                 for p in pairs {
-                    let (target, condition) = match (
-                        scene.tracks[p.first].is_sdc,
-                        scene.tracks[p.second].is_sdc,
-                    ) {
-                        (true, false) => (p.first, p.second),
-                        (false, true) => (p.second, p.first),
-                        _ => continue,
-                    };
+                    let (target, condition) =
+                        match (scene.tracks[p.first].is_sdc, scene.tracks[p.second].is_sdc) {
+                            (true, false) => (p.first, p.second),
+                            (false, true) => (p.second, p.first),
+                            _ => continue,
+                        };
                     if let Ok(s) = builder.sample(w, target, Some(condition))
                         && s.future_valid.iter().filter(|&&v| v).count()
                             >= config.min_future_valid_steps
@@ -183,7 +181,9 @@ mod tests {
         assert!((1700..2300).contains(&val), "{val}");
         assert!((0..100).all(|i| split_of(&format!("s{i}"), 0.0) == Split::Train));
         // A variant shares its scene's split.
-        assert!((0..100).all(|i| split_of(&format!("s{i}~cf3"), 0.2)
-            == split_of(&format!("s{i}"), 0.2)));
+        assert!(
+            (0..100)
+                .all(|i| split_of(&format!("s{i}~cf3"), 0.2) == split_of(&format!("s{i}"), 0.2))
+        );
     }
 }

@@ -24,13 +24,9 @@ fn cache_of(dir: &Path, scenes: impl Iterator<Item = scbg_scene::Scene>) {
     let mut n = 0;
     for scene in scenes {
         n += 1;
-        let p = PreparedScene::from_scene(
-            &scene,
-            &WindowConfig::default(),
-            &PairConfig::default(),
-            4,
-        )
-        .unwrap();
+        let p =
+            PreparedScene::from_scene(&scene, &WindowConfig::default(), &PairConfig::default(), 4)
+                .unwrap();
         w.append(&p).unwrap();
     }
     let bytes = w.finish().unwrap();

@@ -10,6 +10,7 @@ mod corrupt;
 mod pipeline;
 mod predictor;
 mod real_data;
+mod scale;
 
 pub fn scbg(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_scbg"))
