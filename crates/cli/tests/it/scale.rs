@@ -14,6 +14,16 @@ use serde_json::Value;
 
 use crate::scbg_ok;
 
+/// Asserts that a finished command succeeded, with its output in the message.
+fn assert_ran(out: &std::process::Output, what: &str) {
+    assert!(
+        out.status.success(),
+        "{what}: {}\n{}",
+        String::from_utf8_lossy(&out.stdout),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
@@ -41,11 +51,7 @@ fn python() -> PathBuf {
             .args(["-m", "pip", "install", "-q", "ray", "kubernetes-validate"])
             .output()
             .expect("pip");
-        assert!(
-            out.status.success(),
-            "pip install ray kubernetes-validate: {}",
-            String::from_utf8_lossy(&out.stderr)
-        );
+        assert_ran(&out, "pip install ray kubernetes-validate");
     }
     python
 }
@@ -60,12 +66,7 @@ fn ray_stage(python: &Path, args: &[&str], out: &Path, stage: &str) -> Value {
         .env("RAY_USAGE_STATS_ENABLED", "0")
         .output()
         .expect("run the Ray driver");
-    assert!(
-        result.status.success(),
-        "scbg_ray.py {args:?}: {}\n{}",
-        String::from_utf8_lossy(&result.stdout),
-        String::from_utf8_lossy(&result.stderr)
-    );
+    assert_ran(&result, &format!("scbg_ray.py {args:?}"));
     serde_json::from_str(&std::fs::read_to_string(out.join(format!("ray_{stage}.json"))).unwrap())
         .unwrap()
 }
@@ -287,12 +288,7 @@ fn ray_shards_merge_to_the_single_process_result_and_k8s_jobs_validate() {
         .args(&manifests)
         .output()
         .expect("kubernetes-validate");
-    assert!(
-        out.status.success(),
-        "kubernetes-validate: {}\n{}",
-        String::from_utf8_lossy(&out.stdout),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert_ran(&out, "kubernetes-validate");
     // ... and the validator does reject a Job with a misspelt field.
     let broken = std::fs::read_to_string(&manifests[0])
         .unwrap()
