@@ -520,23 +520,12 @@ impl Simulation {
                         a.len()
                     )));
                 }
-                let ego_id = self.sim.ego_id();
-                let now = self
-                    .sim
-                    .snapshot()
-                    .into_iter()
-                    .find(|s| s.id == ego_id)
-                    .map(|s| s.state)
-                    .unwrap_or_default();
-                Some(AgentState {
-                    x_m: a[0],
-                    y_m: a[1],
-                    heading_rad: a[2] as f32,
-                    velocity_x_mps: a[3] as f32,
-                    velocity_y_mps: a[4] as f32,
-                    valid: true,
-                    ..now
-                })
+                Some(self.sim.external_ego_state(
+                    a[0],
+                    a[1],
+                    a[2] as f32,
+                    [a[3] as f32, a[4] as f32],
+                ))
             }
         };
         let (model, ctl) = (self.model.clone(), self.controlled.clone());

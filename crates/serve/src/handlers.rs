@@ -496,23 +496,12 @@ pub(crate) async fn step_session(
             })?;
             let s = &mut *s;
             let ego_state = req.ego.map(|e| {
-                let ego_id = s.sim.ego_id();
-                let now = s
-                    .sim
-                    .snapshot()
-                    .into_iter()
-                    .find(|a| a.id == ego_id)
-                    .map(|a| a.state)
-                    .unwrap_or_default();
-                scbg::AgentState {
-                    x_m: e.x_m,
-                    y_m: e.y_m,
-                    heading_rad: e.heading_rad,
-                    velocity_x_mps: e.velocity_x_mps,
-                    velocity_y_mps: e.velocity_y_mps,
-                    valid: true,
-                    ..now
-                }
+                s.sim.external_ego_state(
+                    e.x_m,
+                    e.y_m,
+                    e.heading_rad,
+                    [e.velocity_x_mps, e.velocity_y_mps],
+                )
             });
             scbg::sim::step(model, &mut s.sim, &s.controlled, ego_state).map_err(ApiError::from)?;
             s.last_used = Instant::now();

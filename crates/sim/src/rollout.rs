@@ -391,6 +391,27 @@ impl Simulation {
         self.log.tracks[self.ego].id
     }
 
+    /// The ego's state for [`Self::step`] when it is driven from outside: this pose and
+    /// velocity (world frame), valid, with everything else (box, z) kept from the ego's
+    /// current state.
+    pub fn external_ego_state(
+        &self,
+        x_m: f64,
+        y_m: f64,
+        heading_rad: f32,
+        velocity_mps: [f32; 2],
+    ) -> AgentState {
+        AgentState {
+            x_m,
+            y_m,
+            heading_rad,
+            velocity_x_mps: velocity_mps[0],
+            velocity_y_mps: velocity_mps[1],
+            valid: true,
+            ..self.states[self.ego][self.t]
+        }
+    }
+
     /// Every agent's state at the current step.
     pub fn snapshot(&self) -> Vec<AgentSnapshot> {
         self.log

@@ -373,22 +373,20 @@ impl Scenario {
 
     /// The scene and its ground truth.
     pub fn generate(&self) -> Generated {
-        let with_b = self.simulate_with(self.logged_plan(), true);
+        let mut with_b = self.simulate_with(self.logged_plan(), true);
         let alone = self.simulate(BPlan::Absent);
         let alone_a = sim::record_track(&alone.agents[0], &alone.paths, NUM_STEPS);
+        let scene = self.scene_of(&mut with_b, self.scenario_id());
+        let (a, b) = (&scene.tracks[0], &scene.tracks[1]);
         // B's logged future as written (the recorded track), as a reader of the file sees it.
-        let logged_future: Vec<[f64; 2]> =
-            sim::record_track(&with_b.agents[1], &with_b.paths, NUM_STEPS).states
-                [CURRENT_STEP + 1..NUM_STEPS]
-                .iter()
-                .map(|s| [s.x_m, s.y_m])
-                .collect();
+        let logged_future: Vec<[f64; 2]> = b.states[CURRENT_STEP + 1..NUM_STEPS]
+            .iter()
+            .map(|s| [s.x_m, s.y_m])
+            .collect();
         let replayed = self
             .a_avg_speed_given(&with_b, &logged_future)
             .expect("a logged future is complete and finite");
         let expected = self.expected_given(&with_b, PRIOR_DRAWS);
-        let scene = self.scene_of(with_b, self.scenario_id());
-        let (a, b) = (&scene.tracks[0], &scene.tracks[1]);
         let collision = a
             .states
             .iter()
@@ -425,7 +423,7 @@ impl Scenario {
     /// If `k >= of`.
     pub fn counterfactual(&self, k: usize, of: usize) -> Scene {
         assert!(k < of, "sibling {k} of {of}");
-        let run = self.simulate_with(
+        let mut run = self.simulate_with(
             BPlan::Simulated {
                 history: self.courtesy,
                 future: (k as f64 + 0.5) / of as f64,
@@ -433,13 +431,13 @@ impl Scenario {
             true,
         );
         self.scene_of(
-            run,
+            &mut run,
             format!("{}{COUNTERFACTUAL_MARK}cf{k}", self.scenario_id()),
         )
     }
 
-    /// The scene of a run with the map.
-    fn scene_of(&self, run: Run, scenario_id: String) -> Scene {
+    /// The scene of a run with the map (moved out of the run; the oracle's replays need none).
+    fn scene_of(&self, run: &mut Run, scenario_id: String) -> Scene {
         let tracks: Vec<_> = run
             .agents
             .iter()
@@ -462,7 +460,7 @@ impl Scenario {
                 },
             ],
             map: {
-                let mut map = run.map;
+                let mut map = std::mem::take(&mut run.map);
                 families::orient_road_edges(&mut map);
                 map
             },

@@ -91,12 +91,7 @@ pub fn load_samples(
                 }
                 for p in pairs {
                     for (a, b) in [(p.first, p.second), (p.second, p.first)] {
-                        if let Ok(s) = builder.sample(w, a, Some(b))
-                            && s.future_valid.iter().filter(|&&v| v).count()
-                                >= config.min_future_valid_steps
-                        {
-                            out.push(s);
-                        }
+                        out.extend(conditional_sample(&mut builder, w, a, b, config));
                     }
                 }
             }
@@ -144,18 +139,33 @@ pub fn counterfactual_samples(
                             (false, true) => (p.second, p.first),
                             _ => continue,
                         };
-                    if let Ok(s) = builder.sample(w, target, Some(condition))
-                        && s.future_valid.iter().filter(|&&v| v).count()
-                            >= config.min_future_valid_steps
-                    {
-                        out.push(s);
-                    }
+                    out.extend(conditional_sample(
+                        &mut builder,
+                        w,
+                        target,
+                        condition,
+                        config,
+                    ));
                 }
             }
             Ok(out)
         })
         .collect::<Result<_, CacheError>>()?;
     Ok(per_scene.into_iter().flatten().collect())
+}
+
+/// `target`'s sample conditioned on `condition`'s future, if it has enough valid future steps.
+fn conditional_sample(
+    builder: &mut SampleBuilder<'_>,
+    window: &scbg_features::Window,
+    target: usize,
+    condition: usize,
+    config: &TrainConfig,
+) -> Option<AgentSample> {
+    builder
+        .sample(window, target, Some(condition))
+        .ok()
+        .filter(|s| s.future_valid.iter().filter(|&&v| v).count() >= config.min_future_valid_steps)
 }
 
 /// Fits standardisation statistics on (up to 4,000 of) the training samples and applies them.
