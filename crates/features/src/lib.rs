@@ -20,6 +20,7 @@ pub mod cache;
 mod codec;
 mod pairs;
 mod prepared;
+mod road_index;
 mod sample;
 mod stats;
 mod window;

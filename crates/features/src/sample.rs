@@ -7,6 +7,7 @@
 use scbg_scene::{ObjectType, Pose2, wrap_angle_rad};
 
 use crate::prepared::{PreparedScene, PreparedTrack, RoadKind};
+use crate::road_index::{Scratch, SegmentIndex, total_order_bits};
 use crate::window::Window;
 
 /// Per history step: x, y, yaw, speed, width, length, valid, type one-hot (5), is_sdc.
@@ -150,10 +151,11 @@ impl AgentFrame {
     }
 }
 
-fn type_one_hot(t: ObjectType) -> [f32; 5] {
-    let mut v = [0.0; 5];
-    v[t.code() as usize] = 1.0;
-    v
+/// Index of `t` in the 5-wide type one-hot. (The one-hot is written into zeroed rows in
+/// place: copying a stack array built with a variable-index store stalled store forwarding
+/// and cost a tenth of feature building.)
+fn type_index(t: ObjectType) -> usize {
+    t.code() as usize
 }
 
 /// Writes the 13 per-step features of `track` at `step` (zeros if invalid).
@@ -170,7 +172,7 @@ fn step_features(track: &PreparedTrack, step: Option<usize>, frame: &AgentFrame,
     out[4] = track.width_m;
     out[5] = track.length_m;
     out[6] = 1.0;
-    out[7..12].copy_from_slice(&type_one_hot(track.object_type));
+    out[7 + type_index(track.object_type)] = 1.0;
     out[12] = f32::from(u8::from(track.is_sdc));
 }
 
@@ -205,7 +207,7 @@ fn track_history(
             d[3] = cur[3] - prev[3];
             d[4] = 1.0;
         }
-        d[5..10].copy_from_slice(&type_one_hot(track.object_type));
+        d[5 + type_index(track.object_type)] = 1.0;
         d[10] = f32::from(u8::from(track.is_sdc));
     }
 }
@@ -241,12 +243,16 @@ pub fn extract_sample(
 pub struct SampleBuilder<'a> {
     scene: &'a PreparedScene,
     config: &'a FeatureConfig,
-    seg_a: Vec<[f32; 2]>,
-    seg_b: Vec<[f32; 2]>,
+    /// The road segments with a grid over them.
+    segments: SegmentIndex,
     seg_kind: Vec<RoadKind>,
-    /// Scratch: candidate segment indices and their distances.
-    candidates: Vec<u32>,
-    dist: Vec<f32>,
+    /// Scratch: the selected segments with their squared distances, and the search's heap.
+    candidates: Vec<(u32, f32)>,
+    scratch: Scratch,
+    /// Per track, its position at its latest valid history step of `latest_for` (the ranking
+    /// key of other agents; the same for every target of a window).
+    latest_history_xy: Vec<Option<[f32; 2]>>,
+    latest_for: Option<Window>,
 }
 
 impl<'a> SampleBuilder<'a> {
@@ -278,12 +284,30 @@ impl<'a> SampleBuilder<'a> {
         Self {
             scene,
             config,
-            seg_a,
-            seg_b,
+            segments: SegmentIndex::new(seg_a, seg_b),
             seg_kind,
             candidates: Vec::new(),
-            dist: vec![0.0; n],
+            scratch: Scratch::default(),
+            latest_history_xy: Vec::new(),
+            latest_for: None,
         }
+    }
+
+    fn refresh_latest_history_xy(&mut self, window: &Window) {
+        if self.latest_for == Some(*window) {
+            return;
+        }
+        let history = self.config.history_steps;
+        self.latest_history_xy.clear();
+        self.latest_history_xy
+            .extend(self.scene.tracks.iter().map(|t| {
+                let last = (0..history)
+                    .rev()
+                    .filter_map(|h| window.history_step(h, history))
+                    .find(|&s| t.valid.get(s).copied().unwrap_or(false))?;
+                Some([t.x_m[last], t.y_m[last]])
+            }));
+        self.latest_for = Some(*window);
     }
 
     /// The features of `target` in `window`, conditioned on `condition`'s future when given.
@@ -335,40 +359,36 @@ impl<'a> SampleBuilder<'a> {
         // Other agents: every other track with a valid history step, closest (at its latest
         // valid history step) first; the conditioning agent is always kept.
         let (tx, ty) = (track.x_m[now], track.y_m[now]);
-        let mut others: Vec<(f32, usize)> = scene
-            .tracks
+        self.refresh_latest_history_xy(window);
+        // Ranked by (squared distance, index) as one integer key (`total_order_bits` orders
+        // like `f32::total_cmp`); the condition agent gets −1, ahead of everyone.
+        let mut others: Vec<u64> = self
+            .latest_history_xy
             .iter()
             .enumerate()
             .filter(|&(i, _)| i != target)
-            .filter_map(|(i, t)| {
-                let last = (0..history)
-                    .rev()
-                    .filter_map(|h| window.history_step(h, history))
-                    .find(|&s| t.valid.get(s).copied().unwrap_or(false))?;
-                let (dx, dy) = (t.x_m[last] - tx, t.y_m[last] - ty);
-                Some((
-                    if Some(i) == condition {
-                        -1.0
-                    } else {
-                        dx * dx + dy * dy
-                    },
-                    i,
-                ))
+            .filter_map(|(i, xy)| {
+                let [x, y] = (*xy)?;
+                let (dx, dy) = (x - tx, y - ty);
+                let d = if Some(i) == condition {
+                    -1.0
+                } else {
+                    dx * dx + dy * dy
+                };
+                Some((u64::from(total_order_bits(d)) << 32) | i as u64)
             })
             .collect();
         let max_others = config.max_other_agents;
-        let by_distance =
-            |a: &(f32, usize), b: &(f32, usize)| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1));
         if others.len() > max_others && max_others > 0 {
-            others.select_nth_unstable_by(max_others - 1, by_distance);
+            others.select_nth_unstable(max_others - 1);
         }
         others.truncate(max_others);
-        others.sort_unstable_by(by_distance);
+        others.sort_unstable();
         let (hs, ds) = (history * AGENT_FEATURES, (history - 1) * DIFF_FEATURES);
         let mut others_history = vec![0.0; max_others * hs];
         let mut others_diffs = vec![0.0; max_others * ds];
         let mut others_valid = vec![false; max_others];
-        for (k, &(_, i)) in others.iter().enumerate() {
+        for (k, i) in others.iter().map(|&key| (key as u32) as usize).enumerate() {
             track_history(
                 &scene.tracks[i],
                 window,
@@ -441,29 +461,14 @@ impl<'a> SampleBuilder<'a> {
     /// rotation); only the P selected segments are rotated into the agent frame.
     fn road_features(&mut self, frame: &AgentFrame) -> (Vec<f32>, Vec<bool>) {
         let p_max = self.config.max_road_segments;
-        let r2 = self.config.road_radius_m * self.config.road_radius_m;
         let (ox, oy) = (frame.x_m as f32, frame.y_m as f32);
-        self.candidates.clear();
-        for (i, (a, b)) in self.seg_a.iter().zip(&self.seg_b).enumerate() {
-            let a = [a[0] - ox, a[1] - oy];
-            let b = [b[0] - ox, b[1] - oy];
-            if (a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]) < r2 {
-                let p = closest_point_to_origin(a, b);
-                self.dist[i] = p[0] * p[0] + p[1] * p[1];
-                self.candidates.push(i as u32);
-            }
-        }
-        let dist = &self.dist;
-        let order = |x: &u32, y: &u32| {
-            dist[*x as usize]
-                .total_cmp(&dist[*y as usize])
-                .then(x.cmp(y))
-        };
-        if self.candidates.len() > p_max && p_max > 0 {
-            self.candidates.select_nth_unstable_by(p_max - 1, order);
-        }
-        self.candidates.truncate(p_max);
-        self.candidates.sort_unstable_by(order);
+        self.segments.closest(
+            [ox, oy],
+            p_max,
+            self.config.road_radius_m,
+            &mut self.scratch,
+            &mut self.candidates,
+        );
         let (sn, cs) = (frame.sin as f32, frame.cos as f32);
         let to_agent = |p: [f32; 2]| {
             let (dx, dy) = (p[0] - ox, p[1] - oy);
@@ -471,12 +476,15 @@ impl<'a> SampleBuilder<'a> {
         };
         let mut out = vec![0.0f32; p_max * ROAD_FEATURES];
         let mut valid = vec![false; p_max];
-        for (k, &i) in self.candidates.iter().enumerate() {
+        for (k, &(i, dist2)) in self.candidates.iter().enumerate() {
             let i = i as usize;
-            let (a, b) = (to_agent(self.seg_a[i]), to_agent(self.seg_b[i]));
+            let (a, b) = (
+                to_agent(self.segments.seg_a(i)),
+                to_agent(self.segments.seg_b(i)),
+            );
             let f = &mut out[k * ROAD_FEATURES..(k + 1) * ROAD_FEATURES];
             let p = closest_point_to_origin(a, b);
-            let dist = self.dist[i].sqrt();
+            let dist = dist2.sqrt();
             f[0] = dist;
             if dist > 1e-6 {
                 f[1] = p[0] / dist;
@@ -498,7 +506,7 @@ impl<'a> SampleBuilder<'a> {
 }
 
 /// The point of segment `a`–`b` closest to the origin.
-fn closest_point_to_origin(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
+pub(crate) fn closest_point_to_origin(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let len2 = dx * dx + dy * dy;
     if len2 <= 1e-12 {

@@ -4,7 +4,12 @@ use std::f64::consts::PI;
 
 /// Wraps an angle to `(-π, π]`.
 pub fn wrap_angle_rad(angle_rad: f64) -> f64 {
-    let mut a = angle_rad % (2.0 * PI);
+    // `fmod` returns its argument unchanged when |a| < 2π: skip the (slow) call then. Same bits.
+    let mut a = if angle_rad.abs() < 2.0 * PI {
+        angle_rad
+    } else {
+        angle_rad % (2.0 * PI)
+    };
     if a <= -PI {
         a += 2.0 * PI;
     } else if a > PI {
@@ -89,5 +94,33 @@ mod tests {
         assert!((wrap_angle_rad(-3.0 * PI) - PI).abs() < 1e-12);
         assert!((wrap_angle_rad(0.5) - 0.5).abs() < 1e-12);
         assert!((wrap_angle_rad(-PI / 2.0 - 2.0 * PI) + PI / 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn wrap_angle_fast_path_has_the_same_bits_as_fmod() {
+        let reference = |x: f64| {
+            let mut a = x % (2.0 * PI);
+            if a <= -PI {
+                a += 2.0 * PI;
+            } else if a > PI {
+                a -= 2.0 * PI;
+            }
+            a
+        };
+        let mut x = -20.0f64;
+        while x < 20.0 {
+            for v in [
+                x,
+                f64::from_bits(x.to_bits() + 1),
+                2.0 * PI,
+                -2.0 * PI,
+                PI,
+                -PI,
+            ] {
+                assert_eq!(wrap_angle_rad(v).to_bits(), reference(v).to_bits(), "{v}");
+            }
+            x += 0.001_3;
+        }
+        assert!(wrap_angle_rad(f64::NAN).is_nan());
     }
 }

@@ -21,6 +21,7 @@ use scbg_base::atomic::AtomicFile;
 use scbg_scene::Scene;
 
 pub mod example;
+pub mod fast;
 pub mod fixtures;
 pub mod proto;
 pub mod scenario;
@@ -260,30 +261,61 @@ impl WomdFile {
     }
 
     /// Decodes every record into a [`Scene`], in file order. The format is detected once from
-    /// the first record. Each item is an error or a scene; after a framing error that leaves
-    /// the next record's start unknown, iteration stops.
+    /// the first record (which is decoded once, not once to detect and again to convert). Each
+    /// item is an error or a scene; after a framing error that leaves the next record's start
+    /// unknown, iteration stops.
     pub fn scenes(&self) -> impl Iterator<Item = Result<Scene, WomdError>> + '_ {
         let mut format: Option<Result<Format, DecodeError>> = None;
         self.records().map(move |record| {
             let record = record?;
-            let fmt = format
-                .get_or_insert_with(|| detect_record_format(record.data))
-                .clone();
-            fmt.and_then(|f| decode_record(record.data, f))
-                .map_err(|e| self.decode_error(&record, e))
+            let scene = match &format {
+                Some(fmt) => fmt.clone().and_then(|f| decode_record(record.data, f)),
+                None => {
+                    let detected = detect(record.data);
+                    format = Some(
+                        detected
+                            .as_ref()
+                            .map(Detected::format)
+                            .map_err(Clone::clone),
+                    );
+                    detected.and_then(Detected::into_scene)
+                }
+            };
+            scene.map_err(|e| self.decode_error(&record, e))
         })
     }
 }
 
-/// Decides whether a serialized record is a motion tf.Example or a Scenario.
-pub fn detect_record_format(data: &[u8]) -> Result<Format, DecodeError> {
+/// A first record, decoded as whichever message it is.
+enum Detected {
+    Example(proto::Example),
+    Scenario(proto::Scenario),
+}
+
+impl Detected {
+    fn format(&self) -> Format {
+        match self {
+            Self::Example(_) => Format::TfExample,
+            Self::Scenario(_) => Format::Scenario,
+        }
+    }
+
+    fn into_scene(self) -> Result<Scene, DecodeError> {
+        Ok(match self {
+            Self::Example(ex) => example::scene_from_example(&ex)?,
+            Self::Scenario(s) => scenario::scene_from_scenario(&s)?,
+        })
+    }
+}
+
+fn detect(data: &[u8]) -> Result<Detected, DecodeError> {
     if let Ok(ex) = proto::Example::decode(data)
         && example::is_motion_example(&ex)
     {
-        return Ok(Format::TfExample);
+        return Ok(Detected::Example(ex));
     }
-    match proto::Scenario::decode(data) {
-        Ok(s) if s.scenario_id.is_some() => Ok(Format::Scenario),
+    match fast::decode_scenario(data) {
+        Ok(s) if s.scenario_id.is_some() => Ok(Detected::Scenario(s)),
         Ok(_) => Err(DecodeError::NotWomd {
             detail: "no `scenario_id`".into(),
         }),
@@ -293,11 +325,16 @@ pub fn detect_record_format(data: &[u8]) -> Result<Format, DecodeError> {
     }
 }
 
+/// Decides whether a serialized record is a motion tf.Example or a Scenario.
+pub fn detect_record_format(data: &[u8]) -> Result<Format, DecodeError> {
+    detect(data).map(|d| d.format())
+}
+
 /// Decodes one serialized record of a known format into a validated [`Scene`].
 pub fn decode_record(data: &[u8], format: Format) -> Result<Scene, DecodeError> {
     match format {
         Format::Scenario => {
-            let scenario = proto::Scenario::decode(data)?;
+            let scenario = fast::decode_scenario(data)?;
             Ok(scenario::scene_from_scenario(&scenario)?)
         }
         Format::TfExample => {

@@ -41,6 +41,53 @@ pub struct Scenario {
     pub tracks_to_predict: Vec<RequiredPrediction>,
 }
 
+/// `Scenario` without its tracks (field 2 is skipped unread): what prost decodes while
+/// [`crate::fast`] reads the tracks.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct ScenarioWithoutTracks {
+    /// See [`Scenario::timestamps_seconds`].
+    #[prost(double, repeated, packed = "false", tag = "1")]
+    pub timestamps_seconds: Vec<f64>,
+    /// See [`Scenario::objects_of_interest`].
+    #[prost(int32, repeated, packed = "false", tag = "4")]
+    pub objects_of_interest: Vec<i32>,
+    /// See [`Scenario::scenario_id`].
+    #[prost(string, optional, tag = "5")]
+    pub scenario_id: Option<String>,
+    /// See [`Scenario::sdc_track_index`].
+    #[prost(int32, optional, tag = "6")]
+    pub sdc_track_index: Option<i32>,
+    /// See [`Scenario::dynamic_map_states`].
+    #[prost(message, repeated, tag = "7")]
+    pub dynamic_map_states: Vec<DynamicMapState>,
+    /// See [`Scenario::map_features`].
+    #[prost(message, repeated, tag = "8")]
+    pub map_features: Vec<MapFeature>,
+    /// See [`Scenario::current_time_index`].
+    #[prost(int32, optional, tag = "10")]
+    pub current_time_index: Option<i32>,
+    /// See [`Scenario::tracks_to_predict`].
+    #[prost(message, repeated, tag = "11")]
+    pub tracks_to_predict: Vec<RequiredPrediction>,
+}
+
+impl ScenarioWithoutTracks {
+    /// The whole `Scenario` with these tracks.
+    pub fn with_tracks(self, tracks: Vec<Track>) -> Scenario {
+        Scenario {
+            timestamps_seconds: self.timestamps_seconds,
+            tracks,
+            objects_of_interest: self.objects_of_interest,
+            scenario_id: self.scenario_id,
+            sdc_track_index: self.sdc_track_index,
+            dynamic_map_states: self.dynamic_map_states,
+            map_features: self.map_features,
+            current_time_index: self.current_time_index,
+            tracks_to_predict: self.tracks_to_predict,
+        }
+    }
+}
+
 /// `Track`: one object over every step of the scenario.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct Track {

@@ -1,0 +1,506 @@
+//! The P road segments closest to a point: a uniform grid over the scene's segments, its cells
+//! visited nearest first.
+//!
+//! A scene has thousands of road segments and every sample needs its 128 closest; scanning all
+//! of them per sample was the largest cost of feature building (BENCHMARKS.md, *Ingest*). The
+//! grid visits only the cells that can still hold a closer segment than the P-th found so far.
+//!
+//! **Exactness.** The result is the same set in the same order as [`closest_brute_force`]:
+//! segments whose nearer endpoint is within the radius, ranked by the distance of their closest
+//! point (`total_cmp`, ties by index), the first P. A segment is listed in every cell its
+//! bounding box meets, so its closest point to the query lies in one of the listed cells; a cell
+//! (dx, dy) cells away from the query's cell holds no point closer than
+//! `|(max(|dx|−1, 0), max(|dy|−1, 0))| · cell` (minus a rounding margin). Cells are visited in
+//! the order of that bound and the search stops when it exceeds the P-th distance found (or
+//! the radius). Segments with a non-finite end are checked for every query.
+
+/// Rounding margin of the ring bound, metres (coordinates are f32 within a few km).
+const MARGIN_M: f32 = 0.05;
+/// Grid side, metres, unless the scene is so large that the grid would exceed `MAX_CELLS_PER_AXIS`.
+const CELL_M: f32 = 10.0;
+const MAX_CELLS_PER_AXIS: usize = 512;
+
+/// Segments `a`–`b` (scene frame, metres) with a grid over their midpoints.
+#[derive(Debug, Clone)]
+pub(crate) struct SegmentIndex {
+    seg_a: Vec<[f32; 2]>,
+    seg_b: Vec<[f32; 2]>,
+    /// Segments with a non-finite end: checked for every query.
+    unplaced: Vec<u32>,
+    min_xy: [f32; 2],
+    cell_m: f32,
+    nx: usize,
+    ny: usize,
+    /// CSR: the segments whose bounding box meets cell `c` are
+    /// `cell_segments[cell_start[c]..cell_start[c + 1]]`.
+    cell_start: Vec<u32>,
+    cell_segments: Vec<u32>,
+}
+
+/// A candidate: squared distance of its closest point, then index (the ranking order), packed
+/// in one `u64` so that selection and sorting compare integers: the high half is the distance's
+/// bits mapped to the order of `f32::total_cmp`, the low half the index.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct Key(u64);
+
+impl Key {
+    fn new(dist2: f32, index: u32) -> Self {
+        Self((u64::from(total_order_bits(dist2)) << 32) | u64::from(index))
+    }
+
+    fn dist2(self) -> f32 {
+        f32_from_total_order_bits((self.0 >> 32) as u32)
+    }
+
+    fn index(self) -> u32 {
+        self.0 as u32
+    }
+}
+
+/// `x`'s bits, mapped so that unsigned comparison is `f32::total_cmp`.
+pub(crate) fn total_order_bits(x: f32) -> u32 {
+    let b = x.to_bits();
+    if b >> 31 == 1 { !b } else { b | 0x8000_0000 }
+}
+
+fn f32_from_total_order_bits(t: u32) -> f32 {
+    f32::from_bits(if t >> 31 == 1 { t & 0x7fff_ffff } else { !t })
+}
+
+/// Scratch space reused between queries.
+#[derive(Debug, Default)]
+pub(crate) struct Scratch {
+    found: Vec<Key>,
+    /// `seen[i] == query` when segment i was already offered in this query (a segment is
+    /// listed in every cell its bounding box meets).
+    seen: Vec<u32>,
+    query: u32,
+    /// Cell offsets `(dx, dy, lower bound², metres²)` sorted by bound, for `offsets_for`.
+    offsets: Vec<(i32, i32, f32)>,
+    /// (cell size, reach) the offsets were made for.
+    offsets_for: Option<(u32, u32)>,
+}
+
+impl Scratch {
+    /// Every cell offset whose cells can hold a point within `reach_m` of a query, in order of
+    /// the smallest distance a segment there can have from a query in cell (0, 0).
+    fn offsets(&mut self, cell_m: f32, reach_m: f32) -> &[(i32, i32, f32)] {
+        let key = (cell_m.to_bits(), reach_m.to_bits());
+        if self.offsets_for != Some(key) {
+            let k = ((reach_m / cell_m).ceil() as i32 + 2).clamp(1, MAX_CELLS_PER_AXIS as i32 + 2);
+            self.offsets.clear();
+            for dy in -k..=k {
+                for dx in -k..=k {
+                    let gap = |d: i32| (d.abs() - 1).max(0) as f32 * cell_m;
+                    let (gx, gy) = (gap(dx), gap(dy));
+                    // Every point of a cell (dx, dy) away is at least the gap from the query.
+                    let lb = ((gx * gx + gy * gy).sqrt() - MARGIN_M).max(0.0);
+                    if lb < reach_m {
+                        self.offsets.push((dx, dy, lb * lb));
+                    }
+                }
+            }
+            self.offsets.sort_by(|a, b| a.2.total_cmp(&b.2));
+            self.offsets_for = Some(key);
+        }
+        &self.offsets
+    }
+}
+
+impl SegmentIndex {
+    /// An index over the segments `seg_a[i]`–`seg_b[i]`.
+    pub(crate) fn new(seg_a: Vec<[f32; 2]>, seg_b: Vec<[f32; 2]>) -> Self {
+        let finite = |i: usize| seg_a[i].iter().chain(&seg_b[i]).all(|v| v.is_finite());
+        let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+        for i in (0..seg_a.len()).filter(|&i| finite(i)) {
+            for d in 0..2 {
+                lo[d] = lo[d].min(seg_a[i][d]).min(seg_b[i][d]);
+                hi[d] = hi[d].max(seg_a[i][d]).max(seg_b[i][d]);
+            }
+        }
+        if lo[0] > hi[0] || lo[1] > hi[1] {
+            (lo, hi) = ([0.0; 2], [0.0; 2]);
+        }
+        let extent = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+        let cell_m = CELL_M.max(extent / (MAX_CELLS_PER_AXIS - 1) as f32);
+        let cells = |d: usize| ((hi[d] - lo[d]) / cell_m) as usize + 1;
+        let (nx, ny) = (cells(0), cells(1));
+        // The cells of segment i's bounding box, as (x0..=x1, y0..=y1).
+        let bbox = |i: usize| {
+            let (a, b) = (seg_a[i], seg_b[i]);
+            let c = |v: f32, d: usize, n: usize| (((v - lo[d]) / cell_m) as usize).min(n - 1);
+            (
+                c(a[0].min(b[0]), 0, nx)..=c(a[0].max(b[0]), 0, nx),
+                c(a[1].min(b[1]), 1, ny)..=c(a[1].max(b[1]), 1, ny),
+            )
+        };
+        let mut unplaced = Vec::new();
+        let mut counts = vec![0u32; nx * ny + 1];
+        for i in 0..seg_a.len() {
+            if !finite(i) {
+                unplaced.push(i as u32);
+                continue;
+            }
+            let (xs, ys) = bbox(i);
+            for y in ys {
+                for x in xs.clone() {
+                    counts[y * nx + x + 1] += 1;
+                }
+            }
+        }
+        for c in 0..nx * ny {
+            counts[c + 1] += counts[c];
+        }
+        let cell_start = counts;
+        let mut fill = cell_start.clone();
+        let mut cell_segments = vec![0u32; cell_start[nx * ny] as usize];
+        for i in (0..seg_a.len()).filter(|&i| finite(i)) {
+            let (xs, ys) = bbox(i);
+            for y in ys {
+                for x in xs.clone() {
+                    let slot = &mut fill[y * nx + x];
+                    cell_segments[*slot as usize] = i as u32;
+                    *slot += 1;
+                }
+            }
+        }
+        Self {
+            seg_a,
+            seg_b,
+            unplaced,
+            min_xy: lo,
+            cell_m,
+            nx,
+            ny,
+            cell_start,
+            cell_segments,
+        }
+    }
+
+    pub(crate) fn seg_a(&self, i: usize) -> [f32; 2] {
+        self.seg_a[i]
+    }
+
+    pub(crate) fn seg_b(&self, i: usize) -> [f32; 2] {
+        self.seg_b[i]
+    }
+
+    /// Segment `i` as a candidate: `Some(key)` when its nearer endpoint is within the radius.
+    #[inline]
+    fn candidate(&self, i: u32, origin: [f32; 2], r2: f32) -> Option<Key> {
+        let a = self.seg_a[i as usize];
+        let b = self.seg_b[i as usize];
+        let a = [a[0] - origin[0], a[1] - origin[1]];
+        let b = [b[0] - origin[0], b[1] - origin[1]];
+        ((a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]) < r2).then(|| {
+            let q = crate::sample::closest_point_to_origin(a, b);
+            Key::new(q[0] * q[0] + q[1] * q[1], i)
+        })
+    }
+
+    /// The short segments of the grid cell `(x, y)` (none outside the grid).
+    fn cell(&self, x: i64, y: i64) -> &[u32] {
+        if !((0..self.nx as i64).contains(&x) && (0..self.ny as i64).contains(&y)) {
+            return &[];
+        }
+        let c = y as usize * self.nx + x as usize;
+        &self.cell_segments[self.cell_start[c] as usize..self.cell_start[c + 1] as usize]
+    }
+
+    /// The at most `p` segments closest to `origin` whose nearer endpoint is within
+    /// `radius_m`, closest first, as `(index, squared distance of the closest point)`.
+    ///
+    /// Cells are visited in order of the least distance a segment in them can have; once `p`
+    /// candidates are found, the p-th distance bounds which further cells and candidates count.
+    pub(crate) fn closest(
+        &self,
+        origin: [f32; 2],
+        p: usize,
+        radius_m: f32,
+        scratch: &mut Scratch,
+        out: &mut Vec<(u32, f32)>,
+    ) {
+        out.clear();
+        if p == 0 {
+            return;
+        }
+        let r2 = radius_m * radius_m;
+        let mut found = std::mem::take(&mut scratch.found);
+        found.clear();
+        found.extend(
+            self.unplaced
+                .iter()
+                .filter_map(|&i| self.candidate(i, origin, r2)),
+        );
+        let mut seen = std::mem::take(&mut scratch.seen);
+        if seen.len() != self.seg_a.len() || scratch.query == u32::MAX {
+            seen.clear();
+            seen.resize(self.seg_a.len(), 0);
+            scratch.query = 0;
+        }
+        scratch.query += 1;
+        let query = scratch.query;
+        let mut fresh = |i: u32| {
+            let s = &mut seen[i as usize];
+            let new = *s != query;
+            *s = query;
+            new
+        };
+        let cell = |d: usize| ((origin[d] - self.min_xy[d]) / self.cell_m).floor();
+        let (cx, cy) = (cell(0), cell(1));
+        if !(cx.is_finite() && cy.is_finite() && radius_m.is_finite()) {
+            // A non-finite origin or radius: every segment, as the brute force would.
+            found.extend(
+                self.cell_segments
+                    .iter()
+                    .filter(|&&i| fresh(i))
+                    .filter_map(|&i| self.candidate(i, origin, r2)),
+            );
+        } else {
+            // A query outside the grid is moved to the cell just outside it: its offsets'
+            // bounds only shrink (still lower bounds), and every grid cell within reach stays
+            // within reach.
+            let (nx, ny) = (self.nx as i64, self.ny as i64);
+            let (cx, cy) = ((cx as i64).clamp(-1, nx), (cy as i64).clamp(-1, ny));
+            // The p-th smallest key found so far: only keys up to it can still be among the
+            // first p. Without one yet, everything within the radius may count.
+            let mut bound = Key(u64::MAX);
+            let mut bounded_at = 0;
+            for &(dx, dy, lb2) in scratch.offsets(self.cell_m, radius_m) {
+                if lb2 >= r2 || Key::new(lb2, 0) > bound {
+                    break;
+                }
+                let segments = self.cell(cx + i64::from(dx), cy + i64::from(dy));
+                found.extend(
+                    segments
+                        .iter()
+                        .filter(|&&i| fresh(i))
+                        .filter_map(|&i| self.candidate(i, origin, r2))
+                        .filter(|&k| k <= bound),
+                );
+                // Tighten the bound each time the candidates have doubled since the last time.
+                if found.len() >= p && found.len() >= 2 * bounded_at {
+                    let (_, kth, _) = found.select_nth_unstable(p - 1);
+                    bound = *kth;
+                    bounded_at = found.len();
+                }
+            }
+        }
+        if found.len() > p {
+            found.select_nth_unstable(p - 1);
+            found.truncate(p);
+        }
+        found.sort_unstable();
+        out.extend(found.iter().map(|k| (k.index(), k.dist2())));
+        scratch.found = found;
+        scratch.seen = seen;
+    }
+}
+
+/// The reference: every segment checked, the first `p` by (distance, index).
+#[cfg(test)]
+pub(crate) fn closest_brute_force(
+    index: &SegmentIndex,
+    origin: [f32; 2],
+    p: usize,
+    radius_m: f32,
+) -> Vec<(u32, f32)> {
+    let r2 = radius_m * radius_m;
+    let mut all: Vec<(u32, f32)> = (0..index.seg_a.len())
+        .filter_map(|i| {
+            let a = index.seg_a[i];
+            let b = index.seg_b[i];
+            let a = [a[0] - origin[0], a[1] - origin[1]];
+            let b = [b[0] - origin[0], b[1] - origin[1]];
+            ((a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]) < r2).then(|| {
+                let q = crate::sample::closest_point_to_origin(a, b);
+                (i as u32, q[0] * q[0] + q[1] * q[1])
+            })
+        })
+        .collect();
+    all.sort_unstable_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)));
+    all.truncate(p);
+    all
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A deterministic generator (no dependency needed for a test's random layouts).
+    struct Lcg(u64);
+    impl Lcg {
+        fn next(&mut self) -> f32 {
+            self.0 = self
+                .0
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            (self.0 >> 40) as f32 / (1u64 << 24) as f32
+        }
+        fn range(&mut self, lo: f32, hi: f32) -> f32 {
+            lo + (hi - lo) * self.next()
+        }
+    }
+
+    #[test]
+    fn total_order_bits_order_like_total_cmp() {
+        let xs = [
+            f32::NEG_INFINITY,
+            -1e30,
+            -1.0,
+            -1e-40,
+            -0.0,
+            0.0,
+            1e-40,
+            1.0,
+            1e30,
+            f32::INFINITY,
+            f32::NAN,
+            -f32::NAN,
+        ];
+        for &a in &xs {
+            assert_eq!(
+                f32_from_total_order_bits(total_order_bits(a)).to_bits(),
+                a.to_bits()
+            );
+            for &b in &xs {
+                assert_eq!(
+                    total_order_bits(a).cmp(&total_order_bits(b)),
+                    a.total_cmp(&b),
+                    "{a} vs {b}"
+                );
+            }
+        }
+    }
+
+    fn check(
+        index: &SegmentIndex,
+        scratch: &mut Scratch,
+        origin: [f32; 2],
+        p: usize,
+        radius_m: f32,
+    ) {
+        let mut got = Vec::new();
+        index.closest(origin, p, radius_m, scratch, &mut got);
+        let want = closest_brute_force(index, origin, p, radius_m);
+        assert_eq!(
+            got.iter().map(|x| (x.0, x.1.to_bits())).collect::<Vec<_>>(),
+            want.iter()
+                .map(|x| (x.0, x.1.to_bits()))
+                .collect::<Vec<_>>(),
+            "origin {origin:?}, p {p}, radius {radius_m}"
+        );
+    }
+
+    /// Polylines of short steps (a road network), a few long segments, exact duplicates
+    /// (ties), degenerate points.
+    fn layout(rng: &mut Lcg, polylines: usize, extent: f32) -> SegmentIndex {
+        let (mut a, mut b) = (Vec::new(), Vec::new());
+        for _ in 0..polylines {
+            let mut p = [rng.range(-extent, extent), rng.range(-extent, extent)];
+            let heading = rng.range(0.0, std::f32::consts::TAU);
+            let step = rng.range(0.3, 4.0);
+            for _ in 0..(rng.range(1.0, 60.0) as usize) {
+                let q = [p[0] + step * heading.cos(), p[1] + step * heading.sin()];
+                a.push(p);
+                b.push(q);
+                p = q;
+            }
+        }
+        for _ in 0..polylines / 4 {
+            let p = [rng.range(-extent, extent), rng.range(-extent, extent)];
+            let q = [rng.range(-extent, extent), rng.range(-extent, extent)];
+            a.push(p);
+            b.push(q);
+            a.push(p); // duplicate: equal distances, ranked by index
+            b.push(q);
+            a.push(q); // a point
+            b.push(q);
+        }
+        SegmentIndex::new(a, b)
+    }
+
+    #[test]
+    fn same_as_brute_force_on_random_layouts() {
+        let mut rng = Lcg(7);
+        for (polylines, extent) in [
+            (0, 10.0),
+            (1, 10.0),
+            (40, 60.0),
+            (300, 400.0),
+            (200, 3000.0),
+        ] {
+            let index = layout(&mut rng, polylines, extent);
+            let mut scratch = Scratch::default();
+            // Radius outermost: the scratch's offset table is made once per radius.
+            for radius in [5.0, 150.0, 5000.0, f32::INFINITY] {
+                for _ in 0..30 {
+                    // Queries inside, at the edge of and far outside the layout.
+                    let spread = [0.5 * extent, extent, 3.0 * extent][(rng.next() * 3.0) as usize];
+                    let origin = [rng.range(-spread, spread), rng.range(-spread, spread)];
+                    for p in [1, 8, 128, 5000] {
+                        check(&index, &mut scratch, origin, p, radius);
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn same_as_brute_force_on_the_segments_of_real_scenes() {
+        use crate::{PairConfig, PreparedScene, WindowConfig};
+        let Some(dir) = scbg_womd::fixtures::real_data_dir() else {
+            return; // real_data_dir said why (and fails under CI)
+        };
+        let mut queries = 0;
+        for sub in ["womd", "womd-reencoded", "nuscenes-reencoded"] {
+            for entry in std::fs::read_dir(dir.join(sub)).unwrap() {
+                let path = entry.unwrap().path();
+                if path.extension().is_none_or(|e| e != "tfrecord") {
+                    continue;
+                }
+                let file = scbg_womd::WomdFile::open(&path).unwrap();
+                let Ok(format) = file.detect_format() else {
+                    continue;
+                };
+                if format != scbg_womd::Format::Scenario {
+                    continue;
+                }
+                for scene in file.scenes() {
+                    let scene = scene.unwrap();
+                    let Ok(prepared) = PreparedScene::from_scene(
+                        &scene,
+                        &WindowConfig::default(),
+                        &PairConfig::default(),
+                        4,
+                    ) else {
+                        continue;
+                    };
+                    let (mut a, mut b) = (Vec::new(), Vec::new());
+                    for poly in &prepared.road {
+                        if poly.xy_m.len() == 1 {
+                            a.push(poly.xy_m[0]);
+                            b.push(poly.xy_m[0]);
+                        }
+                        for w in poly.xy_m.windows(2) {
+                            a.push(w[0]);
+                            b.push(w[1]);
+                        }
+                    }
+                    let index = SegmentIndex::new(a, b);
+                    let mut scratch = Scratch::default();
+                    for w in &prepared.windows {
+                        for t in &prepared.tracks {
+                            if t.valid_at(w.current_step as isize) {
+                                let o = [t.x_m[w.current_step], t.y_m[w.current_step]];
+                                check(&index, &mut scratch, o, 128, 150.0);
+                                queries += 1;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        assert!(queries > 1000, "{queries} queries");
+    }
+}

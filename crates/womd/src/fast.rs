@@ -1,0 +1,263 @@
+//! The hot path of `Scenario` decoding: tracks read by a hand-written wire loop, everything else
+//! by prost.
+//!
+//! A WOMD scenario holds 9 000–40 000 `ObjectState`s (every track × every step), each ten
+//! fields. prost's generic decoding spends, per field, a key varint, a dispatch through the
+//! derived `merge_field`, a wire-type check and the `Option` bookkeeping — about a third of the
+//! whole ingest pipeline's time (`perf` in BENCHMARKS.md, *Ingest*). WOMD's writers (and ours)
+//! put each state's fields behind one-byte keys with fixed-width values, which the loop below
+//! reads directly.
+//!
+//! **Exactness.** The loop accepts only what it fully understands: the known fields of `Track`
+//! and `ObjectState` with their declared wire types and one-byte keys, varints prost accepts,
+//! lengths inside the record. Anything else — an unknown field, another wire type, a
+//! multi-byte key, a group, truncation — returns `None`, and [`decode_scenario`] decodes the
+//! whole record with prost instead, so the result (a scenario or prost's error) is always
+//! exactly prost's. The tests compare both decoders on every shared real file, synthetic
+//! scenes and mutated records.
+
+use prost::Message;
+
+use crate::proto;
+
+/// Decodes a `Scenario` record: tracks by the fast loop when it understands them, otherwise
+/// the whole record by prost. Same result as `proto::Scenario::decode(data)`.
+pub fn decode_scenario(data: &[u8]) -> Result<proto::Scenario, prost::DecodeError> {
+    match try_fast(data) {
+        Some(s) => Ok(s),
+        None => proto::Scenario::decode(data),
+    }
+}
+
+/// The fast decoding, or `None` where it does not apply.
+fn try_fast(data: &[u8]) -> Option<proto::Scenario> {
+    // prost decodes everything but the tracks (field 2 is unknown to `ScenarioWithoutTracks`
+    // and skipped by its length, unread).
+    let rest = proto::ScenarioWithoutTracks::decode(data).ok()?;
+    let mut tracks = Vec::new();
+    let mut r = Reader::new(data);
+    while !r.is_empty() {
+        let key = r.varint()?;
+        let (field, wire) = (key >> 3, key & 7);
+        if field == 0 || field > u64::from(u32::MAX >> 3) {
+            return None;
+        }
+        if field == 2 {
+            if wire != 2 {
+                return None;
+            }
+            tracks.push(track(r.len_delimited()?)?);
+        } else {
+            r.skip(wire)?;
+        }
+    }
+    Some(rest.with_tracks(tracks))
+}
+
+/// One `Track` message.
+fn track(mut r: Reader<'_>) -> Option<proto::Track> {
+    let mut t = proto::Track::default();
+    while !r.is_empty() {
+        match r.byte()? {
+            0x08 => t.id = Some(r.varint()? as i32),          // 1: int32
+            0x10 => t.object_type = Some(r.varint()? as i32), // 2: enum (int32)
+            0x1a => t.states.push(state(r.len_delimited()?)?), // 3: ObjectState
+            _ => return None,
+        }
+    }
+    Some(t)
+}
+
+/// One `ObjectState` message.
+fn state(mut r: Reader<'_>) -> Option<proto::ObjectState> {
+    let mut s = proto::ObjectState::default();
+    while !r.is_empty() {
+        match r.byte()? {
+            0x11 => s.center_x = Some(r.f64()?),      // 2: double
+            0x19 => s.center_y = Some(r.f64()?),      // 3: double
+            0x21 => s.center_z = Some(r.f64()?),      // 4: double
+            0x2d => s.length = Some(r.f32()?),        // 5: float
+            0x35 => s.width = Some(r.f32()?),         // 6: float
+            0x3d => s.height = Some(r.f32()?),        // 7: float
+            0x45 => s.heading = Some(r.f32()?),       // 8: float
+            0x4d => s.velocity_x = Some(r.f32()?),    // 9: float
+            0x55 => s.velocity_y = Some(r.f32()?),    // 10: float
+            0x58 => s.valid = Some(r.varint()? != 0), // 11: bool
+            _ => return None,
+        }
+    }
+    Some(s)
+}
+
+/// A cursor over protobuf wire bytes; every read is bounds-checked and `None` past the end.
+struct Reader<'a> {
+    buf: &'a [u8],
+}
+
+impl<'a> Reader<'a> {
+    fn new(buf: &'a [u8]) -> Self {
+        Self { buf }
+    }
+
+    fn is_empty(&self) -> bool {
+        self.buf.is_empty()
+    }
+
+    fn take(&mut self, n: usize) -> Option<&'a [u8]> {
+        if n > self.buf.len() {
+            return None;
+        }
+        let (head, tail) = self.buf.split_at(n);
+        self.buf = tail;
+        Some(head)
+    }
+
+    fn byte(&mut self) -> Option<u8> {
+        let (&b, tail) = self.buf.split_first()?;
+        self.buf = tail;
+        Some(b)
+    }
+
+    /// A varint as prost reads it: at most ten bytes, the tenth at most 1.
+    fn varint(&mut self) -> Option<u64> {
+        let mut v = 0u64;
+        for i in 0..10 {
+            let b = self.byte()?;
+            if i == 9 && b > 1 {
+                return None;
+            }
+            v |= u64::from(b & 0x7f) << (7 * i);
+            if b < 0x80 {
+                return Some(v);
+            }
+        }
+        None
+    }
+
+    fn f64(&mut self) -> Option<f64> {
+        Some(f64::from_le_bytes(self.take(8)?.try_into().ok()?))
+    }
+
+    fn f32(&mut self) -> Option<f32> {
+        Some(f32::from_le_bytes(self.take(4)?.try_into().ok()?))
+    }
+
+    /// A length-delimited field's bytes.
+    fn len_delimited(&mut self) -> Option<Reader<'a>> {
+        let len = usize::try_from(self.varint()?).ok()?;
+        Some(Reader::new(self.take(len)?))
+    }
+
+    /// Skips one field's value of wire type `wire` (groups are not handled: `None`).
+    fn skip(&mut self, wire: u64) -> Option<()> {
+        match wire {
+            0 => self.varint().map(drop),
+            1 => self.take(8).map(drop),
+            2 => self.len_delimited().map(drop),
+            5 => self.take(4).map(drop),
+            _ => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Both decoders on `data`: the same scenario, or both an error.
+    fn assert_same(data: &[u8]) {
+        let prost = proto::Scenario::decode(data);
+        let fast = decode_scenario(data);
+        match (&prost, &fast) {
+            // Bit-exact (NaN fields compare unequal under PartialEq).
+            (Ok(a), Ok(b)) => assert_eq!(a.encode_to_vec(), b.encode_to_vec()),
+            (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
+            _ => panic!("prost {prost:?} but fast {fast:?}"),
+        }
+    }
+
+    fn sample_bytes() -> Vec<u8> {
+        crate::encode_scene(&crate::tests::sample_scene()).unwrap()
+    }
+
+    #[test]
+    fn fast_path_is_taken_for_our_encoding() {
+        let bytes = sample_bytes();
+        let fast = try_fast(&bytes).expect("our encoder's output takes the fast path");
+        assert_eq!(fast, proto::Scenario::decode(&bytes[..]).unwrap());
+        assert_eq!(fast.tracks.len(), 2);
+        assert_eq!(fast.tracks[0].states.len(), 5);
+    }
+
+    #[test]
+    fn same_as_prost_on_every_shared_real_file() {
+        let Some(dir) = crate::fixtures::real_data_dir() else {
+            return; // real_data_dir said why (and fails under CI)
+        };
+        let mut records = 0;
+        for sub in ["womd", "womd-reencoded", "nuscenes-reencoded"] {
+            for entry in std::fs::read_dir(dir.join(sub)).unwrap() {
+                let path = entry.unwrap().path();
+                if path.extension().is_none_or(|e| e != "tfrecord") {
+                    continue;
+                }
+                let file = crate::WomdFile::open(&path).unwrap();
+                for record in file.records() {
+                    let data = record.unwrap().data;
+                    // The tf.Example fixture is not a Scenario: both must fail alike.
+                    assert_same(data);
+                    if proto::Scenario::decode(data).is_ok_and(|s| s.scenario_id.is_some()) {
+                        assert!(try_fast(data).is_some(), "{}: slow path", path.display());
+                    }
+                    records += 1;
+                }
+            }
+        }
+        assert!(records >= 25, "{records} records");
+    }
+
+    #[test]
+    fn same_as_prost_on_cut_and_mutated_records() {
+        let bytes = sample_bytes();
+        for cut in 0..bytes.len() {
+            assert_same(&bytes[..cut]);
+        }
+        // Every single-byte change at a spread of positions and values.
+        for pos in 0..bytes.len() {
+            for v in [0x00, 0x01, 0x02, 0x08, 0x0a, 0x1a, 0x58, 0x7f, 0x80, 0xff] {
+                let mut b = bytes.clone();
+                b[pos] = v;
+                assert_same(&b);
+            }
+        }
+    }
+
+    #[test]
+    fn unknown_and_repeated_fields_fall_back_or_agree() {
+        // A state with an unknown field 15 (fixed32) and `valid` written twice.
+        let mut state = vec![0x11];
+        state.extend(1.5f64.to_le_bytes());
+        state.extend([0x7d, 1, 2, 3, 4, 0x58, 1, 0x58, 0]);
+        let mut track = vec![0x08, 7, 0x1a, state.len() as u8];
+        track.extend(&state);
+        let mut data = vec![0x12, track.len() as u8];
+        data.extend(&track);
+        data.extend([0x2a, 1, b'x']); // scenario_id "x"
+        assert_same(&data);
+        let s = decode_scenario(&data).unwrap();
+        assert_eq!(s.tracks[0].states[0].valid, Some(false));
+        assert_eq!(s.tracks[0].states[0].center_x, Some(1.5));
+        // Without the unknown field the fast path takes it, with the same result.
+        let mut plain = vec![0x11];
+        plain.extend(1.5f64.to_le_bytes());
+        plain.extend([0x58, 1, 0x58, 0]);
+        let mut track = vec![0x08, 0xff, 0xff, 0xff, 0xff, 0x0f, 0x1a, plain.len() as u8];
+        track.extend(&plain);
+        let mut data = vec![0x12, track.len() as u8];
+        data.extend(&track);
+        data.extend([0x2a, 1, b'x']);
+        assert!(try_fast(&data).is_some());
+        assert_same(&data);
+        assert_eq!(decode_scenario(&data).unwrap().tracks[0].id, Some(-1));
+    }
+}
