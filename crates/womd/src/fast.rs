@@ -17,24 +17,29 @@
 //! scenes and mutated records.
 
 use prost::Message;
+use scbg_scene::{AgentState, ObjectType, Track};
 
-use crate::proto;
+use crate::{proto, scenario};
 
-/// Decodes a `Scenario` record: tracks by the fast loop when it understands them, otherwise
-/// the whole record by prost. Same result as `proto::Scenario::decode(data)`.
-pub fn decode_scenario(data: &[u8]) -> Result<proto::Scenario, prost::DecodeError> {
-    match try_fast(data) {
-        Some(s) => Ok(s),
-        None => proto::Scenario::decode(data),
+/// A `Scenario` record as its other fields (`tracks` left empty) and its tracks converted to
+/// scene tracks: by the fast loop when it understands the tracks, otherwise by prost. Same
+/// result as `proto::Scenario::decode(data)` followed by the conversion of its tracks.
+pub fn decode_parts(data: &[u8]) -> Result<(proto::Scenario, Vec<Track>), prost::DecodeError> {
+    if let Some(parts) = try_fast(data) {
+        return Ok(parts);
     }
+    let mut s = proto::Scenario::decode(data)?;
+    let tracks = s.tracks.iter().map(scenario::scene_track).collect();
+    s.tracks = Vec::new();
+    Ok((s, tracks))
 }
 
 /// The fast decoding, or `None` where it does not apply.
-fn try_fast(data: &[u8]) -> Option<proto::Scenario> {
+fn try_fast(data: &[u8]) -> Option<(proto::Scenario, Vec<Track>)> {
     // prost decodes everything but the tracks (field 2 is unknown to `ScenarioWithoutTracks`
     // and skipped by its length, unread).
     let rest = proto::ScenarioWithoutTracks::decode(data).ok()?;
-    let mut tracks = Vec::new();
+    let mut tracks: Vec<Track> = Vec::new();
     let mut r = Reader::new(data);
     while !r.is_empty() {
         let key = r.varint()?;
@@ -46,43 +51,98 @@ fn try_fast(data: &[u8]) -> Option<proto::Scenario> {
             if wire != 2 {
                 return None;
             }
-            tracks.push(track(r.len_delimited()?)?);
+            let hint = tracks.last().map_or(0, |t| t.states.len());
+            tracks.push(track(r.len_delimited()?, hint)?);
         } else {
             r.skip(wire)?;
         }
     }
-    Some(rest.with_tracks(tracks))
+    Some((rest.with_tracks(Vec::new()), tracks))
 }
 
-/// One `Track` message.
-fn track(mut r: Reader<'_>) -> Option<proto::Track> {
-    let mut t = proto::Track::default();
+/// One `Track` message; `states_hint` is the expected number of states (the previous track's).
+/// Absent fields read as their defaults, as in [`scenario::scene_track`].
+fn track(mut r: Reader<'_>, states_hint: usize) -> Option<Track> {
+    let (mut id, mut object_type) = (0i32, 0i32);
+    let mut states = Vec::with_capacity(states_hint);
     while !r.is_empty() {
         match r.byte()? {
-            0x08 => t.id = Some(r.varint()? as i32),          // 1: int32
-            0x10 => t.object_type = Some(r.varint()? as i32), // 2: enum (int32)
-            0x1a => t.states.push(state(r.len_delimited()?)?), // 3: ObjectState
+            0x08 => id = r.varint()? as i32,                 // 1: int32
+            0x10 => object_type = r.varint()? as i32,        // 2: enum (int32)
+            0x1a => states.push(state(r.len_delimited()?)?), // 3: ObjectState
             _ => return None,
         }
     }
-    Some(t)
+    Some(Track {
+        id: i64::from(id),
+        object_type: ObjectType::from_code(object_type),
+        states,
+    })
 }
 
-/// One `ObjectState` message.
-fn state(mut r: Reader<'_>) -> Option<proto::ObjectState> {
-    let mut s = proto::ObjectState::default();
+/// Key byte and offset of each field of a state written whole, in field order (59 bytes):
+/// three doubles, six floats, the bool `valid` as a one-byte varint.
+const FULL_STATE: [(usize, u8); 10] = [
+    (0, 0x11),
+    (9, 0x19),
+    (18, 0x21),
+    (27, 0x2d),
+    (32, 0x35),
+    (37, 0x3d),
+    (42, 0x45),
+    (47, 0x4d),
+    (52, 0x55),
+    (57, 0x58),
+];
+const FULL_STATE_BYTES: usize = 59;
+
+/// One `ObjectState` message (absent fields read as 0 / false).
+fn state(mut r: Reader<'_>) -> Option<AgentState> {
+    let b = r.buf;
+    if b.len() == FULL_STATE_BYTES
+        && FULL_STATE.iter().all(|&(at, key)| b[at] == key)
+        && b[58] < 0x80
+    {
+        // The common case, read at fixed offsets (the general loop below gives the same).
+        let f64_at = |at: usize| f64::from_le_bytes(b[at..at + 8].try_into().unwrap_or([0; 8]));
+        let f32_at = |at: usize| f32::from_le_bytes(b[at..at + 4].try_into().unwrap_or([0; 4]));
+        return Some(AgentState {
+            x_m: f64_at(1),
+            y_m: f64_at(10),
+            z_m: f64_at(19),
+            length_m: f32_at(28),
+            width_m: f32_at(33),
+            height_m: f32_at(38),
+            heading_rad: f32_at(43),
+            velocity_x_mps: f32_at(48),
+            velocity_y_mps: f32_at(53),
+            valid: b[58] != 0,
+        });
+    }
+    let mut s = AgentState {
+        x_m: 0.0,
+        y_m: 0.0,
+        z_m: 0.0,
+        length_m: 0.0,
+        width_m: 0.0,
+        height_m: 0.0,
+        heading_rad: 0.0,
+        velocity_x_mps: 0.0,
+        velocity_y_mps: 0.0,
+        valid: false,
+    };
     while !r.is_empty() {
         match r.byte()? {
-            0x11 => s.center_x = Some(r.f64()?),      // 2: double
-            0x19 => s.center_y = Some(r.f64()?),      // 3: double
-            0x21 => s.center_z = Some(r.f64()?),      // 4: double
-            0x2d => s.length = Some(r.f32()?),        // 5: float
-            0x35 => s.width = Some(r.f32()?),         // 6: float
-            0x3d => s.height = Some(r.f32()?),        // 7: float
-            0x45 => s.heading = Some(r.f32()?),       // 8: float
-            0x4d => s.velocity_x = Some(r.f32()?),    // 9: float
-            0x55 => s.velocity_y = Some(r.f32()?),    // 10: float
-            0x58 => s.valid = Some(r.varint()? != 0), // 11: bool
+            0x11 => s.x_m = r.f64()?,            // 2: double center_x
+            0x19 => s.y_m = r.f64()?,            // 3: double center_y
+            0x21 => s.z_m = r.f64()?,            // 4: double center_z
+            0x2d => s.length_m = r.f32()?,       // 5: float length
+            0x35 => s.width_m = r.f32()?,        // 6: float width
+            0x3d => s.height_m = r.f32()?,       // 7: float height
+            0x45 => s.heading_rad = r.f32()?,    // 8: float heading
+            0x4d => s.velocity_x_mps = r.f32()?, // 9: float velocity_x
+            0x55 => s.velocity_y_mps = r.f32()?, // 10: float velocity_y
+            0x58 => s.valid = r.varint()? != 0,  // 11: bool valid
             _ => return None,
         }
     }
@@ -164,13 +224,50 @@ impl<'a> Reader<'a> {
 mod tests {
     use super::*;
 
-    /// Both decoders on `data`: the same scenario, or both an error.
+    /// The reference: prost's decoding and the conversion of its tracks.
+    fn by_prost(data: &[u8]) -> Result<(proto::Scenario, Vec<Track>), prost::DecodeError> {
+        let mut s = proto::Scenario::decode(data)?;
+        let tracks = s.tracks.iter().map(scenario::scene_track).collect();
+        s.tracks = Vec::new();
+        Ok((s, tracks))
+    }
+
+    /// Bit-exact comparison (NaN fields compare unequal under PartialEq).
+    fn bits(parts: &(proto::Scenario, Vec<Track>)) -> (Vec<u8>, Vec<(i64, i32, Vec<[u64; 10]>)>) {
+        let tracks = parts
+            .1
+            .iter()
+            .map(|t| {
+                let states = t
+                    .states
+                    .iter()
+                    .map(|s| {
+                        [
+                            s.x_m.to_bits(),
+                            s.y_m.to_bits(),
+                            s.z_m.to_bits(),
+                            s.length_m.to_bits().into(),
+                            s.width_m.to_bits().into(),
+                            s.height_m.to_bits().into(),
+                            s.heading_rad.to_bits().into(),
+                            s.velocity_x_mps.to_bits().into(),
+                            s.velocity_y_mps.to_bits().into(),
+                            s.valid.into(),
+                        ]
+                    })
+                    .collect();
+                (t.id, t.object_type.code(), states)
+            })
+            .collect();
+        (parts.0.encode_to_vec(), tracks)
+    }
+
+    /// Both decoders on `data`: the same parts, or both an error.
     fn assert_same(data: &[u8]) {
-        let prost = proto::Scenario::decode(data);
-        let fast = decode_scenario(data);
+        let prost = by_prost(data);
+        let fast = decode_parts(data);
         match (&prost, &fast) {
-            // Bit-exact (NaN fields compare unequal under PartialEq).
-            (Ok(a), Ok(b)) => assert_eq!(a.encode_to_vec(), b.encode_to_vec()),
+            (Ok(a), Ok(b)) => assert_eq!(bits(a), bits(b)),
             (Err(a), Err(b)) => assert_eq!(a.to_string(), b.to_string()),
             _ => panic!("prost {prost:?} but fast {fast:?}"),
         }
@@ -184,9 +281,9 @@ mod tests {
     fn fast_path_is_taken_for_our_encoding() {
         let bytes = sample_bytes();
         let fast = try_fast(&bytes).expect("our encoder's output takes the fast path");
-        assert_eq!(fast, proto::Scenario::decode(&bytes[..]).unwrap());
-        assert_eq!(fast.tracks.len(), 2);
-        assert_eq!(fast.tracks[0].states.len(), 5);
+        assert_eq!(bits(&fast), bits(&by_prost(&bytes).unwrap()));
+        assert_eq!(fast.1.len(), 2);
+        assert_eq!(fast.1[0].states.len(), 5);
     }
 
     #[test]
@@ -222,7 +319,7 @@ mod tests {
         for cut in 0..bytes.len() {
             assert_same(&bytes[..cut]);
         }
-        // Every single-byte change at a spread of positions and values.
+        // Every single-byte change at every position, to a spread of values.
         for pos in 0..bytes.len() {
             for v in [0x00, 0x01, 0x02, 0x08, 0x0a, 0x1a, 0x58, 0x7f, 0x80, 0xff] {
                 let mut b = bytes.clone();
@@ -243,10 +340,11 @@ mod tests {
         let mut data = vec![0x12, track.len() as u8];
         data.extend(&track);
         data.extend([0x2a, 1, b'x']); // scenario_id "x"
+        assert!(try_fast(&data).is_none());
         assert_same(&data);
-        let s = decode_scenario(&data).unwrap();
-        assert_eq!(s.tracks[0].states[0].valid, Some(false));
-        assert_eq!(s.tracks[0].states[0].center_x, Some(1.5));
+        let (_, tracks) = decode_parts(&data).unwrap();
+        assert!(!tracks[0].states[0].valid);
+        assert_eq!(tracks[0].states[0].x_m, 1.5);
         // Without the unknown field the fast path takes it, with the same result.
         let mut plain = vec![0x11];
         plain.extend(1.5f64.to_le_bytes());
@@ -258,6 +356,6 @@ mod tests {
         data.extend([0x2a, 1, b'x']);
         assert!(try_fast(&data).is_some());
         assert_same(&data);
-        assert_eq!(decode_scenario(&data).unwrap().tracks[0].id, Some(-1));
+        assert_eq!(decode_parts(&data).unwrap().1[0].id, -1);
     }
 }

@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 
 use prost::Message;
 use scbg_base::atomic::AtomicFile;
-use scbg_scene::Scene;
+use scbg_scene::{Scene, Track};
 
 pub mod example;
 pub mod fast;
@@ -289,21 +289,22 @@ impl WomdFile {
 /// A first record, decoded as whichever message it is.
 enum Detected {
     Example(proto::Example),
-    Scenario(proto::Scenario),
+    /// A scenario as [`fast::decode_parts`] gives it.
+    Scenario(proto::Scenario, Vec<Track>),
 }
 
 impl Detected {
     fn format(&self) -> Format {
         match self {
             Self::Example(_) => Format::TfExample,
-            Self::Scenario(_) => Format::Scenario,
+            Self::Scenario(..) => Format::Scenario,
         }
     }
 
     fn into_scene(self) -> Result<Scene, DecodeError> {
         Ok(match self {
             Self::Example(ex) => example::scene_from_example(&ex)?,
-            Self::Scenario(s) => scenario::scene_from_scenario(&s)?,
+            Self::Scenario(s, tracks) => scenario::scene_from_parts(&s, tracks)?,
         })
     }
 }
@@ -314,8 +315,8 @@ fn detect(data: &[u8]) -> Result<Detected, DecodeError> {
     {
         return Ok(Detected::Example(ex));
     }
-    match fast::decode_scenario(data) {
-        Ok(s) if s.scenario_id.is_some() => Ok(Detected::Scenario(s)),
+    match fast::decode_parts(data) {
+        Ok((s, tracks)) if s.scenario_id.is_some() => Ok(Detected::Scenario(s, tracks)),
         Ok(_) => Err(DecodeError::NotWomd {
             detail: "no `scenario_id`".into(),
         }),
@@ -334,8 +335,8 @@ pub fn detect_record_format(data: &[u8]) -> Result<Format, DecodeError> {
 pub fn decode_record(data: &[u8], format: Format) -> Result<Scene, DecodeError> {
     match format {
         Format::Scenario => {
-            let scenario = fast::decode_scenario(data)?;
-            Ok(scenario::scene_from_scenario(&scenario)?)
+            let (scenario, tracks) = fast::decode_parts(data)?;
+            Ok(scenario::scene_from_parts(&scenario, tracks)?)
         }
         Format::TfExample => {
             let example = proto::Example::decode(data)?;

@@ -117,8 +117,40 @@ fn map_from_proto(features: &[proto::MapFeature]) -> Map {
     map
 }
 
+/// A scene track from a decoded `Track` (absent fields read as their defaults).
+pub(crate) fn scene_track(t: &proto::Track) -> Track {
+    Track {
+        id: i64::from(t.id()),
+        object_type: ObjectType::from_code(t.object_type()),
+        states: t
+            .states
+            .iter()
+            .map(|st| AgentState {
+                x_m: st.center_x(),
+                y_m: st.center_y(),
+                z_m: st.center_z(),
+                length_m: st.length(),
+                width_m: st.width(),
+                height_m: st.height(),
+                heading_rad: st.heading(),
+                velocity_x_mps: st.velocity_x(),
+                velocity_y_mps: st.velocity_y(),
+                valid: st.valid(),
+            })
+            .collect(),
+    }
+}
+
 /// Converts a decoded `Scenario` into a validated [`Scene`].
 pub fn scene_from_scenario(s: &proto::Scenario) -> Result<Scene, ScenarioError> {
+    scene_from_parts(s, s.tracks.iter().map(scene_track).collect())
+}
+
+/// [`scene_from_scenario`] with the tracks already converted: `s.tracks` is ignored.
+pub(crate) fn scene_from_parts(
+    s: &proto::Scenario,
+    tracks: Vec<Track>,
+) -> Result<Scene, ScenarioError> {
     let scenario_id = s
         .scenario_id
         .clone()
@@ -130,30 +162,6 @@ pub fn scene_from_scenario(s: &proto::Scenario) -> Result<Scene, ScenarioError> 
     let current = s.current_time_index();
     let current_step =
         usize::try_from(current).map_err(|_| ScenarioError::NegativeCurrentIndex(current))?;
-    let tracks = s
-        .tracks
-        .iter()
-        .map(|t| Track {
-            id: i64::from(t.id()),
-            object_type: ObjectType::from_code(t.object_type()),
-            states: t
-                .states
-                .iter()
-                .map(|st| AgentState {
-                    x_m: st.center_x(),
-                    y_m: st.center_y(),
-                    z_m: st.center_z(),
-                    length_m: st.length(),
-                    width_m: st.width(),
-                    height_m: st.height(),
-                    heading_rad: st.heading(),
-                    velocity_x_mps: st.velocity_x(),
-                    velocity_y_mps: st.velocity_y(),
-                    valid: st.valid(),
-                })
-                .collect(),
-        })
-        .collect();
     let tracks_to_predict = s
         .tracks_to_predict
         .iter()
@@ -195,7 +203,7 @@ pub fn scene_from_scenario(s: &proto::Scenario) -> Result<Scene, ScenarioError> 
         sdc_track_index: s
             .sdc_track_index
             .and_then(|i| usize::try_from(i).ok())
-            .filter(|&i| i < s.tracks.len()),
+            .filter(|&i| i < tracks.len()),
         tracks,
         objects_of_interest: s
             .objects_of_interest
