@@ -270,7 +270,22 @@ impl SegmentIndex {
                 if lb2 >= r2 || Key::new(lb2, 0) > bound {
                     break;
                 }
-                let segments = self.cell(cx + i64::from(dx), cy + i64::from(dy));
+                let (x, y) = (cx + i64::from(dx), cy + i64::from(dy));
+                let segments = self.cell(x, y);
+                if segments.is_empty() {
+                    continue;
+                }
+                // This cell's own bound from the query point (tighter than the offset's, which
+                // holds for any query in the cell), minus the rounding margin.
+                if bound.0 != u64::MAX {
+                    let gap = |q: f32, lo: f32| (lo - q).max(q - (lo + self.cell_m)).max(0.0);
+                    let gx = gap(origin[0], self.min_xy[0] + x as f32 * self.cell_m);
+                    let gy = gap(origin[1], self.min_xy[1] + y as f32 * self.cell_m);
+                    let lb = ((gx * gx + gy * gy).sqrt() - MARGIN_M).max(0.0);
+                    if Key::new(lb * lb, 0) > bound {
+                        continue;
+                    }
+                }
                 found.extend(
                     segments
                         .iter()
