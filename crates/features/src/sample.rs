@@ -158,25 +158,11 @@ fn type_index(t: ObjectType) -> usize {
     t.code() as usize
 }
 
-/// Writes the 13 per-step features of `track` at `step` (zeros if invalid).
-fn step_features(track: &PreparedTrack, step: Option<usize>, frame: &AgentFrame, out: &mut [f32]) {
-    out.fill(0.0);
-    let Some(s) = step.filter(|&s| track.valid.get(s).copied().unwrap_or(false)) else {
-        return;
-    };
-    let (x, y) = frame.point(track.x_m[s], track.y_m[s]);
-    out[0] = x;
-    out[1] = y;
-    out[2] = frame.heading(track.heading_rad[s]);
-    out[3] = track.speed_mps(s);
-    out[4] = track.width_m;
-    out[5] = track.length_m;
-    out[6] = 1.0;
-    out[7 + type_index(track.object_type)] = 1.0;
-    out[12] = f32::from(u8::from(track.is_sdc));
-}
-
 /// Fills `[history, 13]` and `[history - 1, 11]` arrays for one track.
+///
+/// Per history step: x, y, yaw, speed, width, length, valid, type one-hot, is_sdc (zeros where
+/// the track is invalid); per pair of consecutive steps: Δx, Δy, Δyaw (wrapped), Δspeed and
+/// valid where both are valid, then the type one-hot and is_sdc.
 fn track_history(
     track: &PreparedTrack,
     window: &Window,
@@ -185,30 +171,41 @@ fn track_history(
     hist: &mut [f32],
     diffs: &mut [f32],
 ) {
+    let one_hot = type_index(track.object_type);
+    let is_sdc = f32::from(u8::from(track.is_sdc));
+    // x, y, yaw, speed of the previous step where it was valid.
+    let mut prev: Option<[f32; 4]> = None;
     for h in 0..history {
-        let step = window.history_step(h, history);
-        step_features(
-            track,
-            step,
-            frame,
-            &mut hist[h * AGENT_FEATURES..(h + 1) * AGENT_FEATURES],
-        );
-    }
-    for h in 1..history {
-        let (prev, cur) = hist.split_at(h * AGENT_FEATURES);
-        let prev = &prev[(h - 1) * AGENT_FEATURES..];
-        let cur = &cur[..AGENT_FEATURES];
-        let d = &mut diffs[(h - 1) * DIFF_FEATURES..h * DIFF_FEATURES];
-        d.fill(0.0);
-        if prev[6] > 0.0 && cur[6] > 0.0 {
-            d[0] = cur[0] - prev[0];
-            d[1] = cur[1] - prev[1];
-            d[2] = wrap_angle_rad(f64::from(cur[2] - prev[2])) as f32;
-            d[3] = cur[3] - prev[3];
-            d[4] = 1.0;
+        let row = &mut hist[h * AGENT_FEATURES..(h + 1) * AGENT_FEATURES];
+        row.fill(0.0);
+        let step = window
+            .history_step(h, history)
+            .filter(|&s| track.valid.get(s).copied().unwrap_or(false));
+        let cur = step.map(|s| {
+            let (x, y) = frame.point(track.x_m[s], track.y_m[s]);
+            let cur = [x, y, frame.heading(track.heading_rad[s]), track.speed_mps(s)];
+            row[..4].copy_from_slice(&cur);
+            row[4] = track.width_m;
+            row[5] = track.length_m;
+            row[6] = 1.0;
+            row[7 + one_hot] = 1.0;
+            row[12] = is_sdc;
+            cur
+        });
+        if h > 0 {
+            let d = &mut diffs[(h - 1) * DIFF_FEATURES..h * DIFF_FEATURES];
+            d.fill(0.0);
+            if let (Some(p), Some(c)) = (prev, cur) {
+                d[0] = c[0] - p[0];
+                d[1] = c[1] - p[1];
+                d[2] = wrap_angle_rad(f64::from(c[2] - p[2])) as f32;
+                d[3] = c[3] - p[3];
+                d[4] = 1.0;
+            }
+            d[5 + one_hot] = 1.0;
+            d[10] = is_sdc;
         }
-        d[5 + type_index(track.object_type)] = 1.0;
-        d[10] = f32::from(u8::from(track.is_sdc));
+        prev = cur;
     }
 }
 
