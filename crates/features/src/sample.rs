@@ -183,7 +183,12 @@ fn track_history(
             .filter(|&s| track.valid.get(s).copied().unwrap_or(false));
         let cur = step.map(|s| {
             let (x, y) = frame.point(track.x_m[s], track.y_m[s]);
-            let cur = [x, y, frame.heading(track.heading_rad[s]), track.speed_mps(s)];
+            let cur = [
+                x,
+                y,
+                frame.heading(track.heading_rad[s]),
+                track.speed_mps(s),
+            ];
             row[..4].copy_from_slice(&cur);
             row[4] = track.width_m;
             row[5] = track.length_m;

@@ -1,18 +1,20 @@
-//! The hot path of `Scenario` decoding: tracks read by a hand-written wire loop, everything else
-//! by prost.
+//! The hot path of `Scenario` decoding: tracks and map points read by a hand-written wire loop,
+//! everything else by prost.
 //!
 //! A WOMD scenario holds 9 000–40 000 `ObjectState`s (every track × every step), each ten
 //! fields. prost's generic decoding spends, per field, a key varint, a dispatch through the
 //! derived `merge_field`, a wire-type check and the `Option` bookkeeping — about a third of the
 //! whole ingest pipeline's time (`perf` in BENCHMARKS.md, *Ingest*). WOMD's writers (and ours)
 //! put each state's fields behind one-byte keys with fixed-width values, which the loop below
-//! reads directly.
+//! reads directly; the same holds for the map's points (a lane or line is a list of 27-byte
+//! `MapPoint`s), which prost decodes as one message each.
 //!
-//! **Exactness.** The loop accepts only what it fully understands: the known fields of `Track`
-//! and `ObjectState` with their declared wire types and one-byte keys, varints prost accepts,
-//! lengths inside the record. Anything else — an unknown field, another wire type, a
-//! multi-byte key, a group, truncation — returns `None`, and [`decode_scenario`] decodes the
-//! whole record with prost instead, so the result (a scenario or prost's error) is always
+//! **Exactness.** The loop accepts only what it fully understands: the known fields of `Track`,
+//! `ObjectState`, `MapFeature`, `RoadLine`/`RoadEdge` and `MapPoint` with their declared wire
+//! types and one-byte keys, varints prost accepts, lengths inside the record. Anything else — an
+//! unknown field, another wire type, a multi-byte key, a group, truncation, a map feature with
+//! two `oneof` fields — returns `None`, and [`decode_parts`] decodes the whole record with
+//! prost instead, so the result (a scenario or prost's error) is always
 //! exactly prost's. The tests compare both decoders on every shared real file, synthetic
 //! scenes and mutated records.
 
@@ -36,10 +38,11 @@ pub fn decode_parts(data: &[u8]) -> Result<(proto::Scenario, Vec<Track>), prost:
 
 /// The fast decoding, or `None` where it does not apply.
 fn try_fast(data: &[u8]) -> Option<(proto::Scenario, Vec<Track>)> {
-    // prost decodes everything but the tracks (field 2 is unknown to `ScenarioWithoutTracks`
-    // and skipped by its length, unread).
-    let rest = proto::ScenarioWithoutTracks::decode(data).ok()?;
+    // prost decodes everything but the tracks and the map (fields 2 and 8 are unknown to
+    // `ScenarioRest` and skipped by their length, unread).
+    let rest = proto::ScenarioRest::decode(data).ok()?;
     let mut tracks: Vec<Track> = Vec::new();
+    let mut map_features = Vec::new();
     let mut r = Reader::new(data);
     while !r.is_empty() {
         let key = r.varint()?;
@@ -47,17 +50,121 @@ fn try_fast(data: &[u8]) -> Option<(proto::Scenario, Vec<Track>)> {
         if field == 0 || field > u64::from(u32::MAX >> 3) {
             return None;
         }
-        if field == 2 {
-            if wire != 2 {
-                return None;
+        match (field, wire) {
+            (2, 2) => {
+                let hint = tracks.last().map_or(0, |t| t.states.len());
+                tracks.push(track(r.len_delimited()?, hint)?);
             }
-            let hint = tracks.last().map_or(0, |t| t.states.len());
-            tracks.push(track(r.len_delimited()?, hint)?);
-        } else {
-            r.skip(wire)?;
+            (8, 2) => map_features.push(map_feature(r.len_delimited()?)?),
+            (2 | 8, _) => return None,
+            _ => r.skip(wire)?,
         }
     }
-    Some((rest.with_tracks(Vec::new()), tracks))
+    Some((rest.with(Vec::new(), map_features), tracks))
+}
+
+/// One `MapFeature`: lanes, road lines and road edges with their points read here; the other
+/// kinds (few, small) by prost. A feature with more than one of its `oneof` fields (which
+/// prost merges) is left to prost.
+fn map_feature(mut r: Reader<'_>) -> Option<proto::MapFeature> {
+    use proto::MapFeatureData as D;
+    let mut id = None;
+    let mut data = None;
+    while !r.is_empty() {
+        let key = r.byte()?;
+        if key == 0x08 {
+            id = Some(r.varint()? as i64); // 1: int64
+            continue;
+        }
+        if data.is_some() {
+            return None;
+        }
+        let body = r.len_delimited()?;
+        data = Some(match key {
+            0x1a => D::Lane(lane(body)?),
+            0x22 => {
+                let (t, polyline) = typed_polyline(body)?;
+                D::RoadLine(proto::RoadLine {
+                    line_type: t,
+                    polyline,
+                })
+            }
+            0x2a => {
+                let (t, polyline) = typed_polyline(body)?;
+                D::RoadEdge(proto::RoadEdge {
+                    edge_type: t,
+                    polyline,
+                })
+            }
+            0x3a => D::StopSign(proto::StopSign::decode(body.buf).ok()?),
+            0x42 => D::Crosswalk(proto::PolygonFeature::decode(body.buf).ok()?),
+            0x4a => D::SpeedBump(proto::PolygonFeature::decode(body.buf).ok()?),
+            0x52 => D::Driveway(proto::PolygonFeature::decode(body.buf).ok()?),
+            _ => return None,
+        });
+    }
+    Some(proto::MapFeature {
+        id,
+        feature_data: data,
+    })
+}
+
+/// A `LaneCenter`: its points here (field 8), the rest by prost.
+fn lane(body: Reader<'_>) -> Option<proto::LaneCenter> {
+    let rest = proto::LaneCenterRest::decode(body.buf).ok()?;
+    let mut points = Vec::new();
+    let mut r = body;
+    while !r.is_empty() {
+        let key = r.varint()?;
+        let (field, wire) = (key >> 3, key & 7);
+        if field == 0 || field > u64::from(u32::MAX >> 3) {
+            return None;
+        }
+        match (field, wire) {
+            (8, 2) => points.push(map_point(r.len_delimited()?)?),
+            (8, _) => return None,
+            _ => r.skip(wire)?,
+        }
+    }
+    Some(rest.with_polyline(points))
+}
+
+/// A `RoadLine` or `RoadEdge`: type (field 1) and points (field 2).
+fn typed_polyline(mut r: Reader<'_>) -> Option<(Option<i32>, Vec<proto::MapPoint>)> {
+    let mut t = None;
+    let mut points = Vec::new();
+    while !r.is_empty() {
+        match r.byte()? {
+            0x08 => t = Some(r.varint()? as i32),
+            0x12 => points.push(map_point(r.len_delimited()?)?),
+            _ => return None,
+        }
+    }
+    Some((t, points))
+}
+
+/// One `MapPoint` (x, y, z doubles).
+fn map_point(mut r: Reader<'_>) -> Option<proto::MapPoint> {
+    let b = r.buf;
+    if b.len() == 27 && b[0] == 0x09 && b[9] == 0x11 && b[18] == 0x19 {
+        // x, y, z in order: read at fixed offsets (the loop below gives the same).
+        let at = |i: usize| f64::from_le_bytes(b[i..i + 8].try_into().unwrap_or([0; 8]));
+        return Some(proto::MapPoint {
+            x: Some(at(1)),
+            y: Some(at(10)),
+            z: Some(at(19)),
+        });
+    }
+    let mut p = proto::MapPoint::default();
+    while !r.is_empty() {
+        match r.byte()? {
+            0x09 => p.x = Some(r.f64()?),
+            0x11 => p.y = Some(r.f64()?),
+            0x19 => p.z = Some(r.f64()?),
+            _ => return None,
+        }
+    }
+    Some(p)
 }
 
 /// One `Track` message; `states_hint` is the expected number of states (the previous track's).

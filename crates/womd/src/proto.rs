@@ -41,10 +41,10 @@ pub struct Scenario {
     pub tracks_to_predict: Vec<RequiredPrediction>,
 }
 
-/// `Scenario` without its tracks (field 2 is skipped unread): what prost decodes while
-/// [`crate::fast`] reads the tracks.
+/// `Scenario` without its tracks and map features (fields 2 and 8 are skipped unread): what
+/// prost decodes while [`crate::fast`] reads those.
 #[derive(Clone, PartialEq, prost::Message)]
-pub struct ScenarioWithoutTracks {
+pub struct ScenarioRest {
     /// See [`Scenario::timestamps_seconds`].
     #[prost(double, repeated, packed = "false", tag = "1")]
     pub timestamps_seconds: Vec<f64>,
@@ -60,9 +60,6 @@ pub struct ScenarioWithoutTracks {
     /// See [`Scenario::dynamic_map_states`].
     #[prost(message, repeated, tag = "7")]
     pub dynamic_map_states: Vec<DynamicMapState>,
-    /// See [`Scenario::map_features`].
-    #[prost(message, repeated, tag = "8")]
-    pub map_features: Vec<MapFeature>,
     /// See [`Scenario::current_time_index`].
     #[prost(int32, optional, tag = "10")]
     pub current_time_index: Option<i32>,
@@ -71,9 +68,9 @@ pub struct ScenarioWithoutTracks {
     pub tracks_to_predict: Vec<RequiredPrediction>,
 }
 
-impl ScenarioWithoutTracks {
-    /// The whole `Scenario` with these tracks.
-    pub fn with_tracks(self, tracks: Vec<Track>) -> Scenario {
+impl ScenarioRest {
+    /// The whole `Scenario` with these tracks and map features.
+    pub fn with(self, tracks: Vec<Track>, map_features: Vec<MapFeature>) -> Scenario {
         Scenario {
             timestamps_seconds: self.timestamps_seconds,
             tracks,
@@ -81,7 +78,7 @@ impl ScenarioWithoutTracks {
             scenario_id: self.scenario_id,
             sdc_track_index: self.sdc_track_index,
             dynamic_map_states: self.dynamic_map_states,
-            map_features: self.map_features,
+            map_features,
             current_time_index: self.current_time_index,
             tracks_to_predict: self.tracks_to_predict,
         }
@@ -254,6 +251,57 @@ pub struct LaneCenter {
     /// Road lines / edges bounding the lane on the right.
     #[prost(message, repeated, tag = "14")]
     pub right_boundaries: Vec<BoundarySegment>,
+}
+
+/// `LaneCenter` without its polyline (field 8 is skipped unread): what prost decodes while
+/// [`crate::fast`] reads the points.
+#[derive(Clone, PartialEq, prost::Message)]
+pub struct LaneCenterRest {
+    /// See [`LaneCenter::speed_limit_mph`].
+    #[prost(double, optional, tag = "1")]
+    pub speed_limit_mph: Option<f64>,
+    /// See [`LaneCenter::lane_type`].
+    #[prost(int32, optional, tag = "2")]
+    pub lane_type: Option<i32>,
+    /// See [`LaneCenter::interpolating`].
+    #[prost(bool, optional, tag = "3")]
+    pub interpolating: Option<bool>,
+    /// See [`LaneCenter::entry_lanes`].
+    #[prost(int64, repeated, packed = "true", tag = "9")]
+    pub entry_lanes: Vec<i64>,
+    /// See [`LaneCenter::exit_lanes`].
+    #[prost(int64, repeated, packed = "true", tag = "10")]
+    pub exit_lanes: Vec<i64>,
+    /// See [`LaneCenter::left_neighbors`].
+    #[prost(message, repeated, tag = "11")]
+    pub left_neighbors: Vec<LaneNeighbor>,
+    /// See [`LaneCenter::right_neighbors`].
+    #[prost(message, repeated, tag = "12")]
+    pub right_neighbors: Vec<LaneNeighbor>,
+    /// See [`LaneCenter::left_boundaries`].
+    #[prost(message, repeated, tag = "13")]
+    pub left_boundaries: Vec<BoundarySegment>,
+    /// See [`LaneCenter::right_boundaries`].
+    #[prost(message, repeated, tag = "14")]
+    pub right_boundaries: Vec<BoundarySegment>,
+}
+
+impl LaneCenterRest {
+    /// The whole `LaneCenter` with this polyline.
+    pub fn with_polyline(self, polyline: Vec<MapPoint>) -> LaneCenter {
+        LaneCenter {
+            speed_limit_mph: self.speed_limit_mph,
+            lane_type: self.lane_type,
+            interpolating: self.interpolating,
+            polyline,
+            entry_lanes: self.entry_lanes,
+            exit_lanes: self.exit_lanes,
+            left_neighbors: self.left_neighbors,
+            right_neighbors: self.right_neighbors,
+            left_boundaries: self.left_boundaries,
+            right_boundaries: self.right_boundaries,
+        }
+    }
 }
 
 /// `BoundarySegment`: part of a lane bounded by one road line or edge.
