@@ -32,9 +32,11 @@ fn decode_file(path: &PathBuf) -> anyhow::Result<usize> {
     Ok(n)
 }
 
-/// Decodes and builds features for every valid vehicle of every window (marginal), and both
-/// directions of every pair (conditional). Returns (scenes, samples, prepared bytes).
-fn featurize_file(path: &PathBuf) -> anyhow::Result<(usize, usize, u64)> {
+/// Decodes and prepares every scene (what `scbg data prepare` does: `PreparedScene` and its
+/// encoded cache record) and, with `samples`, builds features for every valid vehicle of every
+/// window (marginal) and both directions of every pair (conditional). Returns (scenes,
+/// samples, prepared bytes).
+fn featurize_file(path: &PathBuf, samples_too: bool) -> anyhow::Result<(usize, usize, u64)> {
     let file = WomdFile::open(path)?;
     let (window, pair, features) = (
         WindowConfig::default(),
@@ -49,6 +51,9 @@ fn featurize_file(path: &PathBuf) -> anyhow::Result<(usize, usize, u64)> {
             continue;
         };
         bytes += prepared.encode().len() as u64;
+        if !samples_too {
+            continue;
+        }
         let mut builder = SampleBuilder::new(&prepared, &features);
         for (w, pairs) in prepared.windows.iter().zip(&prepared.pairs) {
             for target in marginal_targets(&prepared, w, window.future_steps, 1) {
@@ -77,7 +82,8 @@ fn run_in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> anyhow:
 /// One row of the ingest benchmark.
 #[derive(Debug, Clone, PartialEq)]
 pub struct IngestRow {
-    /// `decode` or `decode+features`.
+    /// `decode`, `decode+prepare` (the cache record, as `scbg data prepare`) or
+    /// `decode+features` (every sample built as well).
     pub stage: &'static str,
     /// Rayon threads.
     pub threads: usize,
@@ -191,24 +197,26 @@ pub fn ingest(inputs_given: &[String], repeat: usize) -> anyhow::Result<IngestBe
             samples_per_s: None,
             raw_mb_per_s: mb_per_s(secs),
         });
-        let t = Instant::now();
-        let results = run_in_pool(threads, || {
-            work.par_iter()
-                .map(featurize_file)
-                .collect::<anyhow::Result<Vec<_>>>()
-        })??;
-        let secs = t.elapsed().as_secs_f64();
-        let (scenes, samples): (usize, usize) = results
-            .iter()
-            .fold((0, 0), |acc, r| (acc.0 + r.0, acc.1 + r.1));
-        out.prepared_bytes = results.iter().map(|r| r.2).sum::<u64>() / repeat as u64;
-        out.rows.push(IngestRow {
-            stage: "decode+features",
-            threads,
-            scenarios_per_s: scenes as f64 / secs,
-            samples_per_s: Some(samples as f64 / secs),
-            raw_mb_per_s: mb_per_s(secs),
-        });
+        for (stage, samples_too) in [("decode+prepare", false), ("decode+features", true)] {
+            let t = Instant::now();
+            let results = run_in_pool(threads, || {
+                work.par_iter()
+                    .map(|p| featurize_file(p, samples_too))
+                    .collect::<anyhow::Result<Vec<_>>>()
+            })??;
+            let secs = t.elapsed().as_secs_f64();
+            let (scenes, samples): (usize, usize) = results
+                .iter()
+                .fold((0, 0), |acc, r| (acc.0 + r.0, acc.1 + r.1));
+            out.prepared_bytes = results.iter().map(|r| r.2).sum::<u64>() / repeat as u64;
+            out.rows.push(IngestRow {
+                stage,
+                threads,
+                scenarios_per_s: scenes as f64 / secs,
+                samples_per_s: samples_too.then(|| samples as f64 / secs),
+                raw_mb_per_s: mb_per_s(secs),
+            });
+        }
     }
     out.peak_rss_mib = peak_rss_mib();
     Ok(out)

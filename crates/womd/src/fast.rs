@@ -112,7 +112,8 @@ fn map_feature(mut r: Reader<'_>) -> Option<proto::MapFeature> {
 /// A `LaneCenter`: its points here (field 8), the rest by prost.
 fn lane(body: Reader<'_>) -> Option<proto::LaneCenter> {
     let rest = proto::LaneCenterRest::decode(body.buf).ok()?;
-    let mut points = Vec::new();
+    // A point takes 29 bytes (key, length, 27): an upper bound on the count.
+    let mut points = Vec::with_capacity(body.buf.len() / 29);
     let mut r = body;
     while !r.is_empty() {
         let key = r.varint()?;
@@ -132,7 +133,7 @@ fn lane(body: Reader<'_>) -> Option<proto::LaneCenter> {
 /// A `RoadLine` or `RoadEdge`: type (field 1) and points (field 2).
 fn typed_polyline(mut r: Reader<'_>) -> Option<(Option<i32>, Vec<proto::MapPoint>)> {
     let mut t = None;
-    let mut points = Vec::new();
+    let mut points = Vec::with_capacity(r.buf.len() / 29);
     while !r.is_empty() {
         match r.byte()? {
             0x08 => t = Some(r.varint()? as i32),
