@@ -62,6 +62,10 @@ pub struct DemoArgs {
     /// reacting) added to the predictor's training as conditional samples of A.
     #[arg(long, default_value_t = 0)]
     pub counterfactuals: usize,
+    /// Tell the generators who A is (A's position, heading and velocity in B's frame after B's
+    /// embedding); off by default (BENCHMARKS.md, issue 12).
+    #[arg(long)]
+    pub condition_on_a: bool,
     /// Predictor training epochs.
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
@@ -182,6 +186,9 @@ pub struct TrainGeneratorArgs {
     pub range_steps: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Tell the generator and range predictor who A is (A's context after B's embedding).
+    #[arg(long)]
+    pub condition_on_a: bool,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -25,6 +25,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     data: a.data,
                     scenarios: a.scenarios,
                     counterfactuals: a.counterfactuals,
+                    condition_on_a: a.condition_on_a,
                     epochs: a.epochs,
                     generator_epochs: a.generator_epochs,
                     generator_seeds: a.generator_seeds,
@@ -191,6 +192,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     range_steps: a.range_steps,
                     seed: a.seed,
                     labels,
+                    condition_on_a: a.condition_on_a,
                 },
                 progress,
             )?;

@@ -12,7 +12,7 @@ use scbg_features::{
 use scbg_model::Multipath;
 use serde::Serialize;
 
-use crate::data::{Example, a_from_b, marginal_embedding};
+use crate::data::{Example, a_context, a_context_of, a_from_b, marginal_embedding};
 use crate::eval::{generate_and_measure, predicted_ranges};
 use crate::model::Generator;
 use crate::range::{RangePredictor, psi_for_quantile, quantile_for_psi};
@@ -170,6 +170,11 @@ impl Scbg {
             logged_valid: a.condition_future_valid.clone(),
             a_from_b: a_from_b(&a, &b),
             b_embedding: marginal_embedding(&self.predictor, &b, device),
+            a_context: if self.generator.a_context_width > 0 {
+                a_context_of(&a, &b).to_vec()
+            } else {
+                Vec::new()
+            },
             futures_b: Vec::new(),
             psi: Vec::new(),
             a,
@@ -291,7 +296,19 @@ impl Scbg {
             .sample(window, ib, None)
             .map_err(|error| GenerateError::Sample { id: b_id, error })?;
         self.stats.normalize(&mut b);
-        let embedding = marginal_embedding(&self.predictor, &b, device);
+        let mut embedding = marginal_embedding(&self.predictor, &b, device);
+        if self.generator.a_context_width > 0 {
+            // A's pose and velocity at the current step, from its track (no sample needed).
+            let t = &scene.tracks[ia];
+            let o = scene.origin_xy_m;
+            let a_pose = scbg_scene::Pose2::new(
+                f64::from(t.x_m[now]) + o[0],
+                f64::from(t.y_m[now]) + o[1],
+                f64::from(t.heading_rad[now]),
+            );
+            let v = [f64::from(t.vx_mps[now]), f64::from(t.vy_mps[now])];
+            embedding.extend(a_context(a_pose, v, b.world_from_agent));
+        }
         let e = embedding.len();
         let embedding = burn::tensor::Tensor::from_data(
             burn::tensor::TensorData::new(embedding, [1, e]),

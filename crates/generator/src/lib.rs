@@ -21,7 +21,9 @@ mod model;
 mod range;
 mod train;
 
-pub use data::{Example, a_from_b, build_examples, marginal_embedding};
+pub use data::{
+    A_CONTEXT_WIDTH, Example, a_context, a_context_of, a_from_b, build_examples, marginal_embedding,
+};
 pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Scbg};
 pub use model::{Generator, GeneratorConfig};
 pub use range::{

@@ -25,6 +25,11 @@ pub struct GeneratorConfig {
     /// (per-step outputs trained for a few epochs zigzag by decimetres).
     #[serde(default = "one_step")]
     pub knot_stride: usize,
+    /// Values of A's context after the embedding (`embedding_width` includes them): 0 for
+    /// generators not told who A is (those trained before the option), else
+    /// [`crate::data::A_CONTEXT_WIDTH`].
+    #[serde(default)]
+    pub a_context_width: usize,
 }
 
 fn one() -> f32 {
@@ -46,6 +51,17 @@ impl GeneratorConfig {
             future_steps: 80,
             psi_scale: 1.0,
             knot_stride: 5,
+            a_context_width: 0,
+        }
+    }
+
+    /// The default decoder for a predictor embedding of `embedding_width` followed by A's
+    /// context ([`crate::data::a_context`]).
+    pub fn with_a_context(embedding_width: usize) -> Self {
+        let w = crate::data::A_CONTEXT_WIDTH;
+        Self {
+            a_context_width: w,
+            ..Self::new(embedding_width + w)
         }
     }
 
@@ -78,6 +94,7 @@ impl GeneratorConfig {
             .set_require_grad(false),
             future_steps: self.future_steps,
             psi_scale: self.psi_scale,
+            a_context_width: self.a_context_width,
         }
     }
 }
@@ -95,6 +112,8 @@ pub struct Generator {
     pub future_steps: usize,
     /// ψ is divided by this before [`Self::psi_mlp`] (see [`GeneratorConfig::psi_scale`]).
     pub psi_scale: f32,
+    /// See [`GeneratorConfig::a_context_width`].
+    pub a_context_width: usize,
 }
 
 impl Generator {

@@ -114,6 +114,33 @@ fn forward_shape() {
 }
 
 #[test]
+fn a_context_is_a_in_b_frame() {
+    use scbg_scene::Pose2;
+    // B at (100, 50) heading north; A 10 m to B's left (west), heading south at 10 m/s.
+    let b = Pose2::new(100.0, 50.0, std::f64::consts::FRAC_PI_2);
+    let a = Pose2::new(90.0, 50.0, -std::f64::consts::FRAC_PI_2);
+    let c = crate::a_context(a, [0.0, -10.0], b);
+    let want = [0.0, 0.2, -1.0, 0.0, -0.5, 0.0, 0.2];
+    assert!(
+        c.iter().zip(want).all(|(g, w)| (g - w).abs() < 1e-6),
+        "{c:?}"
+    );
+}
+
+#[test]
+fn generators_saved_before_the_a_context_are_not_told_who_a_is() {
+    let mut json = serde_json::to_value(GeneratorConfig::new(24)).unwrap();
+    json.as_object_mut().unwrap().remove("a_context_width");
+    let old: GeneratorConfig = serde_json::from_value(json).unwrap();
+    assert_eq!(old.a_context_width, 0);
+    let new = GeneratorConfig::with_a_context(24);
+    assert_eq!(
+        (new.embedding_width, new.a_context_width),
+        (24 + crate::A_CONTEXT_WIDTH, crate::A_CONTEXT_WIDTH)
+    );
+}
+
+#[test]
 fn variants_train_and_losses_fall() {
     let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex().autodiff();
@@ -133,7 +160,7 @@ fn variants_train_and_losses_fall() {
     let refs: Vec<&Example> = examples.iter().collect();
     for variant in [Variant::Baseline, Variant::Augmented, Variant::Full] {
         device.seed(9);
-        let mut generator = GeneratorConfig::new(config.embedding_width()).init(&device);
+        let mut generator = GeneratorConfig::with_a_context(config.embedding_width()).init(&device);
         let mut optim = AdamConfig::new().init();
         let options = step_options(variant, 1.0);
         let mut first = None;
@@ -164,7 +191,7 @@ fn variants_train_and_losses_fall() {
     }
     // The courtesy loss alone (trajectory weight 0) must send gradients into the generator
     // through J_φ (with an untrained predictor they are tiny, but they must not be zero).
-    let generator = GeneratorConfig::new(config.embedding_width()).init(&device);
+    let generator = GeneratorConfig::with_a_context(config.embedding_width()).init(&device);
     let options = step_options(Variant::Full, 0.0);
     let (loss, losses) = step_loss(&generator, &predictor, &refs, &options, &device);
     assert!(losses.courtesy > 0.0 && losses.trajectory > 0.0);
@@ -239,7 +266,11 @@ fn range_predictor_learns_the_quantiles_and_stays_ordered() {
     let refs: Vec<&Example> = examples.iter().collect();
     let embedding = stored_embeddings(&refs, &device);
     let labels: Vec<&[f32]> = examples.iter().map(|e| e.psi.as_slice()).collect();
-    let mut range = RangePredictor::init(config.embedding_width(), 32, &device);
+    let mut range = RangePredictor::init(
+        config.embedding_width() + crate::A_CONTEXT_WIDTH,
+        32,
+        &device,
+    );
     let mut optim = AdamConfig::new().init();
     for _ in 0..1000 {
         let (r, loss) = range_step(range, &mut optim, embedding.clone(), &labels, 2e-2);
@@ -269,7 +300,7 @@ fn measured_courtesy_matches_the_courtesy_function() {
     let predictor = config.init(&device);
     let examples = labelled(&predictor, 3, 2, Reward::AverageSpeed, 3, &device);
     let refs: Vec<&Example> = examples.iter().collect();
-    let generator = GeneratorConfig::new(config.embedding_width()).init(&device);
+    let generator = GeneratorConfig::with_a_context(config.embedding_width()).init(&device);
     let psi: Vec<Vec<f32>> = refs.iter().map(|_| vec![-0.5, 0.0, 0.7]).collect();
     let m = eval::generate_and_measure(
         &generator,
@@ -324,7 +355,11 @@ fn measured_courtesy_matches_the_courtesy_function() {
         }
     }
     // The evaluation aggregates these numbers: CourtesyMSE(data) by hand.
-    let range = RangePredictor::init(config.embedding_width(), 16, &device);
+    let range = RangePredictor::init(
+        config.embedding_width() + crate::A_CONTEXT_WIDTH,
+        16,
+        &device,
+    );
     let result = eval::evaluate(
         &generator,
         &range,
@@ -376,8 +411,12 @@ fn generate_maps_quantiles_and_reports_bad_requests() {
     let (a_id, b_id) = (scene.tracks[pair.first].id, scene.tracks[pair.second].id);
     let scbg = Scbg {
         predictor: config.init(&device),
-        generator: GeneratorConfig::new(config.embedding_width()).init(&device),
-        range: RangePredictor::init(config.embedding_width(), 16, &device),
+        generator: GeneratorConfig::with_a_context(config.embedding_width()).init(&device),
+        range: RangePredictor::init(
+            config.embedding_width() + crate::A_CONTEXT_WIDTH,
+            16,
+            &device,
+        ),
         stats: stats(&scenes),
         features: features(),
         labels: LabelOptions {

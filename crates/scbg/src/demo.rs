@@ -41,6 +41,8 @@ pub struct DemoOptions {
     /// Counterfactual siblings per synthetic scenario for the predictor's training
     /// ([`scbg_train::TrainConfig::counterfactual_cache`]; 0: none, ignored with `data`).
     pub counterfactuals: usize,
+    /// Train the generators told who A is ([`crate::generator::VariantSettings::condition_on_a`]).
+    pub condition_on_a: bool,
     /// Predictor training epochs.
     pub epochs: usize,
     /// Training epochs of each generator variant.
@@ -298,8 +300,18 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     let (train, validation): (Vec<_>, Vec<_>) = labelled
         .into_iter()
         .partition(|s| split_of(&s.scenario_id, vf) == Split::Train);
-    let examples = examples_of(&predictors.plain, &predictors.plain_device, train);
-    let held_out = examples_of(&predictors.plain, &predictors.plain_device, validation);
+    let examples = examples_of(
+        &predictors.plain,
+        &predictors.plain_device,
+        train,
+        options.condition_on_a,
+    );
+    let held_out = examples_of(
+        &predictors.plain,
+        &predictors.plain_device,
+        validation,
+        options.condition_on_a,
+    );
 
     stage(
         6,

@@ -157,11 +157,13 @@ pub fn load_predictors(dir: &Path) -> anyhow::Result<Predictors> {
     })
 }
 
-/// Generator examples (with B's frozen embedding) of labelled scenes.
+/// Generator examples (with B's frozen embedding) of labelled scenes; with `condition_on_a`
+/// they keep A's context (see [`VariantSettings::condition_on_a`]).
 pub fn examples_of(
     predictor: &Multipath,
     device: &Device,
     labelled: Vec<SceneLabels>,
+    condition_on_a: bool,
 ) -> Vec<Example> {
     labelled
         .into_iter()
@@ -169,7 +171,13 @@ pub fn examples_of(
             let id = s.scenario_id;
             s.roles.into_iter().map(move |role| (id.clone(), role))
         })
-        .map(|(id, role)| Example::from_role(id, role, predictor, device))
+        .map(|(id, role)| {
+            let mut e = Example::from_role(id, role, predictor, device);
+            if !condition_on_a {
+                e.a_context.clear();
+            }
+            e
+        })
         .collect()
 }
 
@@ -185,6 +193,7 @@ pub fn examples_for_split(
     split: Option<Split>,
     labels: LabelOptions,
     seed: u64,
+    condition_on_a: bool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Vec<Example>> {
     let dataset = PreparedDataset::open(data)?;
@@ -203,7 +212,7 @@ pub fn examples_for_split(
         seed,
         progress,
     )?;
-    Ok(examples_of(predictor, device, labelled))
+    Ok(examples_of(predictor, device, labelled, condition_on_a))
 }
 
 /// Training settings of one variant.
@@ -229,6 +238,11 @@ pub struct VariantSettings {
     pub seed: u64,
     /// How the examples were labelled (recorded in generator.json).
     pub labels: LabelOptions,
+    /// Tell the generator and the range predictor who A is (A's context after B's embedding,
+    /// `scbg_generator::a_context`); off by default (BENCHMARKS.md, issue 12: it removes most
+    /// of the closed-loop reversal but B collides more). Used by [`train_generator`]; the
+    /// examples given to [`train_variant`] carry it.
+    pub condition_on_a: bool,
 }
 
 impl VariantSettings {
@@ -245,6 +259,7 @@ impl VariantSettings {
             range_steps: 300,
             seed: 0,
             labels,
+            condition_on_a: false,
         }
     }
 }
@@ -270,7 +285,14 @@ pub fn train_variant(
     let started = std::time::Instant::now();
     ensure_request!(!examples.is_empty(), "no labelled pairs to train on");
     let device = &p.device;
-    let mut gen_config = GeneratorConfig::new(p.ckpt.model_config.embedding_width());
+    // Examples with A's context train a generator and range predictor that read
+    // B's embedding ‖ A's context.
+    let width = p.ckpt.model_config.embedding_width();
+    let mut gen_config = if examples[0].a_context.is_empty() {
+        GeneratorConfig::new(width)
+    } else {
+        GeneratorConfig::with_a_context(width)
+    };
     gen_config.psi_scale = psi_spread(examples);
     let range_hidden = 64;
     // The backend's random stream is the device's, shared by every thread: seed and draw the
@@ -283,8 +305,7 @@ pub fn train_variant(
             .unwrap_or_else(std::sync::PoisonError::into_inner);
         device.seed(s.seed);
         let generator = gen_config.init(device);
-        let range =
-            RangePredictor::init(p.ckpt.model_config.embedding_width(), range_hidden, device);
+        let range = RangePredictor::init(gen_config.embedding_width, range_hidden, device);
         // burn initialises parameters lazily, at first use: draw them now, inside the lock.
         scbg_model::materialize(&generator);
         scbg_model::materialize(&range);
@@ -430,6 +451,7 @@ pub fn train_generator(
         Some(Split::Train),
         settings.labels,
         settings.seed,
+        settings.condition_on_a,
         progress,
     )?;
     ensure_request!(
@@ -470,7 +492,7 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
         .try_load_file(load(GENERATOR_WEIGHTS))
         .map_err(|e| anyhow::anyhow!("{}: {e:?}", load(GENERATOR_WEIGHTS).display()))?;
     let range = RangePredictor::init(
-        ckpt.model_config.embedding_width(),
+        ckpt.model_config.embedding_width() + checkpoint.generator.a_context_width,
         checkpoint.range_hidden,
         &device,
     )

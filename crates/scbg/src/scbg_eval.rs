@@ -221,6 +221,17 @@ pub fn evaluate_scbg(
             first.checkpoint.predictor
         );
     }
+    let condition_on_a = first.checkpoint.generator.a_context_width > 0;
+    for (dir, l) in models.iter().zip(&loaded) {
+        ensure_request!(
+            (l.checkpoint.generator.a_context_width > 0) == condition_on_a,
+            "{} {} told who A is, {} {}: variants evaluated together must agree",
+            dir.display(),
+            if condition_on_a { "is not" } else { "is" },
+            models[0].display(),
+            if condition_on_a { "is" } else { "is not" },
+        );
+    }
     let examples = examples_for_split(
         &first.scbg.predictor,
         &first.predictor,
@@ -229,6 +240,7 @@ pub fn evaluate_scbg(
         split,
         first.checkpoint.labels,
         seed,
+        condition_on_a,
         progress,
     )?;
     evaluate_examples(&loaded, &examples, data, figures, truth, progress)

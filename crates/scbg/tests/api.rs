@@ -70,10 +70,17 @@ fn label_train_and_generate_through_the_library() {
         None,
         options,
         0,
+        // The opt-in generator told who A is: trained, saved, loaded and driven below.
+        true,
         &Quiet,
     )
     .unwrap();
     assert_eq!(examples.len(), 32);
+    assert!(
+        examples
+            .iter()
+            .all(|e| e.a_context.len() == scbg_generator::A_CONTEXT_WIDTH)
+    );
     let first = rows
         .iter()
         .find(|r| r.scenario_id == examples[0].scenario_id && r.sample == 0)
@@ -96,6 +103,10 @@ fn label_train_and_generate_through_the_library() {
     assert_eq!(saved.format_version, generator::GENERATOR_FORMAT_VERSION);
 
     let model = generator::load_scbg(&p("gen"), None).unwrap();
+    assert_eq!(
+        model.checkpoint.generator.a_context_width,
+        scbg_generator::A_CONTEXT_WIDTH
+    );
     let file = p("synth").join("synth-00000.tfrecord");
     let t = &truth[0];
     let (_, scene) = generate::find_scene(&file, Some(&t.scenario_id), t.a_id, t.b_id).unwrap();

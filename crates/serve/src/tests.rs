@@ -55,6 +55,7 @@ fn fixture() -> &'static (tempfile::TempDir, Vec<u8>, scbg::synth::GroundTruth) 
             None,
             options,
             0,
+            false,
             &Quiet,
         )
         .unwrap();

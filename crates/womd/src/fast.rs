@@ -340,8 +340,11 @@ mod tests {
         Ok((s, tracks))
     }
 
+    /// Per track: id, type code, each state's fields as bits.
+    type TrackBits = (i64, i32, Vec<[u64; 10]>);
+
     /// Bit-exact comparison (NaN fields compare unequal under PartialEq).
-    fn bits(parts: &(proto::Scenario, Vec<Track>)) -> (Vec<u8>, Vec<(i64, i32, Vec<[u64; 10]>)>) {
+    fn bits(parts: &(proto::Scenario, Vec<Track>)) -> (Vec<u8>, Vec<TrackBits>) {
         let tracks = parts
             .1
             .iter()
