@@ -45,11 +45,7 @@ fn try_fast(data: &[u8]) -> Option<(proto::Scenario, Vec<Track>)> {
     let mut map_features = Vec::new();
     let mut r = Reader::new(data);
     while !r.is_empty() {
-        let key = r.varint()?;
-        let (field, wire) = (key >> 3, key & 7);
-        if field == 0 || field > u64::from(u32::MAX >> 3) {
-            return None;
-        }
+        let (field, wire) = r.key()?;
         match (field, wire) {
             (2, 2) => {
                 let hint = tracks.last().map_or(0, |t| t.states.len());
@@ -116,11 +112,7 @@ fn lane(body: Reader<'_>) -> Option<proto::LaneCenter> {
     let mut points = Vec::with_capacity(body.buf.len() / 29);
     let mut r = body;
     while !r.is_empty() {
-        let key = r.varint()?;
-        let (field, wire) = (key >> 3, key & 7);
-        if field == 0 || field > u64::from(u32::MAX >> 3) {
-            return None;
-        }
+        let (field, wire) = r.key()?;
         match (field, wire) {
             (8, 2) => points.push(map_point(r.len_delimited()?)?),
             (8, _) => return None,
@@ -284,6 +276,14 @@ impl<'a> Reader<'a> {
         let (&b, tail) = self.buf.split_first()?;
         self.buf = tail;
         Some(b)
+    }
+
+    /// A field key as `(field number, wire type)`; `None` where prost would reject it (field 0
+    /// or above the largest field number).
+    fn key(&mut self) -> Option<(u64, u64)> {
+        let key = self.varint()?;
+        let (field, wire) = (key >> 3, key & 7);
+        (field != 0 && field <= u64::from(u32::MAX >> 3)).then_some((field, wire))
     }
 
     /// A varint as prost reads it: at most ten bytes, the tenth at most 1.
