@@ -192,8 +192,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     range_steps: a.range_steps,
                     seed: a.seed,
                     labels,
-                    condition_on_a: a.condition_on_a,
                 },
+                a.condition_on_a,
                 progress,
             )?;
         }

@@ -14,17 +14,20 @@
 //! the order of that bound and the search stops when it exceeds the P-th distance found (or
 //! the radius). Segments with a non-finite end are checked for every query.
 
-/// Rounding margin of the ring bound, metres (coordinates are f32 within a few km).
+use crate::prepared::{RoadKind, RoadPolyline};
+
+/// Rounding margin of the cell bounds, metres (coordinates are f32 within a few km).
 const MARGIN_M: f32 = 0.05;
 /// Grid side, metres, unless the scene is so large that the grid would exceed `MAX_CELLS_PER_AXIS`.
 const CELL_M: f32 = 10.0;
 const MAX_CELLS_PER_AXIS: usize = 512;
 
-/// Segments `a`–`b` (scene frame, metres) with a grid over their midpoints.
+/// Road segments `a`–`b` (scene frame, metres) and their kinds, with a grid over them.
 #[derive(Debug, Clone)]
 pub(crate) struct SegmentIndex {
     seg_a: Vec<[f32; 2]>,
     seg_b: Vec<[f32; 2]>,
+    kind: Vec<RoadKind>,
     /// Segments with a non-finite end: checked for every query.
     unplaced: Vec<u32>,
     min_xy: [f32; 2],
@@ -108,8 +111,36 @@ impl Scratch {
 }
 
 impl SegmentIndex {
-    /// An index over the segments `seg_a[i]`–`seg_b[i]`.
-    pub(crate) fn new(seg_a: Vec<[f32; 2]>, seg_b: Vec<[f32; 2]>) -> Self {
+    /// The segments of a scene's road polylines, in order (a one-point polyline is a
+    /// zero-length segment).
+    pub(crate) fn from_road(road: &[RoadPolyline]) -> Self {
+        let n: usize = road
+            .iter()
+            .map(|p| p.xy_m.len().saturating_sub(1).max(1))
+            .sum();
+        let (mut seg_a, mut seg_b, mut kind) = (
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+            Vec::with_capacity(n),
+        );
+        for poly in road {
+            let pts = &poly.xy_m;
+            if pts.len() == 1 {
+                seg_a.push(pts[0]);
+                seg_b.push(pts[0]);
+                kind.push(poly.kind);
+            }
+            for w in pts.windows(2) {
+                seg_a.push(w[0]);
+                seg_b.push(w[1]);
+                kind.push(poly.kind);
+            }
+        }
+        Self::new(seg_a, seg_b, kind)
+    }
+
+    /// An index over the segments `seg_a[i]`–`seg_b[i]` of kinds `kind[i]`.
+    fn new(seg_a: Vec<[f32; 2]>, seg_b: Vec<[f32; 2]>, kind: Vec<RoadKind>) -> Self {
         let finite = |i: usize| seg_a[i].iter().chain(&seg_b[i]).all(|v| v.is_finite());
         let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
         for i in (0..seg_a.len()).filter(|&i| finite(i)) {
@@ -167,6 +198,7 @@ impl SegmentIndex {
         Self {
             seg_a,
             seg_b,
+            kind,
             unplaced,
             min_xy: lo,
             cell_m,
@@ -185,6 +217,10 @@ impl SegmentIndex {
         self.seg_b[i]
     }
 
+    pub(crate) fn kind(&self, i: usize) -> RoadKind {
+        self.kind[i]
+    }
+
     /// Segment `i` as a candidate: `Some(key)` when its nearer endpoint is within the radius.
     #[inline]
     fn candidate(&self, i: u32, origin: [f32; 2], r2: f32) -> Option<Key> {
@@ -198,7 +234,7 @@ impl SegmentIndex {
         })
     }
 
-    /// The short segments of the grid cell `(x, y)` (none outside the grid).
+    /// The segments listed in grid cell `(x, y)` (none outside the grid).
     fn cell(&self, x: i64, y: i64) -> &[u32] {
         if !((0..self.nx as i64).contains(&x) && (0..self.ny as i64).contains(&y)) {
             return &[];
@@ -321,17 +357,9 @@ pub(crate) fn closest_brute_force(
     radius_m: f32,
 ) -> Vec<(u32, f32)> {
     let r2 = radius_m * radius_m;
-    let mut all: Vec<(u32, f32)> = (0..index.seg_a.len())
-        .filter_map(|i| {
-            let a = index.seg_a[i];
-            let b = index.seg_b[i];
-            let a = [a[0] - origin[0], a[1] - origin[1]];
-            let b = [b[0] - origin[0], b[1] - origin[1]];
-            ((a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]) < r2).then(|| {
-                let q = crate::sample::closest_point_to_origin(a, b);
-                (i as u32, q[0] * q[0] + q[1] * q[1])
-            })
-        })
+    let mut all: Vec<(u32, f32)> = (0..index.seg_a.len() as u32)
+        .filter_map(|i| index.candidate(i, origin, r2))
+        .map(|k| (k.index(), k.dist2()))
         .collect();
     all.sort_unstable_by(|x, y| x.1.total_cmp(&y.1).then(x.0.cmp(&y.0)));
     all.truncate(p);
@@ -432,7 +460,8 @@ mod tests {
             a.push(q); // a point
             b.push(q);
         }
-        SegmentIndex::new(a, b)
+        let kind = vec![RoadKind::LaneSurfaceStreet; a.len()];
+        SegmentIndex::new(a, b, kind)
     }
 
     #[test]
@@ -491,18 +520,7 @@ mod tests {
                     ) else {
                         continue;
                     };
-                    let (mut a, mut b) = (Vec::new(), Vec::new());
-                    for poly in &prepared.road {
-                        if poly.xy_m.len() == 1 {
-                            a.push(poly.xy_m[0]);
-                            b.push(poly.xy_m[0]);
-                        }
-                        for w in poly.xy_m.windows(2) {
-                            a.push(w[0]);
-                            b.push(w[1]);
-                        }
-                    }
-                    let index = SegmentIndex::new(a, b);
+                    let index = SegmentIndex::from_road(&prepared.road);
                     let mut scratch = Scratch::default();
                     for w in &prepared.windows {
                         for t in &prepared.tracks {

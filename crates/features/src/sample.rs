@@ -239,16 +239,15 @@ pub fn extract_sample(
     SampleBuilder::new(scene, config).sample(window, target, condition)
 }
 
-/// Builds many samples of one scene: flattens the road segments once (struct of arrays) and
-/// reuses its scratch buffers between samples.
+/// Builds many samples of one scene: indexes the road segments once and reuses its scratch
+/// buffers between samples.
 #[derive(Debug)]
 pub struct SampleBuilder<'a> {
     scene: &'a PreparedScene,
     config: &'a FeatureConfig,
-    /// The road segments with a grid over them.
+    /// The road segments (flattened once per scene) with a grid over them.
     segments: SegmentIndex,
-    seg_kind: Vec<RoadKind>,
-    /// Scratch: the selected segments with their squared distances, and the search's heap.
+    /// Scratch: the selected segments with their squared distances, and the search's state.
     candidates: Vec<(u32, f32)>,
     scratch: Scratch,
     /// Per track, its position at its latest valid history step of `latest_for` (the ranking
@@ -260,34 +259,10 @@ pub struct SampleBuilder<'a> {
 impl<'a> SampleBuilder<'a> {
     /// A builder for samples of `scene` with sizes from `config`.
     pub fn new(scene: &'a PreparedScene, config: &'a FeatureConfig) -> Self {
-        let n: usize = scene
-            .road
-            .iter()
-            .map(|p| p.xy_m.len().saturating_sub(1).max(1))
-            .sum();
-        let (mut seg_a, mut seg_b, mut seg_kind) = (
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
-        );
-        for poly in &scene.road {
-            let pts = &poly.xy_m;
-            if pts.len() == 1 {
-                seg_a.push(pts[0]);
-                seg_b.push(pts[0]);
-                seg_kind.push(poly.kind);
-            }
-            for w in pts.windows(2) {
-                seg_a.push(w[0]);
-                seg_b.push(w[1]);
-                seg_kind.push(poly.kind);
-            }
-        }
         Self {
             scene,
             config,
-            segments: SegmentIndex::new(seg_a, seg_b),
-            seg_kind,
+            segments: SegmentIndex::from_road(&scene.road),
             candidates: Vec::new(),
             scratch: Scratch::default(),
             latest_history_xy: Vec::new(),
@@ -500,7 +475,7 @@ impl<'a> SampleBuilder<'a> {
             }
             f[5] = len;
             f[6] = ((b[0] - p[0]).powi(2) + (b[1] - p[1]).powi(2)).sqrt();
-            f[7 + self.seg_kind[i] as usize] = 1.0;
+            f[7 + self.segments.kind(i) as usize] = 1.0;
             valid[k] = true;
         }
         (out, valid)

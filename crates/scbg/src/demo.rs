@@ -41,7 +41,7 @@ pub struct DemoOptions {
     /// Counterfactual siblings per synthetic scenario for the predictor's training
     /// ([`scbg_train::TrainConfig::counterfactual_cache`]; 0: none, ignored with `data`).
     pub counterfactuals: usize,
-    /// Train the generators told who A is ([`crate::generator::VariantSettings::condition_on_a`]).
+    /// Train the generators told who A is (see [`crate::generator::examples_of`]).
     pub condition_on_a: bool,
     /// Predictor training epochs.
     pub epochs: usize,

@@ -158,7 +158,9 @@ pub fn load_predictors(dir: &Path) -> anyhow::Result<Predictors> {
 }
 
 /// Generator examples (with B's frozen embedding) of labelled scenes; with `condition_on_a`
-/// they keep A's context (see [`VariantSettings::condition_on_a`]).
+/// they keep A's context (`scbg_generator::a_context`), and [`train_variant`] then trains a
+/// generator and range predictor told who A is. Off by default (BENCHMARKS.md, issue 12: it
+/// removes most of the closed-loop reversal but B collides more).
 pub fn examples_of(
     predictor: &Multipath,
     device: &Device,
@@ -238,11 +240,6 @@ pub struct VariantSettings {
     pub seed: u64,
     /// How the examples were labelled (recorded in generator.json).
     pub labels: LabelOptions,
-    /// Tell the generator and the range predictor who A is (A's context after B's embedding,
-    /// `scbg_generator::a_context`); off by default (BENCHMARKS.md, issue 12: it removes most
-    /// of the closed-loop reversal but B collides more). Used by [`train_generator`]; the
-    /// examples given to [`train_variant`] carry it.
-    pub condition_on_a: bool,
 }
 
 impl VariantSettings {
@@ -259,7 +256,6 @@ impl VariantSettings {
             range_steps: 300,
             seed: 0,
             labels,
-            condition_on_a: false,
         }
     }
 }
@@ -430,12 +426,14 @@ pub fn train_variant(
 static DEVICE_STREAM: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// What `scbg train generator` does: labels the training split of `data` with the predictor
-/// in `predictor` and trains one variant into `out`.
+/// in `predictor` and trains one variant into `out`, told who A is with `condition_on_a`
+/// (see [`examples_of`]).
 pub fn train_generator(
     predictor: &Path,
     data: &Path,
     out: &Path,
     settings: &VariantSettings,
+    condition_on_a: bool,
     progress: &dyn Progress,
 ) -> anyhow::Result<GeneratorCheckpoint> {
     let p = load_predictors(predictor)?;
@@ -451,7 +449,7 @@ pub fn train_generator(
         Some(Split::Train),
         settings.labels,
         settings.seed,
-        settings.condition_on_a,
+        condition_on_a,
         progress,
     )?;
     ensure_request!(

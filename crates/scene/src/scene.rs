@@ -301,17 +301,7 @@ impl Scene {
                 });
             }
             for (step, s) in track.states.iter().enumerate() {
-                // One combined test per state; the named search below only on failure.
-                let all_finite = s.x_m.is_finite()
-                    & s.y_m.is_finite()
-                    & s.z_m.is_finite()
-                    & s.length_m.is_finite()
-                    & s.width_m.is_finite()
-                    & s.height_m.is_finite()
-                    & s.heading_rad.is_finite()
-                    & s.velocity_x_mps.is_finite()
-                    & s.velocity_y_mps.is_finite();
-                if !s.valid || all_finite {
+                if !s.valid {
                     continue;
                 }
                 let checks: [(&'static str, bool); 9] = [

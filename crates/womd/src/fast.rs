@@ -6,16 +6,16 @@
 //! derived `merge_field`, a wire-type check and the `Option` bookkeeping — about a third of the
 //! whole ingest pipeline's time (`perf` in BENCHMARKS.md, *Ingest*). WOMD's writers (and ours)
 //! put each state's fields behind one-byte keys with fixed-width values, which the loop below
-//! reads directly; the same holds for the map's points (a lane or line is a list of 27-byte
-//! `MapPoint`s), which prost decodes as one message each.
+//! reads directly, straight into scene tracks (no intermediate proto states); the same holds
+//! for the map's points (a lane or line is a list of 27-byte `MapPoint`s), which prost decodes
+//! as one message each.
 //!
 //! **Exactness.** The loop accepts only what it fully understands: the known fields of `Track`,
 //! `ObjectState`, `MapFeature`, `RoadLine`/`RoadEdge` and `MapPoint` with their declared wire
 //! types and one-byte keys, varints prost accepts, lengths inside the record. Anything else — an
 //! unknown field, another wire type, a multi-byte key, a group, truncation, a map feature with
 //! two `oneof` fields — returns `None`, and [`decode_parts`] decodes the whole record with
-//! prost instead, so the result (a scenario or prost's error) is always
-//! exactly prost's. The tests compare both decoders on every shared real file, synthetic
+//! prost instead, so the result (a scenario or prost's error) is always exactly prost's. The tests compare both decoders on every shared real file, synthetic
 //! scenes and mutated records.
 
 use prost::Message;
@@ -27,9 +27,14 @@ use crate::{proto, scenario};
 /// scene tracks: by the fast loop when it understands the tracks, otherwise by prost. Same
 /// result as `proto::Scenario::decode(data)` followed by the conversion of its tracks.
 pub fn decode_parts(data: &[u8]) -> Result<(proto::Scenario, Vec<Track>), prost::DecodeError> {
-    if let Some(parts) = try_fast(data) {
-        return Ok(parts);
+    match try_fast(data) {
+        Some(parts) => Ok(parts),
+        None => by_prost(data),
     }
+}
+
+/// The same parts through prost alone (the fallback, and the tests' reference).
+fn by_prost(data: &[u8]) -> Result<(proto::Scenario, Vec<Track>), prost::DecodeError> {
     let mut s = proto::Scenario::decode(data)?;
     let tracks = s.tracks.iter().map(scenario::scene_track).collect();
     s.tracks = Vec::new();
@@ -56,7 +61,7 @@ fn try_fast(data: &[u8]) -> Option<(proto::Scenario, Vec<Track>)> {
             _ => r.skip(wire)?,
         }
     }
-    Some((rest.with(Vec::new(), map_features), tracks))
+    Some((rest.with_map(map_features), tracks))
 }
 
 /// One `MapFeature`: lanes, road lines and road edges with their points read here; the other
@@ -219,18 +224,7 @@ fn state(mut r: Reader<'_>) -> Option<AgentState> {
             valid: b[58] != 0,
         });
     }
-    let mut s = AgentState {
-        x_m: 0.0,
-        y_m: 0.0,
-        z_m: 0.0,
-        length_m: 0.0,
-        width_m: 0.0,
-        height_m: 0.0,
-        heading_rad: 0.0,
-        velocity_x_mps: 0.0,
-        velocity_y_mps: 0.0,
-        valid: false,
-    };
+    let mut s = AgentState::default();
     while !r.is_empty() {
         match r.byte()? {
             0x11 => s.x_m = r.f64()?,            // 2: double center_x
@@ -331,14 +325,6 @@ impl<'a> Reader<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// The reference: prost's decoding and the conversion of its tracks.
-    fn by_prost(data: &[u8]) -> Result<(proto::Scenario, Vec<Track>), prost::DecodeError> {
-        let mut s = proto::Scenario::decode(data)?;
-        let tracks = s.tracks.iter().map(scenario::scene_track).collect();
-        s.tracks = Vec::new();
-        Ok((s, tracks))
-    }
 
     /// Per track: id, type code, each state's fields as bits.
     type TrackBits = (i64, i32, Vec<[u64; 10]>);

@@ -69,11 +69,11 @@ pub struct ScenarioRest {
 }
 
 impl ScenarioRest {
-    /// The whole `Scenario` with these tracks and map features.
-    pub fn with(self, tracks: Vec<Track>, map_features: Vec<MapFeature>) -> Scenario {
+    /// The whole `Scenario` with these map features and no tracks (the caller keeps them).
+    pub fn with_map(self, map_features: Vec<MapFeature>) -> Scenario {
         Scenario {
             timestamps_seconds: self.timestamps_seconds,
-            tracks,
+            tracks: Vec::new(),
             objects_of_interest: self.objects_of_interest,
             scenario_id: self.scenario_id,
             sdc_track_index: self.sdc_track_index,
