@@ -122,10 +122,12 @@ pub fn select_pairs(
         .collect();
     let travel = |p: &Path| {
         let (_, x0, y0) = p.points[0];
-        p.points
+        let far2 = p
+            .points
             .iter()
-            .map(|&(_, x, y)| (x - x0).hypot(y - y0))
-            .fold(0.0f32, f32::max)
+            .map(|&(_, x, y)| squared_norm(x - x0, y - y0))
+            .fold(0.0f64, f64::max);
+        norm_from_squared(far2)
     };
     let d = config.max_path_distance_m;
     let max_gap_steps = (config.max_time_gap_s / scene.step_secs.max(1e-3)).round() as isize;
@@ -142,15 +144,16 @@ pub fn select_pairs(
             if travel(a) < config.min_travel_m && travel(b) < config.min_travel_m {
                 continue;
             }
-            let mut best = f32::INFINITY;
+            let mut best2 = f64::INFINITY;
             for &(sa, xa, ya) in &a.points[1..] {
                 for &(sb, xb, yb) in &b.points[1..] {
                     if (sa as isize - sb as isize).abs() > max_gap_steps {
                         continue;
                     }
-                    best = best.min((xa - xb).hypot(ya - yb));
+                    best2 = best2.min(squared_norm(xa - xb, ya - yb));
                 }
             }
+            let best = norm_from_squared(best2);
             if best <= d {
                 found.push((
                     best,
@@ -173,4 +176,49 @@ pub fn select_pairs(
         .take(config.max_pairs)
         .map(|(_, p)| p)
         .collect()
+}
+
+/// `dx² + dy²` in f64: exact products, one rounding. With [`norm_from_squared`] this is
+/// `f32::hypot` (glibc computes `(float) sqrt((double) x * x + (double) y * y)`), and because
+/// that map is monotonic, the closest (farthest) of many points can be found on the squares
+/// and the root taken once.
+fn squared_norm(dx: f32, dy: f32) -> f64 {
+    let (dx, dy) = (f64::from(dx), f64::from(dy));
+    dx * dx + dy * dy
+}
+
+fn norm_from_squared(d2: f64) -> f32 {
+    d2.sqrt() as f32
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn squared_then_root_is_hypot() {
+        let mut state = 7u64;
+        let mut next = move || {
+            state = state
+                .wrapping_mul(6_364_136_223_846_793_005)
+                .wrapping_add(1_442_695_040_888_963_407);
+            f32::from_bits((state >> 32) as u32)
+        };
+        let mut checked = 0;
+        while checked < 200_000 {
+            let (x, y) = (next(), next());
+            if !(x.is_finite() && y.is_finite()) {
+                continue;
+            }
+            // Random bit patterns cover every exponent; scaled ones the metre range.
+            for (x, y) in [(x, y), (x.fract() * 300.0, y.fract() * 300.0)] {
+                assert_eq!(
+                    norm_from_squared(squared_norm(x, y)).to_bits(),
+                    x.hypot(y).to_bits(),
+                    "{x} {y}"
+                );
+            }
+            checked += 1;
+        }
+    }
 }

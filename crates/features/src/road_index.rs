@@ -35,9 +35,18 @@ pub(crate) struct SegmentIndex {
     nx: usize,
     ny: usize,
     /// CSR: the segments whose bounding box meets cell `c` are
-    /// `cell_segments[cell_start[c]..cell_start[c + 1]]`.
+    /// `cell_segments[cell_start[c]..cell_start[c + 1]]`, each with its ends (the query reads
+    /// a cell's segments in one sweep instead of looking each one up).
     cell_start: Vec<u32>,
-    cell_segments: Vec<u32>,
+    cell_segments: Vec<Listed>,
+}
+
+/// A segment as listed in a grid cell.
+#[derive(Debug, Clone, Copy)]
+struct Listed {
+    a: [f32; 2],
+    b: [f32; 2],
+    index: u32,
 }
 
 /// A candidate: squared distance of its closest point, then index (the ranking order), packed
@@ -184,13 +193,24 @@ impl SegmentIndex {
         }
         let cell_start = counts;
         let mut fill = cell_start.clone();
-        let mut cell_segments = vec![0u32; cell_start[nx * ny] as usize];
+        let mut cell_segments = vec![
+            Listed {
+                a: [0.0; 2],
+                b: [0.0; 2],
+                index: 0
+            };
+            cell_start[nx * ny] as usize
+        ];
         for i in (0..seg_a.len()).filter(|&i| finite(i)) {
             let (xs, ys) = bbox(i);
             for y in ys {
                 for x in xs.clone() {
                     let slot = &mut fill[y * nx + x];
-                    cell_segments[*slot as usize] = i as u32;
+                    cell_segments[*slot as usize] = Listed {
+                        a: seg_a[i],
+                        b: seg_b[i],
+                        index: i as u32,
+                    };
                     *slot += 1;
                 }
             }
@@ -224,18 +244,17 @@ impl SegmentIndex {
     /// Segment `i` as a candidate: `Some(key)` when its nearer endpoint is within the radius.
     #[inline]
     fn candidate(&self, i: u32, origin: [f32; 2], r2: f32) -> Option<Key> {
-        let a = self.seg_a[i as usize];
-        let b = self.seg_b[i as usize];
-        let a = [a[0] - origin[0], a[1] - origin[1]];
-        let b = [b[0] - origin[0], b[1] - origin[1]];
-        ((a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]) < r2).then(|| {
-            let q = crate::sample::closest_point_to_origin(a, b);
-            Key::new(q[0] * q[0] + q[1] * q[1], i)
-        })
+        candidate(
+            self.seg_a[i as usize],
+            self.seg_b[i as usize],
+            i,
+            origin,
+            r2,
+        )
     }
 
     /// The segments listed in grid cell `(x, y)` (none outside the grid).
-    fn cell(&self, x: i64, y: i64) -> &[u32] {
+    fn cell(&self, x: i64, y: i64) -> &[Listed] {
         if !((0..self.nx as i64).contains(&x) && (0..self.ny as i64).contains(&y)) {
             return &[];
         }
@@ -289,8 +308,8 @@ impl SegmentIndex {
             found.extend(
                 self.cell_segments
                     .iter()
-                    .filter(|&&i| fresh(i))
-                    .filter_map(|&i| self.candidate(i, origin, r2)),
+                    .filter(|l| fresh(l.index))
+                    .filter_map(|l| candidate(l.a, l.b, l.index, origin, r2)),
             );
         } else {
             // A query outside the grid is moved to the cell just outside it: its offsets'
@@ -325,8 +344,8 @@ impl SegmentIndex {
                 found.extend(
                     segments
                         .iter()
-                        .filter(|&&i| fresh(i))
-                        .filter_map(|&i| self.candidate(i, origin, r2))
+                        .filter(|l| fresh(l.index))
+                        .filter_map(|l| candidate(l.a, l.b, l.index, origin, r2))
                         .filter(|&k| k <= bound),
                 );
                 // Tighten the bound each time the candidates have doubled since the last time.
@@ -346,6 +365,18 @@ impl SegmentIndex {
         scratch.found = found;
         scratch.seen = seen;
     }
+}
+
+/// Segment `a`–`b` (index `i`) as a candidate: `Some(key)` when its nearer endpoint is within
+/// the radius.
+#[inline]
+fn candidate(a: [f32; 2], b: [f32; 2], i: u32, origin: [f32; 2], r2: f32) -> Option<Key> {
+    let a = [a[0] - origin[0], a[1] - origin[1]];
+    let b = [b[0] - origin[0], b[1] - origin[1]];
+    ((a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]) < r2).then(|| {
+        let q = crate::sample::closest_point_to_origin(a, b);
+        Key::new(q[0] * q[0] + q[1] * q[1], i)
+    })
 }
 
 /// The reference: every segment checked, the first `p` by (distance, index).
