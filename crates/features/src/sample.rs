@@ -245,9 +245,9 @@ pub fn extract_sample(
 /// Within a window, the marginal sample of a pair member (and of any target a conditioned
 /// sample was asked for) is kept: a conditioned sample of the same target is that sample with
 /// the condition agent ranked first among the other agents and its future filled in, so its
-/// road query and the other agents' histories are not computed again. (Trainer, labeler and
-/// `scbg bench ingest` ask for every pair member marginally and conditioned: ~40 % of the
-/// samples.) The result is the same to the bit as building it from scratch (tested).
+/// road query and the other agents' histories are not computed again (trainer, labeler and
+/// `scbg bench ingest` ask for every pair member marginally and conditioned). The result is
+/// the same to the bit as building it from scratch (tested).
 #[derive(Debug)]
 pub struct SampleBuilder<'a> {
     scene: &'a PreparedScene,
