@@ -16,6 +16,7 @@
 #![warn(missing_docs)]
 
 mod build;
+mod builder;
 pub mod cache;
 mod codec;
 mod pairs;
@@ -26,6 +27,7 @@ mod stats;
 mod window;
 
 pub use build::PrepareError;
+pub use builder::SampleBuilder;
 pub use codec::DecodeError;
 pub use pairs::{PairConfig, select_pairs};
 pub use prepared::{
@@ -33,7 +35,7 @@ pub use prepared::{
 };
 pub use sample::{
     AGENT_FEATURES, AgentSample, DIFF_FEATURES, FeatureConfig, ROAD_FEATURES, ROAD_TYPES,
-    SampleBuilder, SampleError, extract_sample, marginal_targets,
+    SampleError, extract_sample, marginal_targets,
 };
 pub use stats::FeatureStats;
 pub use window::{Window, WindowConfig, windows};

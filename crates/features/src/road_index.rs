@@ -524,42 +524,36 @@ mod tests {
     #[test]
     fn same_as_brute_force_on_the_segments_of_real_scenes() {
         use crate::{PairConfig, PreparedScene, WindowConfig};
-        let Some(dir) = scbg_womd::fixtures::real_data_dir() else {
+        let Some(paths) = scbg_womd::fixtures::real_tfrecords() else {
             return; // real_data_dir said why (and fails under CI)
         };
         let mut queries = 0;
-        for sub in ["womd", "womd-reencoded", "nuscenes-reencoded"] {
-            for entry in std::fs::read_dir(dir.join(sub)).unwrap() {
-                let path = entry.unwrap().path();
-                if path.extension().is_none_or(|e| e != "tfrecord") {
-                    continue;
-                }
-                let file = scbg_womd::WomdFile::open(&path).unwrap();
-                let Ok(format) = file.detect_format() else {
+        for path in &paths {
+            let file = scbg_womd::WomdFile::open(path).unwrap();
+            let Ok(format) = file.detect_format() else {
+                continue;
+            };
+            if format != scbg_womd::Format::Scenario {
+                continue;
+            }
+            for scene in file.scenes() {
+                let scene = scene.unwrap();
+                let Ok(prepared) = PreparedScene::from_scene(
+                    &scene,
+                    &WindowConfig::default(),
+                    &PairConfig::default(),
+                    4,
+                ) else {
                     continue;
                 };
-                if format != scbg_womd::Format::Scenario {
-                    continue;
-                }
-                for scene in file.scenes() {
-                    let scene = scene.unwrap();
-                    let Ok(prepared) = PreparedScene::from_scene(
-                        &scene,
-                        &WindowConfig::default(),
-                        &PairConfig::default(),
-                        4,
-                    ) else {
-                        continue;
-                    };
-                    let index = SegmentIndex::from_road(&prepared.road);
-                    let mut scratch = Scratch::default();
-                    for w in &prepared.windows {
-                        for t in &prepared.tracks {
-                            if t.valid_at(w.current_step as isize) {
-                                let o = [t.x_m[w.current_step], t.y_m[w.current_step]];
-                                check(&index, &mut scratch, o, 128, 150.0);
-                                queries += 1;
-                            }
+                let index = SegmentIndex::from_road(&prepared.road);
+                let mut scratch = Scratch::default();
+                for w in &prepared.windows {
+                    for t in &prepared.tracks {
+                        if t.valid_at(w.current_step as isize) {
+                            let o = [t.x_m[w.current_step], t.y_m[w.current_step]];
+                            check(&index, &mut scratch, o, 128, 150.0);
+                            queries += 1;
                         }
                     }
                 }

@@ -59,16 +59,9 @@ const EXPECTED: u64 = 0x65d3_041c_f634_cc25;
 
 #[test]
 fn features_of_the_shared_real_scenes_are_unchanged() {
-    let Some(dir) = scbg_womd::fixtures::real_data_dir() else {
+    let Some(paths) = scbg_womd::fixtures::real_tfrecords() else {
         return; // real_data_dir said why (and fails under CI)
     };
-    let mut paths: Vec<_> = ["womd", "womd-reencoded", "nuscenes-reencoded"]
-        .iter()
-        .flat_map(|sub| std::fs::read_dir(dir.join(sub)).unwrap())
-        .map(|e| e.unwrap().path())
-        .filter(|p| p.extension().is_some_and(|e| e == "tfrecord"))
-        .collect();
-    paths.sort();
     let (window, pair, features) = (
         WindowConfig::default(),
         PairConfig::default(),

@@ -28,3 +28,21 @@ pub fn real_data_dir() -> Option<PathBuf> {
     );
     None
 }
+
+/// Every `.tfrecord` file of the shared real folders (`womd/`, `womd-reencoded/`,
+/// `nuscenes-reencoded/`), sorted; `None` as [`real_data_dir`]. Panics when a folder cannot be
+/// read (a test's broken fixture, never a silent skip).
+pub fn real_tfrecords() -> Option<Vec<PathBuf>> {
+    let dir = real_data_dir()?;
+    let mut paths: Vec<PathBuf> = ["womd", "womd-reencoded", "nuscenes-reencoded"]
+        .iter()
+        .flat_map(|sub| {
+            let sub = dir.join(sub);
+            std::fs::read_dir(&sub).unwrap_or_else(|e| panic!("{}: {e}", sub.display()))
+        })
+        .map(|entry| entry.expect("a real-data folder entry").path())
+        .filter(|p| p.extension().is_some_and(|e| e == "tfrecord"))
+        .collect();
+    paths.sort();
+    Some(paths)
+}
