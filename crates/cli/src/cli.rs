@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
-use scbg::choices::{Family, MarginalEstimate, Preset, Reward, Threshold, Variant};
+use scbg::choices::{Family, MarginalEstimate, Preset, Reward, Threshold, Variant, Weighting};
 use scbg::predictor::{ModeSelection, SplitSelection};
 
 /// Socially-controllable behavior generation for interactive traffic simulation.
@@ -100,6 +100,17 @@ pub struct EstimatorArgs {
     /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
     #[arg(long, default_value_t = 1.0)]
     pub sample_noise: f32,
+    /// Whose reward B's courtesy counts: `pair` (A alone, the paper) or `neighbours` (A and
+    /// every vehicle within --audience-radius-m of B at the current step, at most 7 besides A).
+    #[arg(long, default_value = "pair", value_parser = ["pair", "neighbours"])]
+    pub audience: String,
+    /// Radius of the `neighbours` audience around B, metres.
+    #[arg(long, default_value_t = 30.0)]
+    pub audience_radius_m: f32,
+    /// Weights of the `neighbours` audience: `sum` (each member 1) or `proximity`
+    /// (1 / (1 + distance / radius)).
+    #[arg(long, value_enum, default_value_t = Weighting::Sum)]
+    pub audience_weighting: Weighting,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -387,7 +387,15 @@ fn label_options(
     samples: usize,
     reward: scbg::choices::Reward,
 ) -> anyhow::Result<LabelOptions> {
-    labels::label_options(samples, reward, estimator.marginal, estimator.sample_noise)
+    let mut options =
+        labels::label_options(samples, reward, estimator.marginal, estimator.sample_noise)?;
+    options.audience = scbg::choices::Audience::parse(
+        &estimator.audience,
+        estimator.audience_radius_m,
+        estimator.audience_weighting,
+    )
+    .map_err(anyhow::Error::msg)?;
+    Ok(options)
 }
 
 /// `scbg data inspect`: one line (or JSON object) per scenario; a bad file is reported and

@@ -4,11 +4,13 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
-use scbg_features::{AgentSample, FeatureConfig, FeatureStats, PreparedScene, SampleBuilder};
+use scbg_features::{
+    AgentSample, FeatureConfig, FeatureStats, PreparedScene, SampleBuilder, Window,
+};
 use scbg_model::{Batch, Mixture, Mode, Multipath};
 use scbg_scene::Pose2;
 
-use crate::{Reward, expected_reward};
+use crate::{Audience, Reward, expected_reward};
 
 /// The marginal mixture of each (standardised) sample.
 pub fn marginal_mixtures(
@@ -76,17 +78,70 @@ pub fn change_frame(points: &[[f32; 2]], from: &Pose2, to: &Pose2) -> Vec<[f32; 
         .collect()
 }
 
-/// ψ and both expectations for several futures of B, for one target A.
+/// ψ and both expectations for several futures of B, for one target A (or B's audience).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PairLabels {
-    /// `[1 + M]`: index 0 is the logged future, 1.. the sampled ones.
+    /// `[1 + M]`: index 0 is the logged future, 1.. the sampled ones. With an audience
+    /// ([`crate::Audience::Neighbours`]), the weighted sum over its members.
     pub psi: Vec<f32>,
-    /// `[1 + M]` E[r(Y_A) | x, y_B] of each future.
+    /// `[1 + M]` E[r(Y_A) | x, y_B] of each future (weighted sum over the audience).
     pub e_cond: Vec<f32>,
-    /// E[r(Y_A) | x] as estimated.
+    /// E[r(Y_A) | x] as estimated (weighted sum over the audience).
     pub e_marg: f32,
     /// The futures of B in A's frame (`[1 + M][T]`; the logged one has its invalid steps at 0).
     pub futures_in_a: Vec<Vec<[f32; 2]>>,
+    /// Each audience member's weight and E[r(Y_j) | x]: entry 0 is A, then the role's
+    /// [`LabelledRole::others`] in order (one entry, weight 1, for the paper's pair).
+    pub terms: Vec<AudienceTerm>,
+}
+
+/// One audience member's part of ψ: `weight · (E[r(Y_j) | x, y_B] − e_marg)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AudienceTerm {
+    /// The member's weight.
+    pub weight: f32,
+    /// E[r(Y_j) | x] as estimated.
+    pub e_marg: f32,
+}
+
+/// A member of B's audience besides A, with its sample conditioned on B's logged future.
+#[derive(Debug, Clone)]
+pub struct AudienceMember {
+    /// Track index in the prepared scene.
+    pub index: usize,
+    /// Track id.
+    pub id: i64,
+    /// The member's standardised sample, conditioned on B's logged future.
+    pub sample: AgentSample,
+    /// Its weight ([`Audience::weight`]).
+    pub weight: f32,
+}
+
+/// The members of B's audience besides A ([`Audience::others`]) with their standardised
+/// samples conditioned on B; a member whose sample cannot be built is left out.
+pub fn audience_members(
+    builder: &mut SampleBuilder<'_>,
+    scene: &PreparedScene,
+    stats: &FeatureStats,
+    window: &Window,
+    a: usize,
+    b: usize,
+    audience: Audience,
+) -> Vec<AudienceMember> {
+    audience
+        .others(scene, window, a, b)
+        .into_iter()
+        .filter_map(|(index, distance)| {
+            let mut sample = builder.sample(window, index, Some(b)).ok()?;
+            stats.normalize(&mut sample);
+            Some(AudienceMember {
+                index,
+                id: scene.tracks[index].id,
+                sample,
+                weight: audience.weight(distance),
+            })
+        })
+        .collect()
 }
 
 /// How `E[r(Y_A) | x]`, the second term of ψ, is estimated.
@@ -141,6 +196,9 @@ pub struct LabelOptions {
     /// Scale of the Gaussian part of B's sampled futures (1 = samples of the mixture, 0 =
     /// mode means); see [`SampleMixture::sample`].
     pub sample_noise: f32,
+    /// Whose reward counts: A alone (the paper, the default) or B's neighbours.
+    #[serde(default)]
+    pub audience: Audience,
 }
 
 /// Labels one ordered pair. `a` is A's standardised sample conditioned on B's logged future;
@@ -154,66 +212,120 @@ pub fn label_pair(
     rng: &mut impl Rng,
     device: &Device,
 ) -> PairLabels {
+    label_role(model, (a, 1.0), &[], b, b_mixture, options, rng, device)
+}
+
+/// Labels one ordered pair toward B's audience: A (`(sample, weight)`, conditioned on B's
+/// logged future) and `others`. B's futures are drawn once; each member's conditional
+/// expectations come from one batched forward, and ψ is the weighted sum of the members' ψ
+/// (see [`crate::audience`]). Without `others` and with weight 1 this is the paper's ψ toward
+/// A, bit for bit.
+#[allow(clippy::too_many_arguments)]
+pub fn label_role(
+    model: &Multipath,
+    a: (&AgentSample, f32),
+    others: &[AudienceMember],
+    b: &AgentSample,
+    b_mixture: &Mixture,
+    options: LabelOptions,
+    rng: &mut impl Rng,
+    device: &Device,
+) -> PairLabels {
     let LabelOptions {
         samples,
         reward,
         marginal,
         sample_noise,
+        ..
     } = options;
-    let t = a.condition_future_valid.len();
-    let logged: Vec<[f32; 2]> = (0..t)
-        .map(|i| {
-            [
-                a.condition_future_xy_m[2 * i],
-                a.condition_future_xy_m[2 * i + 1],
-            ]
-        })
+    let members: Vec<(&AgentSample, f32)> = std::iter::once(a)
+        .chain(others.iter().map(|m| (&m.sample, m.weight)))
         .collect();
-    let mut futures = vec![logged];
-    futures.extend(
-        b_mixture
-            .sample(samples, sample_noise, rng)
-            .iter()
-            .map(|tr| change_frame(tr, &b.world_from_agent, &a.world_from_agent)),
-    );
-    let n = futures.len();
-    let mut cond = Vec::with_capacity(n * t * 3);
-    for (i, f) in futures.iter().enumerate() {
-        for (s, p) in f.iter().enumerate() {
-            let valid = i > 0 || a.condition_future_valid[s];
-            cond.extend([
-                if valid { p[0] } else { 0.0 },
-                if valid { p[1] } else { 0.0 },
-                f32::from(u8::from(valid)),
-            ]);
+    let t = a.0.condition_future_valid.len();
+    let sampled = b_mixture.sample(samples, sample_noise, rng);
+    let n = 1 + sampled.len();
+    let mut cond = Vec::with_capacity(members.len() * n * t * 3);
+    let mut futures_in_a = Vec::new();
+    for (j, &(s, _)) in members.iter().enumerate() {
+        let logged: Vec<[f32; 2]> = (0..t)
+            .map(|i| {
+                [
+                    s.condition_future_xy_m[2 * i],
+                    s.condition_future_xy_m[2 * i + 1],
+                ]
+            })
+            .collect();
+        let mut futures = vec![logged];
+        futures.extend(
+            sampled
+                .iter()
+                .map(|tr| change_frame(tr, &b.world_from_agent, &s.world_from_agent)),
+        );
+        for (i, f) in futures.iter().enumerate() {
+            for (k, p) in f.iter().enumerate() {
+                let valid = i > 0 || s.condition_future_valid[k];
+                cond.extend([
+                    if valid { p[0] } else { 0.0 },
+                    if valid { p[1] } else { 0.0 },
+                    f32::from(u8::from(valid)),
+                ]);
+            }
+        }
+        if j == 0 {
+            futures_in_a = futures;
         }
     }
-    let refs: Vec<&AgentSample> = (0..n).map(|_| a).collect();
+    let rows = members.len() * n;
+    let refs: Vec<&AgentSample> = members
+        .iter()
+        .flat_map(|&(s, _)| std::iter::repeat_n(s, n))
+        .collect();
     let batch = Batch::for_mode(&refs, Mode::Conditional, device);
-    let condition = Tensor::<3>::from_data(TensorData::new(cond, [n, t, 3]), device);
-    let e_cond: Vec<f32> = expected_reward(model, &batch, Some(condition), reward, 0.1)
+    let condition = Tensor::<3>::from_data(TensorData::new(cond, [rows, t, 3]), device);
+    let e_cond_all: Vec<f32> = expected_reward(model, &batch, Some(condition), reward, 0.1)
         .into_data()
         .try_to_vec::<f32>()
         .expect("f32");
-    let e_marg: f32 = if marginal == MarginalEstimate::ConditionalAverage && n > 1 {
-        e_cond[1..].iter().sum::<f32>() / (n - 1) as f32
+    let e_marg_members: Vec<f32> = if marginal == MarginalEstimate::ConditionalAverage && n > 1 {
+        e_cond_all
+            .chunks(n)
+            .map(|e| e[1..].iter().sum::<f32>() / (n - 1) as f32)
+            .collect()
     } else {
+        let samples: Vec<&AgentSample> = members.iter().map(|&(s, _)| s).collect();
         expected_reward(
             model,
-            &Batch::for_mode(&[a], Mode::Conditional, device),
+            &Batch::for_mode(&samples, Mode::Conditional, device),
             None,
             reward,
             0.1,
         )
         .into_data()
         .try_to_vec::<f32>()
-        .expect("f32")[0]
+        .expect("f32")
     };
+    let mut psi = vec![0.0f32; n];
+    let mut e_cond = vec![0.0f32; n];
+    let mut e_marg = 0.0f32;
+    let mut terms = Vec::with_capacity(members.len());
+    for (j, &(_, weight)) in members.iter().enumerate() {
+        let ej = &e_cond_all[j * n..(j + 1) * n];
+        for k in 0..n {
+            psi[k] += weight * (ej[k] - e_marg_members[j]);
+            e_cond[k] += weight * ej[k];
+        }
+        e_marg += weight * e_marg_members[j];
+        terms.push(AudienceTerm {
+            weight,
+            e_marg: e_marg_members[j],
+        });
+    }
     PairLabels {
-        psi: e_cond.iter().map(|e| e - e_marg).collect(),
+        psi,
         e_cond,
         e_marg,
-        futures_in_a: futures,
+        futures_in_a,
+        terms,
     }
 }
 
@@ -235,6 +347,8 @@ pub struct LabelledRole {
     pub a: AgentSample,
     /// B's standardised marginal sample.
     pub b: AgentSample,
+    /// The members of B's audience besides A (empty for the paper's pair).
+    pub others: Vec<AudienceMember>,
     /// ψ of B's logged and sampled futures.
     pub labels: PairLabels,
 }
@@ -272,7 +386,21 @@ pub fn label_scene(
                 stats.normalize(&mut a);
                 stats.normalize(&mut b);
                 let mixture = marginal_mixtures(model, &[&b], device).remove(0);
-                let labels = label_pair(model, &a, &b, &mixture, options, rng, device);
+                let others =
+                    audience_members(&mut builder, scene, stats, w, ia, ib, options.audience);
+                let a_weight = options
+                    .audience
+                    .weight(Audience::distance_between(scene, w, ia, ib));
+                let labels = label_role(
+                    model,
+                    (&a, a_weight),
+                    &others,
+                    &b,
+                    &mixture,
+                    options,
+                    rng,
+                    device,
+                );
                 out.push(LabelledRole {
                     window_step: w.current_step,
                     a_index: ia,
@@ -281,6 +409,7 @@ pub fn label_scene(
                     b_id: scene.tracks[ib].id,
                     a,
                     b,
+                    others,
                     labels,
                 });
             }

@@ -14,10 +14,12 @@
 
 #![warn(missing_docs)]
 
+pub mod audience;
 pub mod label;
 pub mod losses;
 mod reward;
 
+pub use audience::{Audience, Weighting};
 pub use reward::Reward;
 
 use burn::tensor::activation::softmax;

@@ -3,7 +3,9 @@
 
 use burn::tensor::Device;
 use rand::SeedableRng;
-use scbg_courtesy::label::{LabelOptions, LabelledRole, change_frame, label_scene, scene_seed};
+use scbg_courtesy::label::{
+    AudienceTerm, LabelOptions, LabelledRole, change_frame, label_scene, scene_seed,
+};
 use scbg_features::{AgentSample, FeatureConfig, FeatureStats, PreparedScene};
 use scbg_model::Multipath;
 use scbg_scene::Pose2;
@@ -29,6 +31,12 @@ pub struct Example {
     pub e_marg: f32,
     /// B's scene embedding from the frozen predictor encoder (marginal mode).
     pub b_embedding: Vec<f32>,
+    /// Each audience member's weight and E[r(Y_j) | x]: entry 0 is A, then [`Self::others`]
+    /// (one entry of weight 1 for the paper's pair; `e_marg` is their weighted sum).
+    pub terms: Vec<AudienceTerm>,
+    /// The members of B's audience besides A: each one's standardised sample (conditioned on
+    /// B's logged future) and B's frame in its frame (as [`Self::a_from_b`]).
+    pub others: Vec<(AgentSample, [f32; 3])>,
     /// A as B sees it ([`a_context`]); empty for a model that is not told who A is (artefacts
     /// trained before it was). The generator and range predictor read
     /// `b_embedding ‖ a_context` ([`crate::stored_embeddings`]).
@@ -44,7 +52,13 @@ impl Example {
         predictor: &Multipath,
         device: &Device,
     ) -> Self {
-        let LabelledRole { a, b, labels, .. } = role;
+        let LabelledRole {
+            a,
+            b,
+            labels,
+            others,
+            ..
+        } = role;
         let futures_b = labels
             .futures_in_a
             .iter()
@@ -59,6 +73,14 @@ impl Example {
             futures_b,
             psi: labels.psi,
             e_marg: labels.e_marg,
+            terms: labels.terms,
+            others: others
+                .into_iter()
+                .map(|m| {
+                    let frame = a_from_b(&m.sample, &b);
+                    (m.sample, frame)
+                })
+                .collect(),
             a,
             b,
         }
@@ -95,7 +117,8 @@ pub fn build_examples(
     out
 }
 
-/// B's frame in A's frame: `[heading difference (rad), B's origin x, y in A's frame (m)]`.
+/// B's frame in A's frame: `[heading difference (rad), B's origin x, y in A's frame (m)]`
+/// (for any agent A).
 pub fn a_from_b(a: &AgentSample, b: &AgentSample) -> [f32; 3] {
     let (pa, pb) = (a.world_from_agent, b.world_from_agent);
     let (tx, ty) = pa.agent_from_world(pb.x_m, pb.y_m);

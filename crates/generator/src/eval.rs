@@ -12,14 +12,14 @@
 //!   the same over examples whose logged |ψ| exceeds the high-courtesy threshold.
 
 use burn::tensor::{Device, Tensor, TensorData};
-use scbg_courtesy::{Reward, expected_reward};
+use scbg_courtesy::Reward;
 use scbg_model::Multipath;
 use serde::Serialize;
 
 use crate::data::Example;
 use crate::model::Generator;
 use crate::range::{RangePredictor, psi_for_quantile, stored_embeddings};
-use crate::train::{STEP_SECS, a_batch, b_to_a_frame, repeat_rows};
+use crate::train::{audience_courtesy, repeat_rows};
 
 /// The quantiles of the *range* evaluation and of Fig. 4.
 pub const EVAL_QUANTILES: [f32; 9] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9];
@@ -75,24 +75,14 @@ pub fn generate_and_measure(
             Tensor::from_data(TensorData::new(psi_rows, [rows]), device),
         );
         let [_, t, _] = pred.dims();
-        let batch_a = a_batch(exs, device);
         // E[r(Y_A) | x] as the labels estimated it.
         let e_marg: Vec<f32> = exs.iter().map(|e| e.e_marg).collect();
-        let in_a = b_to_a_frame(pred.clone(), exs, k, device);
-        let e_cond = to_vec(expected_reward(
-            predictor,
-            &batch_a.repeat(k),
-            Some(Tensor::cat(
-                vec![in_a, Tensor::ones([rows, t, 1], device)],
-                2,
-            )),
-            reward,
-            STEP_SECS,
-        ));
+        let (achieved, e_cond) = audience_courtesy(predictor, pred.clone(), exs, k, reward, device);
+        let (achieved, e_cond) = (to_vec(achieved), to_vec(e_cond));
         let xy = to_vec(pred);
         for i in 0..n {
             let cond: Vec<f32> = (0..k).map(|j| e_cond[j * n + i]).collect();
-            out.psi.push(cond.iter().map(|e| e - e_marg[i]).collect());
+            out.psi.push((0..k).map(|j| achieved[j * n + i]).collect());
             out.e_cond.push(cond);
             out.e_marg.push(e_marg[i]);
             out.futures_b.push(

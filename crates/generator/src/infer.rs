@@ -5,14 +5,17 @@
 
 use burn::tensor::Device;
 use rand::SeedableRng;
-use scbg_courtesy::label::{LabelOptions, label_pair, marginal_mixtures};
+use scbg_courtesy::Audience;
+use scbg_courtesy::label::{
+    LabelOptions, LabelledRole, audience_members, label_role, marginal_mixtures,
+};
 use scbg_features::{
     FeatureConfig, FeatureStats, PreparedScene, SampleBuilder, SampleError, Window,
 };
 use scbg_model::Multipath;
 use serde::Serialize;
 
-use crate::data::{Example, a_context, a_context_of, a_from_b, marginal_embedding};
+use crate::data::{Example, a_context, marginal_embedding};
 use crate::eval::{generate_and_measure, predicted_ranges};
 use crate::model::Generator;
 use crate::range::{RangePredictor, psi_for_quantile, quantile_for_psi};
@@ -151,35 +154,41 @@ impl Scbg {
             .map_err(|error| GenerateError::Sample { id: b_id, error })?;
         self.stats.normalize(&mut a);
         self.stats.normalize(&mut b);
-        // E[r(Y_A) | x] estimated as in the labels (B's sampled futures, fixed seed).
+        // E[r(Y_A) | x] estimated as in the labels (B's sampled futures, fixed seed), toward
+        // the audience the generator was trained for.
         let mixture = marginal_mixtures(&self.predictor, &[&b], device).remove(0);
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0x5cb6);
-        let e_marg = label_pair(
+        let audience = self.labels.audience;
+        let others = audience_members(&mut builder, scene, &self.stats, window, ia, ib, audience);
+        let a_weight = audience.weight(Audience::distance_between(scene, window, ia, ib));
+        let labels = label_role(
             &self.predictor,
-            &a,
+            (&a, a_weight),
+            &others,
             &b,
             &mixture,
             self.labels,
             &mut rng,
             device,
-        )
-        .e_marg;
-        let example = Example {
-            e_marg,
-            scenario_id: scene.scenario_id.clone(),
-            logged_valid: a.condition_future_valid.clone(),
-            a_from_b: a_from_b(&a, &b),
-            b_embedding: marginal_embedding(&self.predictor, &b, device),
-            a_context: if self.generator.a_context_width > 0 {
-                a_context_of(&a, &b).to_vec()
-            } else {
-                Vec::new()
-            },
-            futures_b: Vec::new(),
-            psi: Vec::new(),
+        );
+        let role = LabelledRole {
+            window_step: window.current_step,
+            a_index: ia,
+            b_index: ib,
+            a_id,
+            b_id,
             a,
             b,
+            others,
+            labels,
         };
+        let mut example =
+            Example::from_role(scene.scenario_id.clone(), role, &self.predictor, device);
+        example.futures_b.clear();
+        example.psi.clear();
+        if self.generator.a_context_width == 0 {
+            example.a_context.clear();
+        }
         let (low, high) = predicted_ranges(&self.range, &[&example], device)[0];
         Ok(PairContext { example, low, high })
     }
@@ -378,28 +387,30 @@ impl Scbg {
         {
             return Err(GenerateError::Future(format!("point {k} is not finite")));
         }
-        let pose = a.world_from_agent;
-        let cond: Vec<f32> = future_world
+        // B's frame, then J_φ toward the audience exactly as for a generated future.
+        let pose = ctx.example.b.world_from_agent;
+        let xy: Vec<f32> = future_world
             .iter()
             .flat_map(|p| {
                 let (x, y) = pose.agent_from_world(p[0], p[1]);
-                [x as f32, y as f32, 1.0]
+                [x as f32, y as f32]
             })
             .collect();
-        let batch = scbg_model::Batch::for_mode(&[a], scbg_model::Mode::Conditional, device);
-        let condition = burn::tensor::Tensor::<3>::from_data(
-            burn::tensor::TensorData::new(cond, [1, t, 3]),
+        let future = burn::tensor::Tensor::<3>::from_data(
+            burn::tensor::TensorData::new(xy, [1, t, 2]),
             device,
         );
-        let e_cond = crate::eval::to_vec(scbg_courtesy::expected_reward(
+        let (psi, e_cond) = crate::train::audience_courtesy(
             &self.predictor,
-            &batch,
-            Some(condition),
+            future,
+            &[&ctx.example],
+            1,
             self.labels.reward,
-            crate::train::STEP_SECS,
-        ))[0];
+            device,
+        );
+        let (psi, e_cond) = (crate::eval::to_vec(psi)[0], crate::eval::to_vec(e_cond)[0]);
         Ok(CourtesyOf {
-            psi: e_cond - e_marg,
+            psi,
             a_expected_reward_conditional: e_cond,
             a_expected_reward_marginal: e_marg,
         })

@@ -284,28 +284,10 @@ pub fn step_loss(
         traj = traj + sampled * (options.alpha * (m_count - 1) as f32);
     }
     let court = (options.variant == Variant::Full).then(|| {
-        let batch_a = a_batch(examples, device);
-        // E[r(Y_A) | x] as in the labels (a constant for ŷ).
-        let e_marg = Tensor::<1>::from_data(
-            TensorData::new(
-                (0..m_count)
-                    .flat_map(|_| examples.iter().map(|e| e.e_marg))
-                    .collect(),
-                [rows],
-            ),
-            device,
-        );
-        let in_a = b_to_a_frame(pred, examples, m_count, device);
-        let ones = Tensor::ones([rows, t, 1], device);
-        let e_cond = expected_reward(
-            predictor,
-            &batch_a.repeat(m_count),
-            Some(Tensor::cat(vec![in_a, ones], 2)),
-            options.reward,
-            STEP_SECS,
-        );
+        let (achieved, _) =
+            audience_courtesy(predictor, pred, examples, m_count, options.reward, device);
         let scale = generator.psi_scale.max(1e-12);
-        courtesy_loss(psi / scale, (e_cond - e_marg) / scale) * m_count as f32
+        courtesy_loss(psi / scale, achieved / scale) * m_count as f32
     });
     let total = match &court {
         Some(c) => traj.clone() * options.trajectory_weight + c.clone() * options.beta,
@@ -338,6 +320,105 @@ pub(crate) fn a_batch(examples: &[&Example], device: &Device) -> Batch {
     Batch::from_samples(&samples, &BatchAugment::default(), &mut rng, device)
 }
 
+/// J_φ of B's futures `pred` toward each example's audience (A alone for the paper's pair,
+/// see [`scbg_courtesy::audience`]): achieved ψ and the (weighted) E[r | x, ŷ] per row. The
+/// marginal terms E[r(Y_j) | x] do not depend on ŷ: they are the labels' values.
+///
+/// For the pair this is one conditional forward of A's samples; with an audience, every
+/// (row, member) goes through the predictor and a constant `[rows, members]` weight matrix
+/// sums the members' ψ, so gradients reach ŷ through every member.
+///
+/// # Shapes
+/// `pred: [times · n, T, 2]` (row `k · n + i` belongs to example `i`) `-> ([times · n], [times · n])`
+pub(crate) fn audience_courtesy(
+    predictor: &Multipath,
+    pred: Tensor<3>,
+    examples: &[&Example],
+    times: usize,
+    reward: Reward,
+    device: &Device,
+) -> (Tensor<1>, Tensor<1>) {
+    let [rows, t, _] = pred.dims();
+    let pair_only = examples
+        .iter()
+        .all(|e| e.others.is_empty() && e.terms.iter().all(|w| w.weight == 1.0));
+    if pair_only {
+        let e_marg = Tensor::<1>::from_data(
+            TensorData::new(
+                (0..times)
+                    .flat_map(|_| examples.iter().map(|e| e.e_marg))
+                    .collect(),
+                [rows],
+            ),
+            device,
+        );
+        let in_a = b_to_a_frame(pred, examples, times, device);
+        let e_cond = expected_reward(
+            predictor,
+            &a_batch(examples, device).repeat(times),
+            Some(Tensor::cat(
+                vec![in_a, Tensor::ones([rows, t, 1], device)],
+                2,
+            )),
+            reward,
+            STEP_SECS,
+        );
+        return (e_cond.clone() - e_marg, e_cond);
+    }
+    // One row per (generated row, audience member).
+    let mut source = Vec::new();
+    let mut samples: Vec<&AgentSample> = Vec::new();
+    let mut frames = Vec::new();
+    let mut e_marg = Vec::new();
+    let mut weights = Vec::new();
+    for k in 0..times {
+        for (i, e) in examples.iter().enumerate() {
+            let members =
+                std::iter::once((&e.a, e.a_from_b)).chain(e.others.iter().map(|(s, f)| (s, *f)));
+            for ((sample, frame), term) in members.zip(&e.terms) {
+                source.push((k * examples.len() + i) as i64);
+                samples.push(sample);
+                frames.push(frame);
+                e_marg.push(term.e_marg);
+                weights.push(term.weight);
+            }
+        }
+    }
+    let members = source.len();
+    let expanded = pred.select(
+        0,
+        Tensor::<1, burn::tensor::Int>::from_data(
+            TensorData::new(source.clone(), [members]),
+            device,
+        ),
+    );
+    let in_member = to_frames(expanded, &frames, device);
+    let mut rng = rand_pcg::Pcg64Mcg::new(0x5eed);
+    let batch = Batch::from_samples(&samples, &BatchAugment::default(), &mut rng, device);
+    let e_cond_members = expected_reward(
+        predictor,
+        &batch,
+        Some(Tensor::cat(
+            vec![in_member, Tensor::ones([members, t, 1], device)],
+            2,
+        )),
+        reward,
+        STEP_SECS,
+    );
+    let mut sum = vec![0.0f32; rows * members];
+    for (r, (&row, &w)) in source.iter().zip(&weights).enumerate() {
+        sum[row as usize * members + r] = w;
+    }
+    let sum = Tensor::<2>::from_data(TensorData::new(sum, [rows, members]), device);
+    let e_marg = Tensor::<1>::from_data(TensorData::new(e_marg, [members]), device);
+    let psi_members = (e_cond_members.clone() - e_marg).reshape([members, 1]);
+    (
+        sum.clone().matmul(psi_members).reshape([rows]),
+        sum.matmul(e_cond_members.reshape([members, 1]))
+            .reshape([rows]),
+    )
+}
+
 /// Trajectories in B's frame → A's frame, per example (row `k · n + i` belongs to example `i`).
 ///
 /// # Shapes
@@ -348,17 +429,27 @@ pub(crate) fn b_to_a_frame(
     times: usize,
     device: &Device,
 ) -> Tensor<3> {
+    let frames: Vec<[f32; 3]> = (0..times)
+        .flat_map(|_| examples.iter().map(|e| e.a_from_b))
+        .collect();
+    to_frames(pred, &frames, device)
+}
+
+/// Each row's points moved by its frame `[heading difference, x, y]` (B's frame in the
+/// other agent's frame, as [`crate::a_from_b`]).
+///
+/// # Shapes
+/// `pred: [rows, T, 2]`, `frames: [rows]` `-> [rows, T, 2]`
+fn to_frames(pred: Tensor<3>, frames: &[[f32; 3]], device: &Device) -> Tensor<3> {
     let [rows, t, _] = pred.dims();
-    let col = |f: &dyn Fn(&Example) -> f32| {
-        let v: Vec<f32> = (0..times)
-            .flat_map(|_| examples.iter().map(|e| f(e)))
-            .collect();
+    let col = |f: &dyn Fn(&[f32; 3]) -> f32| {
+        let v: Vec<f32> = frames.iter().map(f).collect();
         Tensor::<1>::from_data(TensorData::new(v, [rows]), device).reshape([rows, 1])
     };
-    let cos = col(&|e| e.a_from_b[0].cos());
-    let sin = col(&|e| e.a_from_b[0].sin());
-    let tx = col(&|e| e.a_from_b[1]);
-    let ty = col(&|e| e.a_from_b[2]);
+    let cos = col(&|f| f[0].cos());
+    let sin = col(&|f| f[0].sin());
+    let tx = col(&|f| f[1]);
+    let ty = col(&|f| f[2]);
     let x = pred.clone().narrow(2, 0, 1).reshape([rows, t]);
     let y = pred.narrow(2, 1, 1).reshape([rows, t]);
     let xa = x.clone() * cos.clone() - y.clone() * sin.clone() + tx;

@@ -2,8 +2,8 @@
 //! `clap::ValueEnum` under the `clap` feature, serde names, `name()` and `FromStr`), so a
 //! front end needs no other crate.
 
-pub use scbg_courtesy::Reward;
 pub use scbg_courtesy::label::{LabelOptions, MarginalEstimate};
+pub use scbg_courtesy::{Audience, Reward, Weighting};
 pub use scbg_generator::{Courtesy, Threshold, Variant};
 pub use scbg_model::{Mode, Preset};
 pub use scbg_synth::Family;

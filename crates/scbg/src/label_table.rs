@@ -11,8 +11,9 @@ use arrow_schema::{DataType, Field, Schema};
 /// One labelled future of B for target A.
 ///
 /// The label table (one Parquet file per cache shard) has one row per future:
-/// `scenario_id, window_step, a_id, b_id, sample, psi, e_marg, e_cond, psi_true` (the last
-/// nullable: only synthetic scenes' ground-truth roles have it).
+/// `scenario_id, window_step, a_id, b_id, sample, psi, e_marg, e_cond, psi_true,
+/// audience_size` (`psi_true` nullable: only synthetic scenes' ground-truth roles have it;
+/// tables written before `audience_size` existed read back with 1).
 #[derive(Debug, Clone, PartialEq)]
 pub struct LabelRow {
     /// The scenario.
@@ -33,6 +34,9 @@ pub struct LabelRow {
     pub e_cond: f32,
     /// ψ_true of this future from the synthetic simulator's oracle (m/s), when known.
     pub psi_true: Option<f32>,
+    /// Agents whose reward ψ counts: 1 (A) for the paper's pair, A and B's neighbours for
+    /// the `neighbours` audience.
+    pub audience_size: u32,
 }
 
 fn schema() -> Arc<Schema> {
@@ -46,6 +50,7 @@ fn schema() -> Arc<Schema> {
         Field::new("e_marg", DataType::Float32, false),
         Field::new("e_cond", DataType::Float32, false),
         Field::new("psi_true", DataType::Float32, true),
+        Field::new("audience_size", DataType::UInt32, false),
     ]))
 }
 
@@ -81,6 +86,9 @@ pub fn write_label_table(path: &Path, rows: &[LabelRow]) -> anyhow::Result<()> {
         )),
         Arc::new(Float32Array::from(
             rows.iter().map(|r| r.psi_true).collect::<Vec<_>>(),
+        )),
+        Arc::new(UInt32Array::from(
+            rows.iter().map(|r| r.audience_size).collect::<Vec<_>>(),
         )),
     ];
     let batch = RecordBatch::try_new(schema.clone(), columns)?;
@@ -131,6 +139,11 @@ pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
             None => None,
             Some(_) => Some(column(&b, "psi_true", path)?),
         };
+        // Optional: tables written before audiences existed are toward A alone.
+        let size: Option<UInt32Array> = match b.column_by_name("audience_size") {
+            None => None,
+            Some(_) => Some(column(&b, "audience_size", path)?),
+        };
         for i in 0..b.num_rows() {
             rows.push(LabelRow {
                 scenario_id: ids.value(i).to_string(),
@@ -144,6 +157,7 @@ pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
                 psi_true: pt
                     .as_ref()
                     .and_then(|c| arrow_array::Array::is_valid(c, i).then(|| c.value(i))),
+                audience_size: size.as_ref().map_or(1, |c| c.value(i)),
             });
         }
     }

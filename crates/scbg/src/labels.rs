@@ -52,6 +52,7 @@ impl SceneLabels {
                     e_marg: role.labels.e_marg,
                     e_cond: role.labels.e_cond[k],
                     psi_true: psi_true.get(k).copied().flatten(),
+                    audience_size: role.labels.terms.len() as u32,
                 });
             }
         }
@@ -199,6 +200,10 @@ pub struct LabelSummary {
     pub marginal: scbg_courtesy::label::MarginalEstimate,
     /// Scale of the Gaussian part of B's sampled futures.
     pub sample_noise: f32,
+    /// Whose reward counts (A alone, or B's neighbours).
+    pub audience: scbg_courtesy::Audience,
+    /// Mean number of agents whose reward a logged future's ψ counts (1 for the pair).
+    pub audience_size_mean: f64,
     /// ψ of the logged futures.
     pub psi_logged: Spread,
     /// See [`within_pair_std`].
@@ -232,6 +237,13 @@ impl LabelSummary {
             reward: options.reward,
             marginal: options.marginal,
             sample_noise: options.sample_noise,
+            audience: options.audience,
+            audience_size_mean: rows
+                .iter()
+                .filter(|r| r.sample == 0)
+                .map(|r| f64::from(r.audience_size))
+                .sum::<f64>()
+                / logged.len().max(1) as f64,
             psi_logged: Spread {
                 mean: mean(&logged),
                 std: std(&logged),
@@ -250,7 +262,10 @@ impl LabelSummary {
                 .into_iter()
                 .map(|(f, (rho, n))| (f, FamilyRho { rho, n }))
                 .collect(),
-            fidelity: truth.and_then(|t| crate::fidelity::fidelity(rows, t)),
+            // The oracle scores ψ toward A alone: no fidelity for another audience.
+            fidelity: truth
+                .filter(|_| options.audience == scbg_courtesy::Audience::Pair)
+                .and_then(|t| crate::fidelity::fidelity(rows, t)),
         }
     }
 
@@ -271,6 +286,12 @@ impl LabelSummary {
                 "\nSpearman(ψ, latent courtesy) {family}: {} (n = {})",
                 r.rho.map_or("-".into(), |r| format!("{r:.3}")),
                 r.n
+            );
+        }
+        if self.audience != scbg_courtesy::Audience::Pair {
+            s += &format!(
+                "\naudience {:?}: {:.2} agents per ψ on average (A and B's neighbours); no ψ_true (the oracle scores A alone)",
+                self.audience, self.audience_size_mean
             );
         }
         if let Some(f) = &self.fidelity {
@@ -321,6 +342,7 @@ pub fn label_options(
         reward,
         marginal,
         sample_noise,
+        audience: Default::default(),
     })
 }
 
@@ -339,7 +361,9 @@ pub fn write_label_outputs(
     truth: Option<&[GroundTruth]>,
 ) -> anyhow::Result<(Vec<LabelRow>, LabelSummary)> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
-    let index = truth.map(crate::fidelity::TruthIndex::new);
+    let index = truth
+        .filter(|_| options.audience == scbg_courtesy::Audience::Pair)
+        .map(crate::fidelity::TruthIndex::new);
     let mut rows = Vec::new();
     let mut next = labelled.iter().peekable();
     for (si, range) in shard_ranges(dataset).into_iter().enumerate() {
@@ -432,7 +456,11 @@ pub fn label_cache(
         .map(crate::synth::read_ground_truth)
         .transpose()?;
     std::fs::create_dir_all(&run.out).with_context(|| format!("creating {}", run.out.display()))?;
-    let index = truth.as_deref().map(crate::fidelity::TruthIndex::new);
+    // The oracle scores ψ toward A alone: ψ_true only for the paper's pair audience.
+    let index = truth
+        .as_deref()
+        .filter(|_| run.options.audience == scbg_courtesy::Audience::Pair)
+        .map(crate::fidelity::TruthIndex::new);
     let mut rows = Vec::new();
     for (si, range) in shard_ranges(&dataset).into_iter().enumerate() {
         if si % run.num_shards != run.shard_index {

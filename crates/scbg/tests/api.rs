@@ -144,6 +144,7 @@ fn label_train_and_generate_through_the_library() {
     assert!(scbg::is_invalid_request(&bad));
 
     closed_loop_through_the_library(&model, &scene, t, dir.path());
+    courtesy_toward_neighbours(&predictors, &scene, t, dir.path());
 
     // A predictor folder is not a generator folder; an old generator.json is refused clearly.
     let err = generator::load_scbg(&p("model"), None).unwrap_err();
@@ -332,4 +333,108 @@ fn closed_loop_through_the_library(
         sim::rollout(model, &short, Some(t.a_id), &b(0.5), config, None),
         "fewer than 11 history steps",
     );
+}
+
+/// Issue 12, item 2: labels, a generator and generation with ψ toward B's neighbours.
+fn courtesy_toward_neighbours(
+    predictors: &generator::Predictors,
+    scene: &scbg_scene::Scene,
+    t: &scbg_synth::GroundTruth,
+    dir: &std::path::Path,
+) {
+    use scbg::choices::{Audience, Weighting};
+    let p = |s: &str| dir.join(s);
+    let mut options =
+        labels::label_options(2, Reward::AverageSpeed, MarginalEstimate::default(), 1.0).unwrap();
+    options.audience = Audience::parse("neighbours", 40.0, Weighting::Proximity).unwrap();
+    let (rows, summary) = labels::label_cache(
+        &labels::LabelRun {
+            model: p("model"),
+            data: p("cache"),
+            out: p("labels_neighbours"),
+            options,
+            seed: 0,
+            ground_truth: Some(p("synth").join(synth::GROUND_TRUTH_FILE)),
+            shard_index: 0,
+            num_shards: 1,
+        },
+        &Quiet,
+    )
+    .unwrap();
+    // The same roles and futures; the oracle (ψ toward A alone) does not score them.
+    assert_eq!(rows.len(), 16 * 2 * 3);
+    assert!(
+        rows.iter()
+            .all(|r| r.psi_true.is_none() && r.audience_size >= 1)
+    );
+    assert!(
+        rows.iter().any(|r| r.audience_size > 1),
+        "no role has a neighbour"
+    );
+    assert!(summary.fidelity.is_none() && summary.audience_size_mean > 1.0);
+    assert_eq!(summary.audience, options.audience);
+    assert_eq!(
+        labels::read_label_table(&p("labels_neighbours").join(labels::shard_table_name(0)))
+            .unwrap(),
+        rows
+    );
+    let examples = generator::examples_for_split(
+        &predictors.plain,
+        &predictors.ckpt,
+        &predictors.plain_device,
+        &p("cache"),
+        None,
+        options,
+        0,
+        false,
+        &Quiet,
+    )
+    .unwrap();
+    // Labels and training examples come from one path.
+    for e in examples.iter().take(4) {
+        let r = rows
+            .iter()
+            .find(|r| {
+                r.scenario_id == e.scenario_id
+                    && r.sample == 0
+                    && r.b_id == e.b.target_track_id
+                    && r.a_id == e.a.target_track_id
+            })
+            .unwrap();
+        assert_eq!((r.psi, r.audience_size as usize), (e.psi[0], e.terms.len()));
+    }
+    generator::train_variant(
+        predictors,
+        &examples,
+        &generator::VariantSettings {
+            epochs: 1,
+            batch_size: 8,
+            range_steps: 10,
+            ..generator::VariantSettings::new(Variant::Full, options)
+        },
+        &p("gen_neighbours"),
+        &Quiet,
+    )
+    .unwrap();
+    let model = generator::load_scbg(&p("gen_neighbours"), None).unwrap();
+    assert_eq!(model.scbg.labels.audience, options.audience);
+    let out = generate::generate(
+        &model,
+        scene,
+        t.a_id,
+        t.b_id,
+        &[Courtesy::Quantile(0.2), Courtesy::Quantile(0.8)],
+    )
+    .unwrap();
+    assert_eq!(out.trajectories.len(), 2);
+    // ψ of a given future toward the audience is the generation's achieved ψ.
+    for g in &out.trajectories {
+        let c = generate::courtesy(&model, scene, t.a_id, t.b_id, &g.world_xy_m).unwrap();
+        assert!(
+            (c.psi - g.achieved_psi).abs() <= 1e-4 * (1e-3 + g.achieved_psi.abs()),
+            "{} vs {}",
+            c.psi,
+            g.achieved_psi
+        );
+    }
 }

@@ -321,6 +321,50 @@ fn label_writes_parquet_and_resumes() {
         std::fs::metadata(&parquet).unwrap().modified().unwrap(),
         before
     );
+    // ψ toward B's neighbours (issue 12): same rows, each counting its audience; a bad radius
+    // is refused before anything is written.
+    let bad = crate::scbg(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels_bad"),
+        "--audience",
+        "neighbours",
+        "--audience-radius-m",
+        "0",
+    ]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("radius 0"), "{err}");
+    assert!(!dir.path().join("labels_bad").exists());
+    scbg_ok(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels_neighbours"),
+        "--samples",
+        "3",
+        "--audience",
+        "neighbours",
+        "--audience-weighting",
+        "proximity",
+        "--ground-truth",
+        &gt,
+    ]);
+    let summary: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("labels_neighbours/summary.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(summary["rows"], 20 * 2 * 4);
+    assert_eq!(summary["audience"]["kind"], "neighbours", "{summary}");
+    assert_eq!(summary["audience"]["weighting"], "proximity", "{summary}");
+    assert!(summary["audience_size_mean"].as_f64().unwrap() >= 1.0);
+    assert!(summary["fidelity"].is_null(), "{summary}");
 }
 
 #[test]
