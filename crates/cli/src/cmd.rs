@@ -256,7 +256,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The labelling options of `--marginal` and `--sample-noise`.
+/// The closed-loop settings of `sim` and `eval sim`.
 fn loop_config(a: &crate::cli::LoopArgs, others: scbg::sim::OthersMode) -> scbg::sim::SimConfig {
     scbg::sim::SimConfig {
         replan_every: a.replan_every,
