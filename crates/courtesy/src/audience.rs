@@ -73,6 +73,23 @@ impl Audience {
         }
     }
 
+    /// A short name: `pair`, or `neighbours <radius> m <weighting>` (e.g. `neighbours 30 m sum`).
+    pub fn describe(self) -> String {
+        match self {
+            Self::Pair => "pair".into(),
+            Self::Neighbours {
+                radius_m,
+                weighting,
+            } => format!(
+                "neighbours {radius_m} m {}",
+                match weighting {
+                    Weighting::Sum => "sum",
+                    Weighting::Proximity => "proximity",
+                }
+            ),
+        }
+    }
+
     /// A member's weight at `distance_m` from B.
     pub fn weight(self, distance_m: f64) -> f32 {
         match self {

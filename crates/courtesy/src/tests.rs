@@ -244,6 +244,8 @@ fn audience_weights_names_and_members() {
     assert_eq!(sum.weight(15.0), 1.0);
     let prox = Audience::parse("neighbours", 20.0, Weighting::Proximity).unwrap();
     assert_eq!(prox.weight(0.0), 1.0);
+    assert_eq!(prox.describe(), "neighbours 20 m proximity");
+    assert_eq!(Audience::Pair.describe(), "pair");
     assert!((prox.weight(20.0) - 0.5).abs() < 1e-7);
     assert!(prox.weight(5.0) > prox.weight(10.0));
     for bad in [0.0, -3.0, f32::NAN, f32::INFINITY] {

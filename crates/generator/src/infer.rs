@@ -106,7 +106,8 @@ pub struct Generated {
     pub psi_high: f32,
     /// J_φ of the generated future: what the predictor expects it does to A.
     pub achieved_psi: f32,
-    /// E[r(Y_A) | x, ŷ_B].
+    /// E[r(Y_A) | x, ŷ_B] (toward the model's audience: the weighted sum over B's neighbours
+    /// for a model labelled with [`scbg_courtesy::Audience::Neighbours`]).
     pub a_expected_reward_conditional: f32,
     /// E[r(Y_A) | x].
     pub a_expected_reward_marginal: f32,
@@ -353,7 +354,7 @@ impl Scbg {
 pub struct CourtesyOf {
     /// ψ = E[r(Y_A) | x, y_B] − E[r(Y_A) | x].
     pub psi: f32,
-    /// E[r(Y_A) | x, y_B].
+    /// E[r(Y_A) | x, y_B] (toward the model's audience, as [`Generated`]).
     pub a_expected_reward_conditional: f32,
     /// E[r(Y_A) | x], estimated as in the labels.
     pub a_expected_reward_marginal: f32,

@@ -323,6 +323,13 @@ impl Model {
         self.inner.checkpoint.variant.name().to_string()
     }
 
+    /// Whose reward the model's courtesy counts: `pair` (A alone) or
+    /// `neighbours <radius> m <sum|proximity>`.
+    #[getter]
+    fn audience(&self) -> String {
+        self.inner.checkpoint.labels.audience.describe()
+    }
+
     #[pyo3(signature = (scene, a, b, quantile=None, psi=None))]
     fn generate<'py>(
         &self,
@@ -448,7 +455,11 @@ impl Model {
     }
 
     fn __repr__(&self) -> String {
-        format!("Model(variant={:?})", self.variant())
+        format!(
+            "Model(variant={:?}, audience={:?})",
+            self.variant(),
+            self.audience()
+        )
     }
 }
 

@@ -13,6 +13,7 @@ def _pair(scene):
 def test_generate_and_courtesy(trained):
     model, file = trained
     assert model.variant == "full"
+    assert model.audience == "pair"
     scene = scbg.read_scenarios(file)[0]
     a, b = _pair(scene)
     low = model.generate(scene, a, b, quantile=0.1)

@@ -18,6 +18,9 @@ pub struct Health {
     pub status: String,
     /// The generator variant loaded.
     pub variant: String,
+    /// Whose reward the loaded model's courtesy counts: `pair` (A alone, the paper) or
+    /// `neighbours <radius> m <sum|proximity>` (A and the vehicles near B).
+    pub audience: String,
     /// Scenarios held.
     pub scenarios: usize,
     /// Open closed-loop sessions.
@@ -174,7 +177,8 @@ pub struct CourtesyRequest {
 pub struct CourtesyResponse {
     /// ψ = E[r(Y_A) | x, y_B] − E[r(Y_A) | x].
     pub psi: f32,
-    /// E[r(Y_A) | x, y_B].
+    /// E[r(Y_A) | x, y_B] (for a model trained toward B's neighbours: the weighted sum over
+    /// them; see `/healthz`'s `audience`).
     pub a_expected_reward_conditional: f32,
     /// E[r(Y_A) | x].
     pub a_expected_reward_marginal: f32,

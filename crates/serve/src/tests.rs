@@ -192,6 +192,7 @@ async fn generate_courtesy_and_descriptions() {
     let (status, health) = json_call(&app, "GET", "/healthz", Value::Null).await;
     assert_eq!(status, StatusCode::OK);
     assert_eq!(health["status"], "ok");
+    assert_eq!(health["audience"], "pair");
     let (status, doc) = json_call(&app, "GET", "/openapi.json", Value::Null).await;
     assert_eq!(status, StatusCode::OK);
     assert!(doc["openapi"].as_str().unwrap().starts_with("3.1"));

@@ -79,6 +79,10 @@ class Model:
     def __init__(self, path: str, predictor: Optional[str] = None) -> None: ...
     @property
     def variant(self) -> str: ...
+    @property
+    def audience(self) -> str:
+        """Whose reward the courtesy counts: ``pair`` (A alone) or ``neighbours <r> m <sum|proximity>``."""
+        ...
     def generate(
         self,
         scene: Scene,
