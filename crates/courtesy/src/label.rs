@@ -353,6 +353,51 @@ pub struct LabelledRole {
     pub labels: PairLabels,
 }
 
+/// Labels the role (A = track `ia`, B = track `ib`) of `window` from its standardised samples
+/// (A's conditioned on B, B's marginal): B's marginal mixture, B's audience
+/// ([`LabelOptions::audience`]) and ψ of B's logged and sampled futures. The one path of
+/// [`label_scene`] and of the generator's pair context at inference.
+#[allow(clippy::too_many_arguments)]
+pub fn label_built_role(
+    model: &Multipath,
+    builder: &mut SampleBuilder<'_>,
+    stats: &FeatureStats,
+    window: &Window,
+    (ia, a): (usize, AgentSample),
+    (ib, b): (usize, AgentSample),
+    options: LabelOptions,
+    rng: &mut impl Rng,
+    device: &Device,
+) -> LabelledRole {
+    let scene = builder.scene();
+    let mixture = marginal_mixtures(model, &[&b], device).remove(0);
+    let others = audience_members(builder, scene, stats, window, ia, ib, options.audience);
+    let a_weight = options
+        .audience
+        .weight(Audience::distance_between(scene, window, ia, ib));
+    let labels = label_role(
+        model,
+        (&a, a_weight),
+        &others,
+        &b,
+        &mixture,
+        options,
+        rng,
+        device,
+    );
+    LabelledRole {
+        window_step: window.current_step,
+        a_index: ia,
+        b_index: ib,
+        a_id: scene.tracks[ia].id,
+        b_id: scene.tracks[ib].id,
+        a,
+        b,
+        others,
+        labels,
+    }
+}
+
 /// The labelling stream of scene `index` under `seed` (the project's one seed mixer): every
 /// front end labels scene `i` with a generator seeded by this, so its labels do not depend on
 /// which command labels it, or which other scenes it labels.
@@ -385,33 +430,17 @@ pub fn label_scene(
                 };
                 stats.normalize(&mut a);
                 stats.normalize(&mut b);
-                let mixture = marginal_mixtures(model, &[&b], device).remove(0);
-                let others =
-                    audience_members(&mut builder, scene, stats, w, ia, ib, options.audience);
-                let a_weight = options
-                    .audience
-                    .weight(Audience::distance_between(scene, w, ia, ib));
-                let labels = label_role(
+                out.push(label_built_role(
                     model,
-                    (&a, a_weight),
-                    &others,
-                    &b,
-                    &mixture,
+                    &mut builder,
+                    stats,
+                    w,
+                    (ia, a),
+                    (ib, b),
                     options,
                     rng,
                     device,
-                );
-                out.push(LabelledRole {
-                    window_step: w.current_step,
-                    a_index: ia,
-                    b_index: ib,
-                    a_id: scene.tracks[ia].id,
-                    b_id: scene.tracks[ib].id,
-                    a,
-                    b,
-                    others,
-                    labels,
-                });
+                ));
             }
         }
     }

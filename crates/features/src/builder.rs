@@ -76,6 +76,11 @@ impl<'a> SampleBuilder<'a> {
         }
     }
 
+    /// The scene the samples come from.
+    pub fn scene(&self) -> &'a PreparedScene {
+        self.scene
+    }
+
     /// Makes the per-window state that of `window`.
     fn enter_window(&mut self, window: &Window) {
         if self.window == Some(*window) {

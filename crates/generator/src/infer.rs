@@ -5,10 +5,7 @@
 
 use burn::tensor::Device;
 use rand::SeedableRng;
-use scbg_courtesy::Audience;
-use scbg_courtesy::label::{
-    LabelOptions, LabelledRole, audience_members, label_role, marginal_mixtures,
-};
+use scbg_courtesy::label::{LabelOptions, label_built_role};
 use scbg_features::{
     FeatureConfig, FeatureStats, PreparedScene, SampleBuilder, SampleError, Window,
 };
@@ -157,32 +154,18 @@ impl Scbg {
         self.stats.normalize(&mut b);
         // E[r(Y_A) | x] estimated as in the labels (B's sampled futures, fixed seed), toward
         // the audience the generator was trained for.
-        let mixture = marginal_mixtures(&self.predictor, &[&b], device).remove(0);
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0x5cb6);
-        let audience = self.labels.audience;
-        let others = audience_members(&mut builder, scene, &self.stats, window, ia, ib, audience);
-        let a_weight = audience.weight(Audience::distance_between(scene, window, ia, ib));
-        let labels = label_role(
+        let role = label_built_role(
             &self.predictor,
-            (&a, a_weight),
-            &others,
-            &b,
-            &mixture,
+            &mut builder,
+            &self.stats,
+            window,
+            (ia, a),
+            (ib, b),
             self.labels,
             &mut rng,
             device,
         );
-        let role = LabelledRole {
-            window_step: window.current_step,
-            a_index: ia,
-            b_index: ib,
-            a_id,
-            b_id,
-            a,
-            b,
-            others,
-            labels,
-        };
         let mut example =
             Example::from_role(scene.scenario_id.clone(), role, &self.predictor, device);
         example.futures_b.clear();
