@@ -639,6 +639,9 @@ pub struct BenchIngestArgs {
     /// Repeat the file list this many times, to time more than a blink.
     #[arg(long, default_value_t = 20)]
     pub repeat: usize,
+    /// Time only these stages (repeatable; default: all), e.g. to profile one of them.
+    #[arg(long, value_enum)]
+    pub stage: Vec<scbg::bench::IngestStage>,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -87,7 +87,10 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             )?;
         }
         Command::Bench(BenchCommand::Ingest(a)) => {
-            print!("{}", scbg::bench::ingest(&a.input, a.repeat)?.to_text());
+            print!(
+                "{}",
+                scbg::bench::ingest(&a.input, a.repeat, &a.stage)?.to_text()
+            );
         }
         Command::Bench(BenchCommand::Synth(a)) => {
             for (threads, per_s, kb) in scbg::bench::synth(a.scenarios)? {

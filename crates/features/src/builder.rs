@@ -6,8 +6,8 @@ use scbg_scene::Pose2;
 use crate::prepared::PreparedScene;
 use crate::road_index::{Scratch, SegmentIndex, total_order_bits};
 use crate::sample::{
-    AGENT_FEATURES, AgentFrame, AgentSample, DIFF_FEATURES, FeatureConfig, ROAD_FEATURES,
-    SampleError, closest_point_to_origin, future_of, track_history,
+    AGENT_FEATURES, AgentFrame, AgentSample, DIFF_FEATURES, FeatureConfig, HistoryStep,
+    ROAD_FEATURES, SampleError, closest_point_to_origin, future_of, history_steps, track_rows,
 };
 use crate::window::Window;
 
@@ -34,6 +34,8 @@ pub struct SampleBuilder<'a> {
     /// Per track, its position at its latest valid history step of `window` (the ranking
     /// key of other agents; the same for every target of a window).
     latest_history_xy: Vec<Option<[f32; 2]>>,
+    /// Per track, its `history_steps` steps of `window` in the scene frame (track-major).
+    steps: Vec<HistoryStep>,
     /// Per track, whether it is a member of one of `window`'s pairs.
     pair_member: Vec<bool>,
     /// Marginal samples of `window` kept for conditioned samples of the same target.
@@ -71,6 +73,7 @@ impl<'a> SampleBuilder<'a> {
             scratch: Scratch::default(),
             window: None,
             latest_history_xy: Vec::new(),
+            steps: Vec::new(),
             pair_member: Vec::new(),
             marginals: Vec::new(),
         }
@@ -95,6 +98,10 @@ impl<'a> SampleBuilder<'a> {
                 .find(|&s| t.valid.get(s).copied().unwrap_or(false))?;
             Some([t.x_m[last], t.y_m[last]])
         }));
+        self.steps.clear();
+        for t in &scene.tracks {
+            history_steps(t, window, history, &mut self.steps);
+        }
         self.pair_member.clear();
         self.pair_member.resize(scene.tracks.len(), false);
         let pairs = scene
@@ -111,6 +118,12 @@ impl<'a> SampleBuilder<'a> {
         }
         self.marginals.clear();
         self.window = Some(*window);
+    }
+
+    /// Track `i`'s history steps of the current window.
+    fn track_steps(&self, i: usize) -> &[HistoryStep] {
+        let h = self.config.history_steps;
+        &self.steps[i * h..(i + 1) * h]
     }
 
     /// The features of `target` in `window`, conditioned on `condition`'s future when given.
@@ -174,10 +187,9 @@ impl<'a> SampleBuilder<'a> {
 
         let mut target_history = vec![0.0; history * AGENT_FEATURES];
         let mut target_diffs = vec![0.0; (history - 1) * DIFF_FEATURES];
-        track_history(
+        track_rows(
             track,
-            window,
-            history,
+            self.track_steps(target),
             &frame,
             &mut target_history,
             &mut target_diffs,
@@ -209,10 +221,9 @@ impl<'a> SampleBuilder<'a> {
         let mut others_diffs = vec![0.0; max_others * ds];
         let mut others_valid = vec![false; max_others];
         for (k, i) in others.iter().map(|&key| key_index(key)).enumerate() {
-            track_history(
+            track_rows(
                 &scene.tracks[i],
-                window,
-                history,
+                self.track_steps(i),
                 &frame,
                 &mut others_history[k * hs..(k + 1) * hs],
                 &mut others_diffs[k * ds..(k + 1) * ds],
@@ -300,7 +311,7 @@ impl<'a> SampleBuilder<'a> {
                     hist.copy_from_slice(&m.sample.others_history[j * hs..(j + 1) * hs]);
                     diffs.copy_from_slice(&m.sample.others_diffs[j * ds..(j + 1) * ds]);
                 }
-                None => track_history(&scene.tracks[i], window, history, &m.frame, hist, diffs),
+                None => track_rows(&scene.tracks[i], self.track_steps(i), &m.frame, hist, diffs),
             }
             s.others_valid[k] = true;
         }
@@ -363,6 +374,7 @@ mod tests {
     use super::*;
     use crate::prepared::{InteractingPair, PairSource};
     use crate::sample::tests::{scene, straight_track};
+    use crate::sample::track_history;
 
     /// A scene of `n` tracks at pseudo-random places, some with gaps in their history, and
     /// one pair in its only window.

@@ -158,11 +158,48 @@ fn type_index(t: ObjectType) -> usize {
     t.code() as usize
 }
 
+/// One history step of a track in the scene frame: what [`track_rows`] transforms into a
+/// target's frame. The same for every target of a window, so [`SampleBuilder`] makes them once
+/// per window (speed's square root included).
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct HistoryStep {
+    pub(crate) x_m: f32,
+    pub(crate) y_m: f32,
+    pub(crate) heading_rad: f32,
+    pub(crate) speed_mps: f32,
+    pub(crate) valid: bool,
+}
+
+/// `track`'s `history` steps of `window` (invalid before the scene's start).
+pub(crate) fn history_steps(
+    track: &PreparedTrack,
+    window: &Window,
+    history: usize,
+    out: &mut Vec<HistoryStep>,
+) {
+    out.extend((0..history).map(|h| {
+        match window
+            .history_step(h, history)
+            .filter(|&s| track.valid.get(s).copied().unwrap_or(false))
+        {
+            Some(s) => HistoryStep {
+                x_m: track.x_m[s],
+                y_m: track.y_m[s],
+                heading_rad: track.heading_rad[s],
+                speed_mps: track.speed_mps(s),
+                valid: true,
+            },
+            None => HistoryStep::default(),
+        }
+    }));
+}
+
 /// Fills `[history, 13]` and `[history - 1, 11]` arrays for one track.
 ///
 /// Per history step: x, y, yaw, speed, width, length, valid, type one-hot, is_sdc (zeros where
 /// the track is invalid); per pair of consecutive steps: Δx, Δy, Δyaw (wrapped), Δspeed and
 /// valid where both are valid, then the type one-hot and is_sdc.
+#[cfg(test)]
 pub(crate) fn track_history(
     track: &PreparedTrack,
     window: &Window,
@@ -171,24 +208,29 @@ pub(crate) fn track_history(
     hist: &mut [f32],
     diffs: &mut [f32],
 ) {
+    let mut steps = Vec::new();
+    history_steps(track, window, history, &mut steps);
+    track_rows(track, &steps, frame, hist, diffs);
+}
+
+/// [`track_history`] from the track's [`history_steps`].
+pub(crate) fn track_rows(
+    track: &PreparedTrack,
+    steps: &[HistoryStep],
+    frame: &AgentFrame,
+    hist: &mut [f32],
+    diffs: &mut [f32],
+) {
     let one_hot = type_index(track.object_type);
     let is_sdc = f32::from(u8::from(track.is_sdc));
     // x, y, yaw, speed of the previous step where it was valid.
     let mut prev: Option<[f32; 4]> = None;
-    for h in 0..history {
+    for (h, st) in steps.iter().enumerate() {
         let row = &mut hist[h * AGENT_FEATURES..(h + 1) * AGENT_FEATURES];
         row.fill(0.0);
-        let step = window
-            .history_step(h, history)
-            .filter(|&s| track.valid.get(s).copied().unwrap_or(false));
-        let cur = step.map(|s| {
-            let (x, y) = frame.point(track.x_m[s], track.y_m[s]);
-            let cur = [
-                x,
-                y,
-                frame.heading(track.heading_rad[s]),
-                track.speed_mps(s),
-            ];
+        let cur = st.valid.then(|| {
+            let (x, y) = frame.point(st.x_m, st.y_m);
+            let cur = [x, y, frame.heading(st.heading_rad), st.speed_mps];
             row[..4].copy_from_slice(&cur);
             row[4] = track.width_m;
             row[5] = track.length_m;

@@ -150,9 +150,27 @@ impl IngestBench {
     }
 }
 
+/// A stage of [`ingest`]; each is timed on its own (a profile of one stage runs only it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum IngestStage {
+    /// Decode every scenario.
+    Decode,
+    /// Decode and build the prepared cache record (`scbg data prepare`).
+    Prepare,
+    /// Decode, prepare and build every feature sample.
+    Features,
+}
+
 /// Decode and decode + features throughput over `inputs` (default: every file of the shared
-/// real-data folder) repeated `repeat` times, at 1 thread and at every thread.
-pub fn ingest(inputs_given: &[String], repeat: usize) -> anyhow::Result<IngestBench> {
+/// real-data folder) repeated `repeat` times, at 1 thread and at every thread, for each of
+/// `stages` (empty: all three).
+pub fn ingest(
+    inputs_given: &[String],
+    repeat: usize,
+    stages: &[IngestStage],
+) -> anyhow::Result<IngestBench> {
+    let wanted = |s: IngestStage| stages.is_empty() || stages.contains(&s);
     let files = if inputs_given.is_empty() {
         let dir = scbg_womd::fixtures::real_data_dir()
             .context("no --input and no shared real data folder")?;
@@ -181,23 +199,32 @@ pub fn ingest(inputs_given: &[String], repeat: usize) -> anyhow::Result<IngestBe
     };
     let mb_per_s = |secs: f64| (raw_bytes * repeat as u64) as f64 / secs / 1e6;
     for threads in [1, all] {
-        let t = Instant::now();
-        let scenes: usize = run_in_pool(threads, || {
-            work.par_iter()
-                .map(decode_file)
-                .collect::<anyhow::Result<Vec<_>>>()
-        })??
-        .iter()
-        .sum();
-        let secs = t.elapsed().as_secs_f64();
-        out.rows.push(IngestRow {
-            stage: "decode",
-            threads,
-            scenarios_per_s: scenes as f64 / secs,
-            samples_per_s: None,
-            raw_mb_per_s: mb_per_s(secs),
-        });
+        if wanted(IngestStage::Decode) {
+            let t = Instant::now();
+            let scenes: usize = run_in_pool(threads, || {
+                work.par_iter()
+                    .map(decode_file)
+                    .collect::<anyhow::Result<Vec<_>>>()
+            })??
+            .iter()
+            .sum();
+            let secs = t.elapsed().as_secs_f64();
+            out.rows.push(IngestRow {
+                stage: "decode",
+                threads,
+                scenarios_per_s: scenes as f64 / secs,
+                samples_per_s: None,
+                raw_mb_per_s: mb_per_s(secs),
+            });
+        }
         for (stage, samples_too) in [("decode+prepare", false), ("decode+features", true)] {
+            if !wanted(if samples_too {
+                IngestStage::Features
+            } else {
+                IngestStage::Prepare
+            }) {
+                continue;
+            }
             let t = Instant::now();
             let results = run_in_pool(threads, || {
                 work.par_iter()
