@@ -46,7 +46,18 @@ pub(crate) struct SegmentIndex {
 struct Listed {
     a: [f32; 2],
     b: [f32; 2],
+    /// The segment's index, with [`MULTI_CELL`] set when it is listed in more than one cell
+    /// (only those can be met twice in a query).
     index: u32,
+}
+
+/// The flag of [`Listed::index`] for a segment listed in several cells.
+const MULTI_CELL: u32 = 1 << 31;
+
+impl Listed {
+    fn segment(&self) -> u32 {
+        self.index & !MULTI_CELL
+    }
 }
 
 /// A candidate: squared distance of its closest point, then index (the ranking order), packed
@@ -150,6 +161,8 @@ impl SegmentIndex {
 
     /// An index over the segments `seg_a[i]`–`seg_b[i]` of kinds `kind[i]`.
     fn new(seg_a: Vec<[f32; 2]>, seg_b: Vec<[f32; 2]>, kind: Vec<RoadKind>) -> Self {
+        // (2³¹ segments would be tens of GB of map; the index's top bit is a flag.)
+        debug_assert!(seg_a.len() < MULTI_CELL as usize);
         let finite = |i: usize| seg_a[i].iter().chain(&seg_b[i]).all(|v| v.is_finite());
         let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
         for i in (0..seg_a.len()).filter(|&i| finite(i)) {
@@ -203,13 +216,18 @@ impl SegmentIndex {
         ];
         for i in (0..seg_a.len()).filter(|&i| finite(i)) {
             let (xs, ys) = bbox(i);
-            for y in ys {
+            for y in ys.clone() {
                 for x in xs.clone() {
                     let slot = &mut fill[y * nx + x];
+                    let multi = if xs.clone().count() * ys.clone().count() > 1 {
+                        MULTI_CELL
+                    } else {
+                        0
+                    };
                     cell_segments[*slot as usize] = Listed {
                         a: seg_a[i],
                         b: seg_b[i],
-                        index: i as u32,
+                        index: i as u32 | multi,
                     };
                     *slot += 1;
                 }
@@ -308,8 +326,8 @@ impl SegmentIndex {
             found.extend(
                 self.cell_segments
                     .iter()
-                    .filter(|l| fresh(l.index))
-                    .filter_map(|l| candidate(l.a, l.b, l.index, origin, r2)),
+                    .filter(|l| fresh(l.segment()))
+                    .filter_map(|l| candidate(l.a, l.b, l.segment(), origin, r2)),
             );
         } else {
             // A query outside the grid is moved to the cell just outside it: its offsets'
@@ -341,11 +359,12 @@ impl SegmentIndex {
                         continue;
                     }
                 }
+                // Only segments listed in several cells can have been met before.
                 found.extend(
                     segments
                         .iter()
-                        .filter(|l| fresh(l.index))
-                        .filter_map(|l| candidate(l.a, l.b, l.index, origin, r2))
+                        .filter(|l| l.index & MULTI_CELL == 0 || fresh(l.segment()))
+                        .filter_map(|l| candidate(l.a, l.b, l.segment(), origin, r2))
                         .filter(|&k| k <= bound),
                 );
                 // Tighten the bound each time the candidates have doubled since the last time.
