@@ -311,7 +311,12 @@ impl<'a> SampleBuilder<'a> {
                     hist.copy_from_slice(&m.sample.others_history[j * hs..(j + 1) * hs]);
                     diffs.copy_from_slice(&m.sample.others_diffs[j * ds..(j + 1) * ds]);
                 }
-                None => track_rows(&scene.tracks[i], self.track_steps(i), &m.frame, hist, diffs),
+                None => {
+                    // (The row held another agent.)
+                    hist.fill(0.0);
+                    diffs.fill(0.0);
+                    track_rows(&scene.tracks[i], self.track_steps(i), &m.frame, hist, diffs);
+                }
             }
             s.others_valid[k] = true;
         }

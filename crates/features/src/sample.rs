@@ -194,7 +194,7 @@ pub(crate) fn history_steps(
     }));
 }
 
-/// Fills `[history, 13]` and `[history - 1, 11]` arrays for one track.
+/// Fills zeroed `[history, 13]` and `[history - 1, 11]` arrays for one track.
 ///
 /// Per history step: x, y, yaw, speed, width, length, valid, type one-hot, is_sdc (zeros where
 /// the track is invalid); per pair of consecutive steps: Δx, Δy, Δyaw (wrapped), Δspeed and
@@ -213,7 +213,8 @@ pub(crate) fn track_history(
     track_rows(track, &steps, frame, hist, diffs);
 }
 
-/// [`track_history`] from the track's [`history_steps`].
+/// [`track_history`] from the track's [`history_steps`], into zeroed `hist` and `diffs`
+/// (only the non-zero features are written).
 pub(crate) fn track_rows(
     track: &PreparedTrack,
     steps: &[HistoryStep],
@@ -227,7 +228,6 @@ pub(crate) fn track_rows(
     let mut prev: Option<[f32; 4]> = None;
     for (h, st) in steps.iter().enumerate() {
         let row = &mut hist[h * AGENT_FEATURES..(h + 1) * AGENT_FEATURES];
-        row.fill(0.0);
         let cur = st.valid.then(|| {
             let (x, y) = frame.point(st.x_m, st.y_m);
             let cur = [x, y, frame.heading(st.heading_rad), st.speed_mps];
@@ -241,7 +241,6 @@ pub(crate) fn track_rows(
         });
         if h > 0 {
             let d = &mut diffs[(h - 1) * DIFF_FEATURES..h * DIFF_FEATURES];
-            d.fill(0.0);
             if let (Some(p), Some(c)) = (prev, cur) {
                 d[0] = c[0] - p[0];
                 d[1] = c[1] - p[1];
