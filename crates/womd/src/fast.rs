@@ -110,21 +110,58 @@ fn map_feature(mut r: Reader<'_>) -> Option<proto::MapFeature> {
     })
 }
 
-/// A `LaneCenter`: its points here (field 8), the rest by prost.
-fn lane(body: Reader<'_>) -> Option<proto::LaneCenter> {
-    let rest = proto::LaneCenterRest::decode(body.buf).ok()?;
+/// A `LaneCenter` in one pass: scalars, points and lane ids here, the (small) neighbour and
+/// boundary messages by prost. A field number or wire type outside the schema is left to
+/// prost (`None`).
+fn lane(mut r: Reader<'_>) -> Option<proto::LaneCenter> {
     // A point takes 29 bytes (key, length, 27): an upper bound on the count.
-    let mut points = Vec::with_capacity(body.buf.len() / 29);
-    let mut r = body;
+    let mut lane = proto::LaneCenter {
+        polyline: Vec::with_capacity(r.buf.len() / 29),
+        ..Default::default()
+    };
     while !r.is_empty() {
         let (field, wire) = r.key()?;
         match (field, wire) {
-            (8, 2) => points.push(map_point(r.len_delimited()?)?),
-            (8, _) => return None,
-            _ => r.skip(wire)?,
+            (1, 1) => lane.speed_limit_mph = Some(r.f64()?),
+            (2, 0) => lane.lane_type = Some(r.varint()? as i32),
+            (3, 0) => lane.interpolating = Some(r.varint()? != 0),
+            (8, 2) => lane.polyline.push(map_point(r.len_delimited()?)?),
+            (9 | 10, 0) => {
+                let id = r.varint()? as i64;
+                lane_ids(&mut lane, field).push(id);
+            }
+            (9 | 10, 2) => {
+                let mut packed = r.len_delimited()?;
+                let ids = lane_ids(&mut lane, field);
+                while !packed.is_empty() {
+                    ids.push(packed.varint()? as i64);
+                }
+            }
+            (11, 2) => lane
+                .left_neighbors
+                .push(proto::LaneNeighbor::decode(r.len_delimited()?.buf).ok()?),
+            (12, 2) => lane
+                .right_neighbors
+                .push(proto::LaneNeighbor::decode(r.len_delimited()?.buf).ok()?),
+            (13, 2) => lane
+                .left_boundaries
+                .push(proto::BoundarySegment::decode(r.len_delimited()?.buf).ok()?),
+            (14, 2) => lane
+                .right_boundaries
+                .push(proto::BoundarySegment::decode(r.len_delimited()?.buf).ok()?),
+            _ => return None,
         }
     }
-    Some(rest.with_polyline(points))
+    Some(lane)
+}
+
+/// `entry_lanes` (field 9) or `exit_lanes` (10).
+fn lane_ids(lane: &mut proto::LaneCenter, field: u64) -> &mut Vec<i64> {
+    if field == 9 {
+        &mut lane.entry_lanes
+    } else {
+        &mut lane.exit_lanes
+    }
 }
 
 /// A `RoadLine` or `RoadEdge`: type (field 1) and points (field 2).
@@ -418,6 +455,42 @@ mod tests {
                 assert_same(&b);
             }
         }
+    }
+
+    #[test]
+    fn lane_ids_packed_and_unpacked_agree_with_prost() {
+        // entry_lanes (9) unpacked twice, exit_lanes (10) packed, lane_type, one point.
+        let mut lane = vec![0x48, 5, 0x48, 6, 0x52, 2, 7, 8, 0x10, 1, 0x42, 27, 0x09];
+        lane.extend(1.0f64.to_le_bytes());
+        lane.push(0x11);
+        lane.extend(2.0f64.to_le_bytes());
+        lane.push(0x19);
+        lane.extend(0.0f64.to_le_bytes());
+        let mut feature = vec![0x08, 42, 0x1a, lane.len() as u8];
+        feature.extend(&lane);
+        let mut data = vec![0x42, feature.len() as u8];
+        data.extend(&feature);
+        data.extend([0x2a, 1, b'x']);
+        assert!(try_fast(&data).is_some());
+        assert_same(&data);
+        let (scenario, _) = decode_parts(&data).unwrap();
+        let Some(proto::MapFeatureData::Lane(l)) = &scenario.map_features[0].feature_data else {
+            panic!("a lane");
+        };
+        assert_eq!(
+            (&l.entry_lanes[..], &l.exit_lanes[..]),
+            (&[5, 6][..], &[7, 8][..])
+        );
+        // A field outside the schema (15) leaves the scenario to prost, with the same result.
+        let mut odd = lane.clone();
+        odd.extend([0x78, 1]);
+        let mut feature = vec![0x08, 42, 0x1a, odd.len() as u8];
+        feature.extend(&odd);
+        let mut data = vec![0x42, feature.len() as u8];
+        data.extend(&feature);
+        data.extend([0x2a, 1, b'x']);
+        assert!(try_fast(&data).is_none());
+        assert_same(&data);
     }
 
     #[test]

@@ -253,57 +253,6 @@ pub struct LaneCenter {
     pub right_boundaries: Vec<BoundarySegment>,
 }
 
-/// `LaneCenter` without its polyline (field 8 is skipped unread): what prost decodes while
-/// [`crate::fast`] reads the points.
-#[derive(Clone, PartialEq, prost::Message)]
-pub struct LaneCenterRest {
-    /// See [`LaneCenter::speed_limit_mph`].
-    #[prost(double, optional, tag = "1")]
-    pub speed_limit_mph: Option<f64>,
-    /// See [`LaneCenter::lane_type`].
-    #[prost(int32, optional, tag = "2")]
-    pub lane_type: Option<i32>,
-    /// See [`LaneCenter::interpolating`].
-    #[prost(bool, optional, tag = "3")]
-    pub interpolating: Option<bool>,
-    /// See [`LaneCenter::entry_lanes`].
-    #[prost(int64, repeated, packed = "true", tag = "9")]
-    pub entry_lanes: Vec<i64>,
-    /// See [`LaneCenter::exit_lanes`].
-    #[prost(int64, repeated, packed = "true", tag = "10")]
-    pub exit_lanes: Vec<i64>,
-    /// See [`LaneCenter::left_neighbors`].
-    #[prost(message, repeated, tag = "11")]
-    pub left_neighbors: Vec<LaneNeighbor>,
-    /// See [`LaneCenter::right_neighbors`].
-    #[prost(message, repeated, tag = "12")]
-    pub right_neighbors: Vec<LaneNeighbor>,
-    /// See [`LaneCenter::left_boundaries`].
-    #[prost(message, repeated, tag = "13")]
-    pub left_boundaries: Vec<BoundarySegment>,
-    /// See [`LaneCenter::right_boundaries`].
-    #[prost(message, repeated, tag = "14")]
-    pub right_boundaries: Vec<BoundarySegment>,
-}
-
-impl LaneCenterRest {
-    /// The whole `LaneCenter` with this polyline.
-    pub fn with_polyline(self, polyline: Vec<MapPoint>) -> LaneCenter {
-        LaneCenter {
-            speed_limit_mph: self.speed_limit_mph,
-            lane_type: self.lane_type,
-            interpolating: self.interpolating,
-            polyline,
-            entry_lanes: self.entry_lanes,
-            exit_lanes: self.exit_lanes,
-            left_neighbors: self.left_neighbors,
-            right_neighbors: self.right_neighbors,
-            left_boundaries: self.left_boundaries,
-            right_boundaries: self.right_boundaries,
-        }
-    }
-}
-
 /// `BoundarySegment`: part of a lane bounded by one road line or edge.
 #[derive(Clone, PartialEq, prost::Message)]
 pub struct BoundarySegment {
