@@ -679,3 +679,31 @@ pub fn sim(model: &crate::generator::LoadedScbg, scenes: usize) -> anyhow::Resul
         })
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ingest_times_the_stages_asked_for() {
+        let Some(real) = scbg_womd::fixtures::real_data_dir() else {
+            return;
+        };
+        let file = real.join("womd/motion_data_one_scenario.tfrecord");
+        let input = [file.display().to_string()];
+        let only = ingest(&input, 1, &[IngestStage::Features]).unwrap();
+        assert!(!only.rows.is_empty());
+        for r in &only.rows {
+            assert_eq!(r.stage, "decode+features");
+            assert!(r.samples_per_s.is_some_and(|v| v > 0.0));
+        }
+        assert!(only.prepared_bytes > 0);
+        let all = ingest(&input, 1, &[]).unwrap();
+        let stages: Vec<_> = all.rows.iter().take(3).map(|r| r.stage).collect();
+        assert_eq!(stages, ["decode", "decode+prepare", "decode+features"]);
+        assert_eq!(all.rows.len(), 3 * only.rows.len());
+        assert_eq!(all.prepared_bytes, only.prepared_bytes);
+        let decode = ingest(&input, 1, &[IngestStage::Decode]).unwrap();
+        assert!(decode.rows.iter().all(|r| r.stage == "decode"));
+    }
+}
