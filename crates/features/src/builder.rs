@@ -32,7 +32,7 @@ pub struct SampleBuilder<'a> {
     /// The window the per-window state below is for.
     window: Option<Window>,
     /// Per track, its position at its latest valid history step of `window` (the ranking
-    /// key of other agents; the same for every target of a window).
+    /// key of other agents; the same for every target of a window), from `steps`.
     latest_history_xy: Vec<Option<[f32; 2]>>,
     /// Per track, its `history_steps` steps of `window` in the scene frame (track-major).
     steps: Vec<HistoryStep>,
@@ -90,18 +90,20 @@ impl<'a> SampleBuilder<'a> {
             return;
         }
         let (scene, history) = (self.scene, self.config.history_steps);
-        self.latest_history_xy.clear();
-        self.latest_history_xy.extend(scene.tracks.iter().map(|t| {
-            let last = (0..history)
-                .rev()
-                .filter_map(|h| window.history_step(h, history))
-                .find(|&s| t.valid.get(s).copied().unwrap_or(false))?;
-            Some([t.x_m[last], t.y_m[last]])
-        }));
         self.steps.clear();
         for t in &scene.tracks {
             history_steps(t, window, history, &mut self.steps);
         }
+        self.latest_history_xy.clear();
+        let steps = &self.steps;
+        self.latest_history_xy
+            .extend((0..scene.tracks.len()).map(|i| {
+                let last = steps[i * history..(i + 1) * history]
+                    .iter()
+                    .rev()
+                    .find(|s| s.valid)?;
+                Some([last.x_m, last.y_m])
+            }));
         self.pair_member.clear();
         self.pair_member.resize(scene.tracks.len(), false);
         let pairs = scene

@@ -216,14 +216,14 @@ impl SegmentIndex {
         ];
         for i in (0..seg_a.len()).filter(|&i| finite(i)) {
             let (xs, ys) = bbox(i);
-            for y in ys.clone() {
+            let multi = if xs.clone().count() * ys.clone().count() > 1 {
+                MULTI_CELL
+            } else {
+                0
+            };
+            for y in ys {
                 for x in xs.clone() {
                     let slot = &mut fill[y * nx + x];
-                    let multi = if xs.clone().count() * ys.clone().count() > 1 {
-                        MULTI_CELL
-                    } else {
-                        0
-                    };
                     cell_segments[*slot as usize] = Listed {
                         a: seg_a[i],
                         b: seg_b[i],

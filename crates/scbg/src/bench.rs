@@ -217,12 +217,11 @@ pub fn ingest(
                 raw_mb_per_s: mb_per_s(secs),
             });
         }
-        for (stage, samples_too) in [("decode+prepare", false), ("decode+features", true)] {
-            if !wanted(if samples_too {
-                IngestStage::Features
-            } else {
-                IngestStage::Prepare
-            }) {
+        for (stage, which, samples_too) in [
+            ("decode+prepare", IngestStage::Prepare, false),
+            ("decode+features", IngestStage::Features, true),
+        ] {
+            if !wanted(which) {
                 continue;
             }
             let t = Instant::now();

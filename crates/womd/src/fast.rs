@@ -466,11 +466,16 @@ mod tests {
         lane.extend(2.0f64.to_le_bytes());
         lane.push(0x19);
         lane.extend(0.0f64.to_le_bytes());
-        let mut feature = vec![0x08, 42, 0x1a, lane.len() as u8];
-        feature.extend(&lane);
-        let mut data = vec![0x42, feature.len() as u8];
-        data.extend(&feature);
-        data.extend([0x2a, 1, b'x']);
+        // A scenario "x" whose one map feature (id 42) is this lane.
+        let scenario_with = |lane: &[u8]| {
+            let mut feature = vec![0x08, 42, 0x1a, lane.len() as u8];
+            feature.extend(lane);
+            let mut data = vec![0x42, feature.len() as u8];
+            data.extend(&feature);
+            data.extend([0x2a, 1, b'x']);
+            data
+        };
+        let data = scenario_with(&lane);
         assert!(try_fast(&data).is_some());
         assert_same(&data);
         let (scenario, _) = decode_parts(&data).unwrap();
@@ -484,11 +489,7 @@ mod tests {
         // A field outside the schema (15) leaves the scenario to prost, with the same result.
         let mut odd = lane.clone();
         odd.extend([0x78, 1]);
-        let mut feature = vec![0x08, 42, 0x1a, odd.len() as u8];
-        feature.extend(&odd);
-        let mut data = vec![0x42, feature.len() as u8];
-        data.extend(&feature);
-        data.extend([0x2a, 1, b'x']);
+        let data = scenario_with(&odd);
         assert!(try_fast(&data).is_none());
         assert_same(&data);
     }
