@@ -771,6 +771,20 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
         fmt(&c.spearman_quantile_realised_courtesy),
         meta(c.wosac_scbg.as_ref())
     );
+    if let Some(w) = &c.world_knob {
+        out += &format!(
+            "\nThe ceiling: the same {} scenes with B driven by the synthetic world's own rule at courtesy c = q (a B faithful to its courtesy). A's realised speed per quantile: {}. Spearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. B collision rate at most {:.3}.\n",
+            w.scenes,
+            w.per_quantile
+                .iter()
+                .map(|r| format!("{:.1}: {:.2}", r.quantile, r.a_avg_speed_mps))
+                .collect::<Vec<_>>()
+                .join(", "),
+            fmt(&w.spearman_quantile_a_speed),
+            fmt(&w.spearman_quantile_realised_courtesy),
+            w.max_b_collision_rate
+        );
+    }
     out
 }
 

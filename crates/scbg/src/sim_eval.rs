@@ -159,6 +159,10 @@ pub struct SimEval {
     pub a_speed_curve_rises: bool,
     /// The largest B collision rate over the quantiles.
     pub max_b_collision_rate: f64,
+    /// The same curve with B driven by the synthetic world's own rule at courtesy `c = q`
+    /// (A and the others reacting alike) on the scenes with ground truth: what a B faithful
+    /// to its courtesy achieves in this world, the ceiling of the generator's curve.
+    pub world_knob: Option<KnobCurve>,
     /// scbg over every WOSAC quantile together.
     pub wosac_scbg: Option<WosacSummary>,
     /// Baselines on the WOSAC scenes: `log_replay`, `constant_velocity`, `idm_only`.
@@ -348,6 +352,114 @@ fn wosac_scene(
     Ok((rollout_metrics, metrics))
 }
 
+/// The courtesy knob's curve over scenes: the numbers per quantile and the correlations.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct KnobCurve {
+    /// Scenes of the curve.
+    pub scenes: usize,
+    /// Per quantile.
+    pub per_quantile: Vec<QuantileSim>,
+    /// Spearman(quantile, A's realised average speed) over every (scene, quantile).
+    pub spearman_quantile_a_speed: PerFamily,
+    /// Spearman(quantile, realised courtesy) over every (scene, quantile).
+    pub spearman_quantile_realised_courtesy: PerFamily,
+    /// Whether the mean of A's realised speed never falls from one quantile to the next.
+    pub a_speed_curve_rises: bool,
+    /// The largest B collision rate over the quantiles.
+    pub max_b_collision_rate: f64,
+}
+
+impl KnobCurve {
+    /// The curve of `done` scenes, each with one (A, B) result per quantile of `quantiles`.
+    fn of(done: &[SceneResult], quantiles: &[f32]) -> Self {
+        let mut speed_points = Vec::new();
+        let mut courtesy_points = Vec::new();
+        let mut per_quantile = Vec::new();
+        for (k, &q) in quantiles.iter().enumerate() {
+            let speeds: Vec<f64> = done.iter().map(|r| r.curve[k].0.avg_speed_mps).collect();
+            let realised: Vec<f64> = done
+                .iter()
+                .map(|r| r.curve[k].0.avg_speed_mps - r.base_a_speed)
+                .collect();
+            for (r, (&v, &c)) in done.iter().zip(speeds.iter().zip(&realised)) {
+                speed_points.push((r.family.clone(), f64::from(q), v));
+                courtesy_points.push((r.family.clone(), f64::from(q), c));
+            }
+            let (a_avg_speed_mps, a_avg_speed_std_mps) = mean_std(&speeds);
+            let (realised_courtesy_mps, realised_courtesy_std_mps) = mean_std(&realised);
+            let b = || done.iter().map(|r| &r.curve[k].1);
+            per_quantile.push(QuantileSim {
+                quantile: q,
+                a_avg_speed_mps,
+                a_avg_speed_std_mps,
+                realised_courtesy_mps,
+                realised_courtesy_std_mps,
+                b_collision_rate: rate(b().map(|m| m.collision)),
+                b_offroad_rate: rate(b().map(|m| m.offroad.unwrap_or(false))),
+                b_mean_abs_jerk_mps3: mean_std(
+                    &b().map(|m| m.mean_abs_jerk_mps3).collect::<Vec<_>>(),
+                )
+                .0,
+                b_progress_m: mean_std(&b().map(|m| m.progress_m).collect::<Vec<_>>()).0,
+                wosac: None,
+            });
+        }
+        Self {
+            scenes: done.len(),
+            a_speed_curve_rises: per_quantile
+                .windows(2)
+                .all(|w| w[1].a_avg_speed_mps >= w[0].a_avg_speed_mps),
+            max_b_collision_rate: per_quantile
+                .iter()
+                .map(|r| r.b_collision_rate)
+                .fold(0.0, f64::max),
+            per_quantile,
+            spearman_quantile_a_speed: spearman_per_family(&speed_points),
+            spearman_quantile_realised_courtesy: spearman_per_family(&courtesy_points),
+        }
+    }
+}
+
+/// The synthetic world's own knob on a scene: B driven by the world's rule with courtesy
+/// `c = q` (B's prior is uniform, so its q-quantile is q) from the current step on, A and the
+/// others reacting by the same rule as in the closed loop; `None` without ground truth.
+fn world_scene(s: &SimScene, quantiles: &[f32]) -> Option<anyhow::Result<SceneResult>> {
+    let truth = s.truth.as_ref()?;
+    Some((|| {
+        let scenario = scbg_synth::Scenario::of_truth(truth)?;
+        let base = quantiles
+            .iter()
+            .position(|&q| (q - 0.5).abs() < 1e-6)
+            .expect("0.5 is among the quantiles");
+        let curve = quantiles
+            .iter()
+            .map(|&q| {
+                let tracks = scenario.tracks_with_courtesy(f64::from(q));
+                anyhow::ensure!(
+                    tracks.len() == s.scene.tracks.len()
+                        && tracks
+                            .iter()
+                            .zip(&s.scene.tracks)
+                            .all(|(a, b)| a.id == b.id),
+                    "scenario {}: the world's tracks are not the scene's",
+                    s.scene.scenario_id
+                );
+                let scene = Scene {
+                    tracks,
+                    ..s.scene.clone()
+                };
+                let r = report(&scene, s.ego, &[s.controlled])?;
+                Ok((r.ego, r.controlled[0]))
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
+        Ok(SceneResult {
+            family: s.family(),
+            base_a_speed: curve[base].0.avg_speed_mps,
+            curve,
+        })
+    })())
+}
+
 fn spearman_per_family(points: &[(String, f64, f64)]) -> PerFamily {
     let mut out = PerFamily::new();
     let mut families: Vec<&str> = points.iter().map(|p| p.0.as_str()).collect();
@@ -424,36 +536,8 @@ pub fn evaluate_sim(
         !done.is_empty(),
         "no scene could be simulated (skipped: {skipped:?})"
     );
-    let mut speed_points = Vec::new();
-    let mut courtesy_points = Vec::new();
-    let mut per_quantile = Vec::new();
-    for (k, &q) in quantiles.iter().enumerate() {
-        let speeds: Vec<f64> = done.iter().map(|r| r.curve[k].0.avg_speed_mps).collect();
-        let realised: Vec<f64> = done
-            .iter()
-            .map(|r| r.curve[k].0.avg_speed_mps - r.base_a_speed)
-            .collect();
-        for (r, (&v, &c)) in done.iter().zip(speeds.iter().zip(&realised)) {
-            speed_points.push((r.family.clone(), f64::from(q), v));
-            courtesy_points.push((r.family.clone(), f64::from(q), c));
-        }
-        let (a_avg_speed_mps, a_avg_speed_std_mps) = mean_std(&speeds);
-        let (realised_courtesy_mps, realised_courtesy_std_mps) = mean_std(&realised);
-        let b = || done.iter().map(|r| &r.curve[k].1);
-        per_quantile.push(QuantileSim {
-            quantile: q,
-            a_avg_speed_mps,
-            a_avg_speed_std_mps,
-            realised_courtesy_mps,
-            realised_courtesy_std_mps,
-            b_collision_rate: rate(b().map(|m| m.collision)),
-            b_offroad_rate: rate(b().map(|m| m.offroad.unwrap_or(false))),
-            b_mean_abs_jerk_mps3: mean_std(&b().map(|m| m.mean_abs_jerk_mps3).collect::<Vec<_>>())
-                .0,
-            b_progress_m: mean_std(&b().map(|m| m.progress_m).collect::<Vec<_>>()).0,
-            wosac: None,
-        });
-    }
+    let mut curve = KnobCurve::of(&done, &quantiles);
+    let per_quantile = &mut curve.per_quantile;
 
     // WOSAC realism on the first scenes.
     let wosac_scenes = &scenes[..scenes.len().min(options.wosac_scenes)];
@@ -468,7 +552,7 @@ pub fn evaluate_sim(
             .collect();
         scbg_metrics::wosac::aggregate(&m, options.wosac)
     };
-    for row in &mut per_quantile {
+    for row in per_quantile.iter_mut() {
         row.wosac = aggregate(&format!("q={:.1}", row.quantile)).map(|m| WosacSummary::of(&m));
     }
     let all_scbg: Vec<ScenarioMetrics> = scored
@@ -503,23 +587,24 @@ pub fn evaluate_sim(
         let idm = baselines["idm_only"].wosac.as_ref()?.metametric;
         Some(w.metametric > cv && w.metametric > idm)
     });
-    let a_speed_curve_rises = per_quantile
-        .windows(2)
-        .all(|w| w[1].a_avg_speed_mps >= w[0].a_avg_speed_mps);
-    let max_b_collision_rate = per_quantile
-        .iter()
-        .map(|r| r.b_collision_rate)
-        .fold(0.0, f64::max);
+    // The world's own knob on the same scenes (synthetic scenes only).
+    let world: Vec<SceneResult> = scenes
+        .par_iter()
+        .filter_map(|s| world_scene(s, &quantiles))
+        .filter_map(Result::ok)
+        .collect();
+    let world_knob = (!world.is_empty()).then(|| KnobCurve::of(&world, &quantiles));
     let rollouts_done = done.len() * quantiles.len();
     Ok(SimEval {
         scenes: done.len(),
         skipped,
         replan_every: options.config.replan_every,
-        per_quantile,
-        spearman_quantile_a_speed: spearman_per_family(&speed_points),
-        spearman_quantile_realised_courtesy: spearman_per_family(&courtesy_points),
-        a_speed_curve_rises,
-        max_b_collision_rate,
+        per_quantile: curve.per_quantile,
+        spearman_quantile_a_speed: curve.spearman_quantile_a_speed,
+        spearman_quantile_realised_courtesy: curve.spearman_quantile_realised_courtesy,
+        a_speed_curve_rises: curve.a_speed_curve_rises,
+        max_b_collision_rate: curve.max_b_collision_rate,
+        world_knob,
         wosac_scbg,
         baselines,
         wosac_above_baselines,
@@ -540,24 +625,36 @@ pub fn write_figures(eval: &SimEval, dir: &Path) -> anyhow::Result<()> {
             .map(|r| (f64::from(r.quantile), f(r)))
             .collect()
     };
+    let mut courtesy_series = vec![
+        Series {
+            label: "A's realised avg speed − at q=0.5 (m/s)".into(),
+            points: q(&|r| r.realised_courtesy_mps),
+            band: Some(
+                eval.per_quantile
+                    .iter()
+                    .map(|r| r.realised_courtesy_std_mps)
+                    .collect(),
+            ),
+        },
+        Series {
+            label: "B collision rate".into(),
+            points: q(&|r| r.b_collision_rate),
+            band: None,
+        },
+    ];
+    if let Some(world) = &eval.world_knob {
+        courtesy_series.push(Series {
+            label: "same, the world's own B at courtesy c = q (m/s)".into(),
+            points: world
+                .per_quantile
+                .iter()
+                .map(|r| (f64::from(r.quantile), r.realised_courtesy_mps))
+                .collect(),
+            band: None,
+        });
+    }
     scbg_plot::line_chart(
-        &[
-            Series {
-                label: "A's realised avg speed − at q=0.5 (m/s)".into(),
-                points: q(&|r| r.realised_courtesy_mps),
-                band: Some(
-                    eval.per_quantile
-                        .iter()
-                        .map(|r| r.realised_courtesy_std_mps)
-                        .collect(),
-                ),
-            },
-            Series {
-                label: "B collision rate".into(),
-                points: q(&|r| r.b_collision_rate),
-                band: None,
-            },
-        ],
+        &courtesy_series,
         "courtesy quantile of B",
         "m/s  |  rate",
         "closed loop: realised courtesy toward A",

@@ -269,6 +269,22 @@ fn closed_loop_through_the_library(
     assert_eq!(eval.per_quantile[1].realised_courtesy_mps, 0.0);
     assert!(eval.baselines["log_replay"].wosac.is_some());
     assert!(eval.wosac_scbg.is_some());
+    // The world's own knob on the same scene: B at courtesy c = q by the world's rule, A's
+    // realised speed what the oracle says for that future of B.
+    let world = eval.world_knob.as_ref().expect("a synthetic scene has the world's knob");
+    assert_eq!((world.scenes, world.per_quantile.len()), (1, 3));
+    assert_eq!(world.per_quantile[1].realised_courtesy_mps, 0.0);
+    let scenario = scbg_synth::Scenario::of_truth(t).unwrap();
+    let b_future: Vec<[f64; 2]> = scenario.tracks_with_courtesy(0.9)[1].states[11..]
+        .iter()
+        .map(|s| [s.x_m, s.y_m])
+        .collect();
+    let oracle_speed = scenario.oracle().a_avg_speed_mps(&b_future).unwrap();
+    assert!(
+        (world.per_quantile[2].a_avg_speed_mps - oracle_speed).abs() < 0.25,
+        "{} vs the oracle's {oracle_speed}",
+        world.per_quantile[2].a_avg_speed_mps
+    );
     scbg::sim_eval::write_figures(&eval, &dir.join("sim_figures")).unwrap();
     assert!(dir.join("sim_figures/sim_courtesy.png").is_file());
 

@@ -436,6 +436,22 @@ impl Scenario {
         )
     }
 
+    /// Every agent's track ([`NUM_STEPS`] states, in the scene's track order: A, B, the
+    /// others) when B, after its logged history, drives with courtesy `c` from the current step
+    /// on and everyone else reacts: the world's own courtesy knob, what a B that is faithful to
+    /// its courtesy does here (the ceiling any generated B is measured against). `c` is
+    /// clamped to B's prior, [0, 1].
+    pub fn tracks_with_courtesy(&self, c: f64) -> Vec<scbg_scene::Track> {
+        let run = self.simulate(BPlan::Simulated {
+            history: self.courtesy,
+            future: c.clamp(0.0, 1.0),
+        });
+        run.agents
+            .iter()
+            .map(|a| sim::record_track(a, &run.paths, NUM_STEPS))
+            .collect()
+    }
+
     /// The scene of a run with the map (moved out of the run; the oracle's replays need none).
     fn scene_of(&self, run: &mut Run, scenario_id: String) -> Scene {
         let tracks: Vec<_> = run

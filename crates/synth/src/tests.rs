@@ -326,3 +326,29 @@ fn counterfactual_siblings_share_the_history_and_intervene_on_b_only() {
     assert!(b_differs >= 20, "{b_differs}");
     assert!(a_changed * 4 >= scenes, "{a_changed} of {scenes}");
 }
+
+#[test]
+fn the_worlds_knob_is_the_sibling_and_the_logged_courtesy_is_the_log() {
+    for index in 0..12 {
+        let scenario = Scenario::draw(21, index, &Family::ALL);
+        let g = scenario.generate();
+        // B at its own courtesy is the logged scene.
+        let own = scenario.tracks_with_courtesy(scenario.courtesy);
+        assert_eq!(own.len(), g.scene.tracks.len());
+        for (t, o) in own.iter().zip(&g.scene.tracks) {
+            assert_eq!(t.id, o.id);
+            assert_eq!(t.states, o.states, "scene {index} track {}", t.id);
+        }
+        // Any other courtesy is the counterfactual sibling at that courtesy.
+        let sib = scenario.counterfactual(0, 4);
+        let knob = scenario.tracks_with_courtesy(0.125);
+        for (t, s) in knob.iter().zip(&sib.tracks) {
+            assert_eq!(t.states, s.states, "scene {index} track {}", t.id);
+        }
+        // Outside the prior it is clamped.
+        assert_eq!(
+            scenario.tracks_with_courtesy(7.0)[1].states,
+            scenario.tracks_with_courtesy(1.0)[1].states
+        );
+    }
+}

@@ -173,6 +173,12 @@ pub fn acceptance_checks(
         }
     }
     if let Some(c) = closed_loop {
+        let pooled_of = |m: &crate::sim_eval::PerFamily| {
+            m.get("all")
+                .copied()
+                .flatten()
+                .map_or("-".into(), |r| format!("{r:.3}"))
+        };
         let pooled = c
             .spearman_quantile_a_speed
             .get("all")
@@ -183,12 +189,13 @@ pub fn acceptance_checks(
             key: "closed_loop_spearman_0_6",
             passed: pooled >= 0.6,
             text: format!(
-                "closed loop: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {})",
-                c.spearman_quantile_realised_courtesy
-                    .get("all")
-                    .copied()
-                    .flatten()
-                    .map_or("-".into(), |r| format!("{r:.3}"))
+                "closed loop: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}){}",
+                pooled_of(&c.spearman_quantile_realised_courtesy),
+                c.world_knob.as_ref().map_or(String::new(), |w| format!(
+                    "; the world's own B at courtesy c = q on the same scenes: {} pooled, {} with each scene's level removed",
+                    pooled_of(&w.spearman_quantile_a_speed),
+                    pooled_of(&w.spearman_quantile_realised_courtesy)
+                ))
             ),
         });
         out.push(Check {
