@@ -248,6 +248,13 @@ pub struct LoopArgs {
     /// crossing conflicts).
     #[arg(long)]
     pub no_safety_guard: bool,
+    /// Pull every plan point to within this many metres of the nearest car-lane centre line
+    /// before it is followed (lane keeping).
+    #[arg(long, default_value_t = scbg::sim::DEFAULT_LANE_KEEPING_M)]
+    pub lane_keeping_m: f64,
+    /// Follow the plans as generated, without lane keeping.
+    #[arg(long, conflicts_with = "lane_keeping_m")]
+    pub no_lane_keeping: bool,
 }
 
 #[derive(Debug, Clone, Args)]

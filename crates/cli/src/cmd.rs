@@ -266,6 +266,7 @@ fn loop_config(a: &crate::cli::LoopArgs, others: scbg::sim::OthersMode) -> scbg:
         ego: a.ego,
         others: a.others.unwrap_or(others),
         safety_guard: !a.no_safety_guard,
+        lane_keeping_m: (!a.no_lane_keeping).then_some(a.lane_keeping_m),
         ..Default::default()
     }
 }

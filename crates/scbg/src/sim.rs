@@ -25,6 +25,7 @@ use serde::Serialize;
 use crate::generator::LoadedScbg;
 use crate::{InvalidRequest, ensure_request};
 
+pub use scbg_sim::rollout::DEFAULT_LANE_KEEPING_M;
 pub use scbg_sim::{
     AgentRolloutMetrics, AgentSnapshot, EgoMode, HORIZON_STEPS, OthersMode, SimConfig, Simulation,
     VehicleLimits,

@@ -271,7 +271,10 @@ fn closed_loop_through_the_library(
     assert!(eval.wosac_scbg.is_some());
     // The world's own knob on the same scene: B at courtesy c = q by the world's rule, A's
     // realised speed what the oracle says for that future of B.
-    let world = eval.world_knob.as_ref().expect("a synthetic scene has the world's knob");
+    let world = eval
+        .world_knob
+        .as_ref()
+        .expect("a synthetic scene has the world's knob");
     assert_eq!((world.scenes, world.per_quantile.len()), (1, 3));
     assert_eq!(world.per_quantile[1].realised_courtesy_mps, 0.0);
     let scenario = scbg_synth::Scenario::of_truth(t).unwrap();

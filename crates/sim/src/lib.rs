@@ -7,6 +7,7 @@
 //! - [`rollout`]: the step-wise [`Simulation`] (`reset → step → … → to_scene`) with a
 //!   [`Planner`] for the controlled agents; on a synthetic scene the synthetic world's own
 //!   reaction rule ([`scbg_synth::ClosedLoop`]) drives the reactive agents;
+//! - [`lanes`]: lane keeping of a plan before it is followed;
 //! - [`metrics`]: collision, off-road, progress, jerk and speed of an agent in a rollout.
 //!
 //! **Architecture invariant:** no models, tensors or file formats: a planner is anything that
@@ -16,6 +17,7 @@
 
 pub mod idm;
 pub mod kinematics;
+pub mod lanes;
 pub mod metrics;
 pub mod rollout;
 

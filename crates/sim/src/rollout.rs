@@ -105,6 +105,18 @@ pub struct SimConfig {
     /// standing obstacle at that point), so a plan that runs into another agent is followed
     /// at a safe distance instead. On by default.
     pub safety_guard: bool,
+    /// Lane keeping of the controlled agents' plans ([`crate::lanes`]): every plan point is
+    /// pulled to within this many metres of the nearest car-lane centre line before it is
+    /// followed; `None` follows the plans as generated. Default 0.25 m.
+    #[serde(default = "default_lane_keeping_m")]
+    pub lane_keeping_m: Option<f64>,
+}
+
+/// The default lane keeping (0.25 m; what a serialised config without the field gets).
+pub const DEFAULT_LANE_KEEPING_M: f64 = 0.25;
+
+fn default_lane_keeping_m() -> Option<f64> {
+    Some(DEFAULT_LANE_KEEPING_M)
 }
 
 impl Default for SimConfig {
@@ -115,6 +127,7 @@ impl Default for SimConfig {
             others: OthersMode::Log,
             limits: VehicleLimits::default(),
             safety_guard: true,
+            lane_keeping_m: default_lane_keeping_m(),
         }
     }
 }
@@ -176,6 +189,9 @@ pub enum SimError {
     /// `replan_every` outside 1 ..= 80.
     #[error("replan_every {0} is outside 1..=80")]
     ReplanEvery(usize),
+    /// A lane-keeping offset that is negative or not finite.
+    #[error("lane_keeping_m {0} is not a finite number ≥ 0")]
+    LaneKeeping(f64),
     /// The synthetic world does not belong to this scene.
     #[error("scenario {0}: the synthetic world given is not this scenario's")]
     WorldMismatch(String),
@@ -276,6 +292,12 @@ impl Simulation {
         }
         if !(1..=HORIZON_STEPS).contains(&config.replan_every) {
             return Err(SimError::ReplanEvery(config.replan_every));
+        }
+        if let Some(m) = config
+            .lane_keeping_m
+            .filter(|m| !(m.is_finite() && *m >= 0.0))
+        {
+            return Err(SimError::LaneKeeping(m));
         }
         let index = |agent: i64| {
             let i = scene.track_index(agent).ok_or(SimError::UnknownAgent {
@@ -623,7 +645,7 @@ impl Simulation {
         view: &Scene,
         id: i64,
     ) -> Result<Vec<[f64; 2]>, PlanError> {
-        let plan = planner.plan(view, id)?;
+        let mut plan = planner.plan(view, id)?;
         if plan.len() != HORIZON_STEPS {
             return Err(PlanError(format!(
                 "{} points, expected {HORIZON_STEPS}",
@@ -635,6 +657,9 @@ impl Simulation {
             .position(|p| !(p[0].is_finite() && p[1].is_finite()))
         {
             return Err(PlanError(format!("point {k} is not finite")));
+        }
+        if let Some(max_offset_m) = self.config.lane_keeping_m {
+            crate::lanes::keep_near_lanes(&mut plan, &view.map, max_offset_m);
         }
         Ok(plan)
     }

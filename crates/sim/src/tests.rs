@@ -144,6 +144,11 @@ fn bad_requests_name_what_is_wrong() {
         ..c
     };
     assert!(err(Simulation::reset(&log, None, &[B_ID], zero, None)).contains("replan_every"));
+    let negative = SimConfig {
+        lane_keeping_m: Some(-1.0),
+        ..c
+    };
+    assert!(err(Simulation::reset(&log, None, &[B_ID], negative, None)).contains("lane_keeping_m"));
     let mut short = log.clone();
     short.current_step = 5;
     assert!(err(Simulation::reset(&short, None, &[B_ID], c, None)).contains("history steps"));
@@ -160,4 +165,84 @@ fn bad_requests_name_what_is_wrong() {
     let e = sim.step(&mut Failing, None).unwrap_err().to_string();
     assert!(e.contains("agent 202") && e.contains("no model"), "{e}");
     assert_eq!(sim.step_index(), 10);
+}
+
+/// Plans the log's future 1.2 m to its left (nearer its own lane than the next one, 3.5 m
+/// away): a planner whose futures run beside the lane.
+struct Beside<'a>(LogPlanner<'a>);
+
+impl Planner for Beside<'_> {
+    fn plan(&mut self, view: &Scene, agent_id: i64) -> Result<Vec<[f64; 2]>, PlanError> {
+        let logged = self.0.plan(view, agent_id)?;
+        let n = logged.len();
+        let mut normal = [0.0, 0.0];
+        Ok((0..n)
+            .map(|k| {
+                let (a, b) = (logged[k.saturating_sub(1)], logged[(k + 1).min(n - 1)]);
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let len = dx.hypot(dy);
+                if len > 1e-3 {
+                    normal = [-dy / len, dx / len];
+                }
+                [
+                    logged[k][0] + 3.0 * normal[0],
+                    logged[k][1] + 3.0 * normal[1],
+                ]
+            })
+            .collect())
+    }
+}
+
+#[test]
+fn lane_keeping_holds_a_plan_beside_the_lane_near_it() {
+    // B's mean distance from the nearest car-lane centre over the rollout, with and without
+    // lane keeping, on scenes of every family.
+    let off_lane = |config: SimConfig, log: &Scene| {
+        let mut sim = Simulation::reset(log, None, &[B_ID], config, None).unwrap();
+        let mut planner = Beside(LogPlanner {
+            log,
+            every: 10,
+            calls: 0,
+        });
+        sim.run(&mut planner).unwrap();
+        let out = sim.to_scene();
+        out.tracks[1].states[11..]
+            .iter()
+            .map(|s| {
+                let mut p = [[s.x_m, s.y_m]];
+                // Distance to the nearest lane centre: how far keeping at 0 m moves the point.
+                crate::lanes::keep_near_lanes(&mut p, &log.map, 0.0);
+                (p[0][0] - s.x_m).hypot(p[0][1] - s.y_m)
+            })
+            .sum::<f64>()
+            / HORIZON_STEPS as f64
+    };
+    let (mut kept, mut free) = (0.0f64, 0.0f64);
+    let scenes = 6;
+    for index in 0..scenes {
+        let log = scbg_synth::generate(5, index, &Family::ALL).scene;
+        kept += off_lane(
+            SimConfig {
+                lane_keeping_m: Some(0.0),
+                ..SimConfig::default()
+            },
+            &log,
+        ) / scenes as f64;
+        free += off_lane(
+            SimConfig {
+                lane_keeping_m: None,
+                ..SimConfig::default()
+            },
+            &log,
+        ) / scenes as f64;
+    }
+    eprintln!("B's mean distance from a lane centre: kept {kept:.2} m, free {free:.2} m");
+    assert!(
+        kept < 0.4,
+        "with lane keeping B is {kept} m from its lane on average"
+    );
+    assert!(
+        free > kept + 0.3,
+        "lane keeping brings B only from {free} m to {kept} m"
+    );
 }

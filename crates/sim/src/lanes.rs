@@ -1,0 +1,177 @@
+//! Lane keeping of a plan: points that drift from every car lane's centre line are pulled
+//! back toward it before the tracker follows them.
+//!
+//! The generator is trained open loop on logged histories. Re-planned every second from the
+//! simulated history, its futures compound sideways off the road (the demo measured B
+//! off-road in 78 % of rollouts at quantile 0.1; a single plan stays on the road). Lane
+//! keeping moves each plan point that lies more than `max_offset_m` from the nearest car-lane
+//! centre line (any lane type but bike lanes) along the line to that nearest point, to
+//! `max_offset_m` from it. Lane changes stay possible — a point between two lanes is pulled
+//! toward the nearer one — and the plan's timing (when B is where along its way, which is what
+//! courtesy is about) is kept. Only lanes heading the plan's way (within 45°) count, so at an
+//! intersection a drifting point is not kept on the crossing road. Points farther than [`REACH_M`] from every lane centre (a car
+//! park, a driveway) are left as they are.
+
+use scbg_scene::{LaneType, Map};
+
+/// Lane segments farther than this from a plan point are not considered for it (m).
+pub const REACH_M: f64 = 6.0;
+/// Only lanes heading within 45° of the plan's own direction at a point count for it (the
+/// cosine): at an intersection, a point that drifted sideways off its lane is not "kept" on
+/// the crossing road's lane it happens to lie on.
+pub const MAX_ANGLE_COS: f64 = std::f64::consts::FRAC_1_SQRT_2;
+/// Plan points less than this apart (over two steps) are standing: they keep the direction
+/// the plan had before (m).
+pub const MOVING_M: f64 = 0.2;
+
+/// Pulls every point of `plan` (world frame) to within `max_offset_m` of the nearest car-lane
+/// centre line of `map` that lies within [`REACH_M`]; returns how many points moved.
+pub fn keep_near_lanes(plan: &mut [[f64; 2]], map: &Map, max_offset_m: f64) -> usize {
+    if plan.is_empty() {
+        return 0;
+    }
+    // The plan's bounding box grown by the reach: segments outside it cannot be nearest to
+    // any point within reach.
+    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+    for p in plan.iter() {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    let (lo, hi) = (
+        [lo[0] - REACH_M, lo[1] - REACH_M],
+        [hi[0] + REACH_M, hi[1] + REACH_M],
+    );
+    let segments: Vec<([f64; 2], [f64; 2])> = map
+        .lanes
+        .iter()
+        .filter(|l| l.lane_type != LaneType::BikeLane)
+        .flat_map(|l| {
+            l.polyline
+                .windows(2)
+                .map(|w| ([w[0].x_m, w[0].y_m], [w[1].x_m, w[1].y_m]))
+        })
+        .filter(|(a, b)| {
+            a[0].max(b[0]) >= lo[0]
+                && a[0].min(b[0]) <= hi[0]
+                && a[1].max(b[1]) >= lo[1]
+                && a[1].min(b[1]) <= hi[1]
+        })
+        .collect();
+    // The plan's direction at each point (central difference; where the plan stands, the
+    // last direction it had, or none before it first moves).
+    let n = plan.len();
+    let mut heading: Vec<Option<[f64; 2]>> = Vec::with_capacity(n);
+    let mut last = None;
+    for k in 0..n {
+        let (a, b) = (plan[k.saturating_sub(1)], plan[(k + 1).min(n - 1)]);
+        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+        let len = dx.hypot(dy);
+        if len >= MOVING_M {
+            last = Some([dx / len, dy / len]);
+        }
+        heading.push(last);
+    }
+    let mut moved = 0;
+    for (p, heading) in plan.iter_mut().zip(heading) {
+        let mut best = (REACH_M * REACH_M, None);
+        for (a, b) in &segments {
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let len2 = dx * dx + dy * dy;
+            if let Some(h) = heading
+                && (dx * h[0] + dy * h[1]) < MAX_ANGLE_COS * len2.sqrt()
+            {
+                continue;
+            }
+            let t = if len2 > 0.0 {
+                (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let q = [a[0] + t * dx, a[1] + t * dy];
+            let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+            if d2 < best.0 {
+                best = (d2, Some(q));
+            }
+        }
+        if let (d2, Some(q)) = best {
+            let d = d2.sqrt();
+            if d > max_offset_m {
+                let k = max_offset_m / d;
+                *p = [q[0] + k * (p[0] - q[0]), q[1] + k * (p[1] - q[1])];
+                moved += 1;
+            }
+        }
+    }
+    moved
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scbg_scene::{Lane, MapPoint};
+
+    fn lane(y: f64, lane_type: LaneType) -> Lane {
+        Lane {
+            lane_type,
+            polyline: (0..=10)
+                .map(|i| MapPoint {
+                    x_m: 10.0 * f64::from(i),
+                    y_m: y,
+                    z_m: 0.0,
+                })
+                .collect(),
+            ..Lane::default()
+        }
+    }
+
+    #[test]
+    fn points_off_the_lane_come_back_and_points_on_it_stay() {
+        let map = Map {
+            lanes: vec![
+                lane(0.0, LaneType::SurfaceStreet),
+                lane(3.5, LaneType::Freeway),
+            ],
+            ..Map::default()
+        };
+        // One point at a time (no direction, no carried correction).
+        let keep = |p: [f64; 2]| {
+            let mut plan = [p];
+            let moved = keep_near_lanes(&mut plan, &map, 0.5);
+            (moved, plan[0])
+        };
+        assert_eq!(keep([5.0, 0.3]), (0, [5.0, 0.3])); // on the first lane: stays
+        let (moved, p) = keep([15.0, -2.0]); // 2 m right of it: to 0.5 m
+        assert!(moved == 1 && (p[0] - 15.0).abs() < 1e-9 && (p[1] + 0.5).abs() < 1e-9);
+        let (moved, p) = keep([25.0, 2.2]); // nearer the second lane (1.3 m): 0.5 m below it
+        assert!(moved == 1 && (p[0] - 25.0).abs() < 1e-9 && (p[1] - 3.0).abs() < 1e-9);
+        assert_eq!(keep([35.0, -20.0]), (0, [35.0, -20.0])); // out of reach: stays
+        // A lane across the plan's way does not count: a plan heading +x drifting onto a
+        // lane along y is pulled to the nearest lane along x (out of reach here: unchanged).
+        let crossing = Map {
+            lanes: vec![Lane {
+                lane_type: LaneType::SurfaceStreet,
+                polyline: (0..=10)
+                    .map(|i| MapPoint {
+                        x_m: 50.0,
+                        y_m: 10.0 * f64::from(i) - 50.0,
+                        z_m: 0.0,
+                    })
+                    .collect(),
+                ..Lane::default()
+            }],
+            ..Map::default()
+        };
+        let mut p = vec![[48.0, 20.0], [49.0, 20.0], [50.0, 20.0]];
+        assert_eq!(keep_near_lanes(&mut p, &crossing, 0.5), 0);
+        // A bike lane does not count.
+        let bike = Map {
+            lanes: vec![lane(0.0, LaneType::BikeLane)],
+            ..Map::default()
+        };
+        let mut p = vec![[15.0, -2.0]];
+        assert_eq!(keep_near_lanes(&mut p, &bike, 0.5), 0);
+        assert_eq!(p[0], [15.0, -2.0]);
+    }
+}
