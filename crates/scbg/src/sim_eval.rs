@@ -588,11 +588,21 @@ pub fn evaluate_sim(
         Some(w.metametric > cv && w.metametric > idm)
     });
     // The world's own knob on the same scenes (synthetic scenes only).
-    let world: Vec<SceneResult> = scenes
+    let world_results: Vec<anyhow::Result<SceneResult>> = scenes
         .par_iter()
         .filter_map(|s| world_scene(s, &quantiles))
-        .filter_map(Result::ok)
         .collect();
+    let mut world = Vec::new();
+    for r in world_results {
+        match r {
+            Ok(r) => world.push(r),
+            Err(e) => {
+                let why = format!("{e:#}");
+                let key = why.split(':').next().unwrap_or("error");
+                *skipped.entry(format!("world knob: {key}")).or_insert(0) += 1;
+            }
+        }
+    }
     let world_knob = (!world.is_empty()).then(|| KnobCurve::of(&world, &quantiles));
     let rollouts_done = done.len() * quantiles.len();
     Ok(SimEval {
