@@ -226,6 +226,21 @@ struct SceneResult {
     base_a_speed: f64,
 }
 
+impl SceneResult {
+    /// The curve of scene `s`; `base` is the index of quantile 0.5 (realised courtesy's zero).
+    fn new(
+        s: &SimScene,
+        curve: Vec<(AgentRolloutMetrics, AgentRolloutMetrics)>,
+        base: usize,
+    ) -> Self {
+        Self {
+            family: s.family(),
+            base_a_speed: curve[base].0.avg_speed_mps,
+            curve,
+        }
+    }
+}
+
 fn mean_std(v: &[f64]) -> (f64, f64) {
     if v.is_empty() {
         return (f64::NAN, f64::NAN);
@@ -423,41 +438,62 @@ impl KnobCurve {
 /// The synthetic world's own knob on a scene: B driven by the world's rule with courtesy
 /// `c = q` (B's prior is uniform, so its q-quantile is q) from the current step on, A and the
 /// others reacting by the same rule as in the closed loop; `None` without ground truth.
-fn world_scene(s: &SimScene, quantiles: &[f32]) -> Option<anyhow::Result<SceneResult>> {
+fn world_scene(
+    s: &SimScene,
+    quantiles: &[f32],
+    base: usize,
+) -> Option<anyhow::Result<SceneResult>> {
     let truth = s.truth.as_ref()?;
-    Some((|| {
-        let scenario = scbg_synth::Scenario::of_truth(truth)?;
-        let base = quantiles
-            .iter()
-            .position(|&q| (q - 0.5).abs() < 1e-6)
-            .expect("0.5 is among the quantiles");
-        let curve = quantiles
-            .iter()
-            .map(|&q| {
-                let tracks = scenario.tracks_with_courtesy(f64::from(q));
-                anyhow::ensure!(
-                    tracks.len() == s.scene.tracks.len()
-                        && tracks
-                            .iter()
-                            .zip(&s.scene.tracks)
-                            .all(|(a, b)| a.id == b.id),
-                    "scenario {}: the world's tracks are not the scene's",
-                    s.scene.scenario_id
-                );
-                let scene = Scene {
-                    tracks,
-                    ..s.scene.clone()
-                };
-                let r = report(&scene, s.ego, &[s.controlled])?;
-                Ok((r.ego, r.controlled[0]))
-            })
-            .collect::<anyhow::Result<Vec<_>>>()?;
-        Ok(SceneResult {
-            family: s.family(),
-            base_a_speed: curve[base].0.avg_speed_mps,
-            curve,
+    Some(world_curve(s, truth, quantiles).map(|curve| SceneResult::new(s, curve, base)))
+}
+
+/// The (A, B) metrics of scene `s` at each quantile with B driven by the world's rule.
+fn world_curve(
+    s: &SimScene,
+    truth: &GroundTruth,
+    quantiles: &[f32],
+) -> anyhow::Result<Vec<(AgentRolloutMetrics, AgentRolloutMetrics)>> {
+    let scenario = scbg_synth::Scenario::of_truth(truth)?;
+    let mut scene = s.scene.clone();
+    quantiles
+        .iter()
+        .map(|&q| {
+            let tracks = scenario.tracks_with_courtesy(f64::from(q));
+            anyhow::ensure!(
+                tracks.len() == s.scene.tracks.len()
+                    && tracks
+                        .iter()
+                        .zip(&s.scene.tracks)
+                        .all(|(a, b)| a.id == b.id),
+                "scenario {}: the world's tracks are not the scene's",
+                s.scene.scenario_id
+            );
+            scene.tracks = tracks;
+            let r = report(&scene, s.ego, &[s.controlled])?;
+            Ok((r.ego, r.controlled[0]))
         })
-    })())
+        .collect()
+}
+
+/// The scenes that ran; each one that failed is counted in `skipped` under `prefix` and the
+/// first part of its error.
+fn kept_counting_skips(
+    results: Vec<anyhow::Result<SceneResult>>,
+    prefix: &str,
+    skipped: &mut BTreeMap<String, usize>,
+) -> Vec<SceneResult> {
+    let mut kept = Vec::new();
+    for r in results {
+        match r {
+            Ok(r) => kept.push(r),
+            Err(e) => {
+                let why = format!("{e:#}");
+                let key = why.split(':').next().unwrap_or("error");
+                *skipped.entry(format!("{prefix}{key}")).or_insert(0) += 1;
+            }
+        }
+    }
+    kept
 }
 
 fn spearman_per_family(points: &[(String, f64, f64)]) -> PerFamily {
@@ -512,33 +548,17 @@ pub fn evaluate_sim(
                 .iter()
                 .map(|&q| one_rollout(model, s, q, options.config))
                 .collect::<anyhow::Result<Vec<_>>>()?;
-            Ok(SceneResult {
-                family: s.family(),
-                base_a_speed: curve[base].0.avg_speed_mps,
-                curve,
-            })
+            Ok(SceneResult::new(s, curve, base))
         })
         .collect();
     let curve_seconds = curve_started.elapsed().as_secs_f64();
     let mut skipped = BTreeMap::new();
-    let mut done = Vec::new();
-    for r in results {
-        match r {
-            Ok(r) => done.push(r),
-            Err(e) => {
-                let why = format!("{e:#}");
-                let key = why.split(':').next().unwrap_or("error").to_string();
-                *skipped.entry(key).or_insert(0) += 1;
-            }
-        }
-    }
+    let done = kept_counting_skips(results, "", &mut skipped);
     anyhow::ensure!(
         !done.is_empty(),
         "no scene could be simulated (skipped: {skipped:?})"
     );
     let mut curve = KnobCurve::of(&done, &quantiles);
-    let per_quantile = &mut curve.per_quantile;
-
     // WOSAC realism on the first scenes.
     let wosac_scenes = &scenes[..scenes.len().min(options.wosac_scenes)];
     let scored: Vec<Scored> = wosac_scenes
@@ -552,7 +572,7 @@ pub fn evaluate_sim(
             .collect();
         scbg_metrics::wosac::aggregate(&m, options.wosac)
     };
-    for row in per_quantile.iter_mut() {
+    for row in &mut curve.per_quantile {
         row.wosac = aggregate(&format!("q={:.1}", row.quantile)).map(|m| WosacSummary::of(&m));
     }
     let all_scbg: Vec<ScenarioMetrics> = scored
@@ -588,21 +608,14 @@ pub fn evaluate_sim(
         Some(w.metametric > cv && w.metametric > idm)
     });
     // The world's own knob on the same scenes (synthetic scenes only).
-    let world_results: Vec<anyhow::Result<SceneResult>> = scenes
-        .par_iter()
-        .filter_map(|s| world_scene(s, &quantiles))
-        .collect();
-    let mut world = Vec::new();
-    for r in world_results {
-        match r {
-            Ok(r) => world.push(r),
-            Err(e) => {
-                let why = format!("{e:#}");
-                let key = why.split(':').next().unwrap_or("error");
-                *skipped.entry(format!("world knob: {key}")).or_insert(0) += 1;
-            }
-        }
-    }
+    let world = kept_counting_skips(
+        scenes
+            .par_iter()
+            .filter_map(|s| world_scene(s, &quantiles, base))
+            .collect(),
+        "world knob: ",
+        &mut skipped,
+    );
     let world_knob = (!world.is_empty()).then(|| KnobCurve::of(&world, &quantiles));
     let rollouts_done = done.len() * quantiles.len();
     Ok(SimEval {

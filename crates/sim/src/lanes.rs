@@ -9,8 +9,9 @@
 //! `max_offset_m` from it. Lane changes stay possible — a point between two lanes is pulled
 //! toward the nearer one — and the plan's timing (when B is where along its way, which is what
 //! courtesy is about) is kept. Only lanes heading the plan's way (within 45°) count, so at an
-//! intersection a drifting point is not kept on the crossing road. Points farther than [`REACH_M`] from every lane centre (a car
-//! park, a driveway) are left as they are.
+//! intersection a drifting point is not kept on the crossing road. Points farther than
+//! [`REACH_M`] from every lane centre (a car park, a driveway) are left as they are. The
+//! segments are listed once per simulation ([`LaneSegments`]).
 
 use scbg_scene::{LaneType, Map};
 
@@ -24,87 +25,107 @@ pub const MAX_ANGLE_COS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 /// the plan had before (m).
 pub const MOVING_M: f64 = 0.2;
 
-/// Pulls every point of `plan` (world frame) to within `max_offset_m` of the nearest car-lane
-/// centre line of `map` that lies within [`REACH_M`]; returns how many points moved.
-pub fn keep_near_lanes(plan: &mut [[f64; 2]], map: &Map, max_offset_m: f64) -> usize {
-    if plan.is_empty() {
-        return 0;
-    }
-    // The plan's bounding box grown by the reach: segments outside it cannot be nearest to
-    // any point within reach.
-    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-    for p in plan.iter() {
-        for k in 0..2 {
-            lo[k] = lo[k].min(p[k]);
-            hi[k] = hi[k].max(p[k]);
+/// The car-lane centre-line segments of a map (every lane but bike lanes), listed once per
+/// simulation: the map does not change while plans are made.
+#[derive(Debug, Clone, Default)]
+pub struct LaneSegments {
+    segments: Vec<([f64; 2], [f64; 2])>,
+}
+
+impl LaneSegments {
+    /// The segments of `map`'s car lanes.
+    pub fn new(map: &Map) -> Self {
+        Self {
+            segments: map
+                .lanes
+                .iter()
+                .filter(|l| l.lane_type != LaneType::BikeLane)
+                .flat_map(|l| {
+                    l.polyline
+                        .windows(2)
+                        .map(|w| ([w[0].x_m, w[0].y_m], [w[1].x_m, w[1].y_m]))
+                })
+                .collect(),
         }
     }
-    let (lo, hi) = (
-        [lo[0] - REACH_M, lo[1] - REACH_M],
-        [hi[0] + REACH_M, hi[1] + REACH_M],
-    );
-    let segments: Vec<([f64; 2], [f64; 2])> = map
-        .lanes
-        .iter()
-        .filter(|l| l.lane_type != LaneType::BikeLane)
-        .flat_map(|l| {
-            l.polyline
-                .windows(2)
-                .map(|w| ([w[0].x_m, w[0].y_m], [w[1].x_m, w[1].y_m]))
-        })
-        .filter(|(a, b)| {
-            a[0].max(b[0]) >= lo[0]
-                && a[0].min(b[0]) <= hi[0]
-                && a[1].max(b[1]) >= lo[1]
-                && a[1].min(b[1]) <= hi[1]
-        })
-        .collect();
-    // The plan's direction at each point (central difference; where the plan stands, the
-    // last direction it had, or none before it first moves).
-    let n = plan.len();
-    let mut heading: Vec<Option<[f64; 2]>> = Vec::with_capacity(n);
-    let mut last = None;
-    for k in 0..n {
-        let (a, b) = (plan[k.saturating_sub(1)], plan[(k + 1).min(n - 1)]);
-        let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-        let len = dx.hypot(dy);
-        if len >= MOVING_M {
-            last = Some([dx / len, dy / len]);
+
+    /// Pulls every point of `plan` (world frame) to within `max_offset_m` of the nearest
+    /// car-lane centre line within [`REACH_M`] that heads the plan's way; returns how many
+    /// points moved.
+    pub fn keep_near(&self, plan: &mut [[f64; 2]], max_offset_m: f64) -> usize {
+        if plan.is_empty() {
+            return 0;
         }
-        heading.push(last);
-    }
-    let mut moved = 0;
-    for (p, heading) in plan.iter_mut().zip(heading) {
-        let mut best = (REACH_M * REACH_M, None);
-        for (a, b) in &segments {
+        // The plan's bounding box grown by the reach: segments outside it cannot be nearest to
+        // any point within reach.
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for p in plan.iter() {
+            for k in 0..2 {
+                lo[k] = lo[k].min(p[k]);
+                hi[k] = hi[k].max(p[k]);
+            }
+        }
+        let (lo, hi) = (
+            [lo[0] - REACH_M, lo[1] - REACH_M],
+            [hi[0] + REACH_M, hi[1] + REACH_M],
+        );
+        let segments: Vec<&([f64; 2], [f64; 2])> = self
+            .segments
+            .iter()
+            .filter(|(a, b)| {
+                a[0].max(b[0]) >= lo[0]
+                    && a[0].min(b[0]) <= hi[0]
+                    && a[1].max(b[1]) >= lo[1]
+                    && a[1].min(b[1]) <= hi[1]
+            })
+            .collect();
+        // The plan's direction at each point (central difference; where the plan stands, the
+        // last direction it had, or none before it first moves).
+        let n = plan.len();
+        let mut heading: Vec<Option<[f64; 2]>> = Vec::with_capacity(n);
+        let mut last = None;
+        for k in 0..n {
+            let (a, b) = (plan[k.saturating_sub(1)], plan[(k + 1).min(n - 1)]);
             let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let len2 = dx * dx + dy * dy;
-            if let Some(h) = heading
-                && (dx * h[0] + dy * h[1]) < MAX_ANGLE_COS * len2.sqrt()
-            {
-                continue;
+            let len = dx.hypot(dy);
+            if len >= MOVING_M {
+                last = Some([dx / len, dy / len]);
             }
-            let t = if len2 > 0.0 {
-                (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-            } else {
-                0.0
-            };
-            let q = [a[0] + t * dx, a[1] + t * dy];
-            let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
-            if d2 < best.0 {
-                best = (d2, Some(q));
+            heading.push(last);
+        }
+        let mut moved = 0;
+        for (p, heading) in plan.iter_mut().zip(heading) {
+            let mut best = (REACH_M * REACH_M, None);
+            for &(a, b) in &segments {
+                let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+                let len2 = dx * dx + dy * dy;
+                if let Some(h) = heading
+                    && (dx * h[0] + dy * h[1]) < MAX_ANGLE_COS * len2.sqrt()
+                {
+                    continue;
+                }
+                let t = if len2 > 0.0 {
+                    (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                let q = [a[0] + t * dx, a[1] + t * dy];
+                let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+                if d2 < best.0 {
+                    best = (d2, Some(q));
+                }
+            }
+            if let (d2, Some(q)) = best {
+                let d = d2.sqrt();
+                if d > max_offset_m {
+                    let k = max_offset_m / d;
+                    *p = [q[0] + k * (p[0] - q[0]), q[1] + k * (p[1] - q[1])];
+                    moved += 1;
+                }
             }
         }
-        if let (d2, Some(q)) = best {
-            let d = d2.sqrt();
-            if d > max_offset_m {
-                let k = max_offset_m / d;
-                *p = [q[0] + k * (p[0] - q[0]), q[1] + k * (p[1] - q[1])];
-                moved += 1;
-            }
-        }
+        moved
     }
-    moved
 }
 
 #[cfg(test)]
@@ -138,7 +159,7 @@ mod tests {
         // One point at a time (no direction, no carried correction).
         let keep = |p: [f64; 2]| {
             let mut plan = [p];
-            let moved = keep_near_lanes(&mut plan, &map, 0.5);
+            let moved = LaneSegments::new(&map).keep_near(&mut plan, 0.5);
             (moved, plan[0])
         };
         assert_eq!(keep([5.0, 0.3]), (0, [5.0, 0.3])); // on the first lane: stays
@@ -164,14 +185,14 @@ mod tests {
             ..Map::default()
         };
         let mut p = vec![[48.0, 20.0], [49.0, 20.0], [50.0, 20.0]];
-        assert_eq!(keep_near_lanes(&mut p, &crossing, 0.5), 0);
+        assert_eq!(LaneSegments::new(&crossing).keep_near(&mut p, 0.5), 0);
         // A bike lane does not count.
         let bike = Map {
             lanes: vec![lane(0.0, LaneType::BikeLane)],
             ..Map::default()
         };
         let mut p = vec![[15.0, -2.0]];
-        assert_eq!(keep_near_lanes(&mut p, &bike, 0.5), 0);
+        assert_eq!(LaneSegments::new(&bike).keep_near(&mut p, 0.5), 0);
         assert_eq!(p[0], [15.0, -2.0]);
     }
 }

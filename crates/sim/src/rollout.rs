@@ -255,6 +255,8 @@ pub struct Simulation {
     controlled: Vec<Controlled>,
     idm: Vec<Option<IdmAgent>>,
     synthetic: Option<Synthetic>,
+    /// The map's car-lane segments, when plans are lane-kept.
+    lanes: Option<crate::lanes::LaneSegments>,
 }
 
 fn finite(s: &AgentState) -> bool {
@@ -395,6 +397,9 @@ impl Simulation {
             controlled: ctl,
             idm,
             synthetic,
+            lanes: config
+                .lane_keeping_m
+                .map(|_| crate::lanes::LaneSegments::new(&scene.map)),
         })
     }
 
@@ -658,8 +663,8 @@ impl Simulation {
         {
             return Err(PlanError(format!("point {k} is not finite")));
         }
-        if let Some(max_offset_m) = self.config.lane_keeping_m {
-            crate::lanes::keep_near_lanes(&mut plan, &view.map, max_offset_m);
+        if let (Some(lanes), Some(max_offset_m)) = (&self.lanes, self.config.lane_keeping_m) {
+            lanes.keep_near(&mut plan, max_offset_m);
         }
         Ok(plan)
     }

@@ -211,7 +211,7 @@ fn lane_keeping_holds_a_plan_beside_the_lane_near_it() {
             .map(|s| {
                 let mut p = [[s.x_m, s.y_m]];
                 // Distance to the nearest lane centre: how far keeping at 0 m moves the point.
-                crate::lanes::keep_near_lanes(&mut p, &log.map, 0.0);
+                crate::lanes::LaneSegments::new(&log.map).keep_near(&mut p, 0.0);
                 (p[0][0] - s.x_m).hypot(p[0][1] - s.y_m)
             })
             .sum::<f64>()
