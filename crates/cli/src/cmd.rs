@@ -344,10 +344,10 @@ fn sim(a: &crate::cli::SimArgs, progress: &dyn Progress) -> anyhow::Result<()> {
 fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
     println!(
         "closed loop, {} scenes, re-plan every {} steps ({:.0} ms per rollout, {:.0} s)",
-        e.scenes, e.replan_every, e.rollout_ms, e.seconds
+        e.curve.scenes, e.replan_every, e.rollout_ms, e.seconds
     );
     println!("quantile  A speed m/s  realised courtesy  B collision  B off-road  WOSAC meta");
-    for r in &e.per_quantile {
+    for r in &e.curve.per_quantile {
         println!(
             "{:8.1}  {:11.2}  {:17.3}  {:11.3}  {:10.3}  {}",
             r.quantile,
@@ -378,11 +378,11 @@ fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
     };
     println!(
         "Spearman(quantile, A speed): {}",
-        fmt(&e.spearman_quantile_a_speed)
+        fmt(&e.curve.spearman_quantile_a_speed)
     );
     println!(
         "Spearman(quantile, realised courtesy): {}",
-        fmt(&e.spearman_quantile_realised_courtesy)
+        fmt(&e.curve.spearman_quantile_realised_courtesy)
     );
 }
 

@@ -471,9 +471,10 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             Ok(eval) => {
                 progress.note(&format!(
                     "closed loop: {} scenes in {:.0} s; Spearman(quantile, A's speed) {}",
-                    eval.scenes,
+                    eval.curve.scenes,
                     eval.seconds,
-                    eval.spearman_quantile_a_speed
+                    eval.curve
+                        .spearman_quantile_a_speed
                         .get("all")
                         .copied()
                         .flatten()
@@ -732,9 +733,9 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
     let mut out = format!(
         "The full generator drives B (re-planning every {} steps from the simulated history, kinematic bicycle with a safety guard) among reactive agents (the synthetic world's rule) on {} held-out scenes.\n\n\
          | quantile | A's realised speed (m/s) | realised courtesy (m/s) | B collision | B off-road | WOSAC meta | kinematic | interactive | map | collision rate |\n|---|---|---|---|---|---|---|---|---|---|\n",
-        c.replan_every, c.scenes
+        c.replan_every, c.curve.scenes
     );
-    for r in &c.per_quantile {
+    for r in &c.curve.per_quantile {
         out += &format!(
             "| {:.1} | {:.2} ± {:.2} | {:.3} ± {:.3} | {:.3} | {:.3} | {} |\n",
             r.quantile,
@@ -767,8 +768,8 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
     out += &format!(
         "\nSpearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. scbg WOSAC over its quantiles: {}.\n\n\
          ![closed-loop courtesy](figures/sim_courtesy.png)\n![closed-loop realism](figures/sim_realism.png)\n",
-        fmt(&c.spearman_quantile_a_speed),
-        fmt(&c.spearman_quantile_realised_courtesy),
+        fmt(&c.curve.spearman_quantile_a_speed),
+        fmt(&c.curve.spearman_quantile_realised_courtesy),
         meta(c.wosac_scbg.as_ref())
     );
     if let Some(w) = &c.world_knob {

@@ -142,23 +142,14 @@ pub type PerFamily = BTreeMap<String, Option<f64>>;
 /// Everything `eval sim` measures (`eval_sim.json`; the demo's `closed_loop`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SimEval {
-    /// Scenes of the courtesy curve.
-    pub scenes: usize,
+    /// The generator's courtesy curve: scenes, per quantile, the correlations (its fields
+    /// appear at the top level of the JSON).
+    #[serde(flatten)]
+    pub curve: KnobCurve,
     /// Scenes skipped, with why.
     pub skipped: BTreeMap<String, usize>,
     /// Steps between plans.
     pub replan_every: usize,
-    /// Per quantile.
-    pub per_quantile: Vec<QuantileSim>,
-    /// Spearman(quantile, A's realised average speed) over every (scene, quantile).
-    pub spearman_quantile_a_speed: PerFamily,
-    /// Spearman(quantile, realised courtesy) over every (scene, quantile): the same, with
-    /// each scene's own level removed.
-    pub spearman_quantile_realised_courtesy: PerFamily,
-    /// Whether the mean of A's realised speed never falls from one quantile to the next.
-    pub a_speed_curve_rises: bool,
-    /// The largest B collision rate over the quantiles.
-    pub max_b_collision_rate: f64,
     /// The same curve with B driven by the synthetic world's own rule at courtesy `c = q`
     /// (A and the others reacting alike) on the scenes with ground truth: what a B faithful
     /// to its courtesy achieves in this world, the ceiling of the generator's curve.
@@ -376,7 +367,8 @@ pub struct KnobCurve {
     pub per_quantile: Vec<QuantileSim>,
     /// Spearman(quantile, A's realised average speed) over every (scene, quantile).
     pub spearman_quantile_a_speed: PerFamily,
-    /// Spearman(quantile, realised courtesy) over every (scene, quantile).
+    /// Spearman(quantile, realised courtesy) over every (scene, quantile): the same, with
+    /// each scene's own level removed.
     pub spearman_quantile_realised_courtesy: PerFamily,
     /// Whether the mean of A's realised speed never falls from one quantile to the next.
     pub a_speed_curve_rises: bool,
@@ -619,14 +611,9 @@ pub fn evaluate_sim(
     let world_knob = (!world.is_empty()).then(|| KnobCurve::of(&world, &quantiles));
     let rollouts_done = done.len() * quantiles.len();
     Ok(SimEval {
-        scenes: done.len(),
+        curve,
         skipped,
         replan_every: options.config.replan_every,
-        per_quantile: curve.per_quantile,
-        spearman_quantile_a_speed: curve.spearman_quantile_a_speed,
-        spearman_quantile_realised_courtesy: curve.spearman_quantile_realised_courtesy,
-        a_speed_curve_rises: curve.a_speed_curve_rises,
-        max_b_collision_rate: curve.max_b_collision_rate,
         world_knob,
         wosac_scbg,
         baselines,
@@ -643,7 +630,8 @@ pub fn write_figures(eval: &SimEval, dir: &Path) -> anyhow::Result<()> {
     use scbg_plot::Series;
     std::fs::create_dir_all(dir)?;
     let q = |f: &dyn Fn(&QuantileSim) -> f64| -> Vec<(f64, f64)> {
-        eval.per_quantile
+        eval.curve
+            .per_quantile
             .iter()
             .map(|r| (f64::from(r.quantile), f(r)))
             .collect()
@@ -653,7 +641,8 @@ pub fn write_figures(eval: &SimEval, dir: &Path) -> anyhow::Result<()> {
             label: "A's realised avg speed − at q=0.5 (m/s)".into(),
             points: q(&|r| r.realised_courtesy_mps),
             band: Some(
-                eval.per_quantile
+                eval.curve
+                    .per_quantile
                     .iter()
                     .map(|r| r.realised_courtesy_std_mps)
                     .collect(),
@@ -686,6 +675,7 @@ pub fn write_figures(eval: &SimEval, dir: &Path) -> anyhow::Result<()> {
     let mut series = vec![Series {
         label: "scbg (32 rollouts around q)".into(),
         points: eval
+            .curve
             .per_quantile
             .iter()
             .filter_map(|r| {

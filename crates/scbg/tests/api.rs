@@ -265,8 +265,8 @@ fn closed_loop_through_the_library(
         },
     )
     .unwrap();
-    assert_eq!(eval.per_quantile.len(), 3, "0.5 is added");
-    assert_eq!(eval.per_quantile[1].realised_courtesy_mps, 0.0);
+    assert_eq!(eval.curve.per_quantile.len(), 3, "0.5 is added");
+    assert_eq!(eval.curve.per_quantile[1].realised_courtesy_mps, 0.0);
     assert!(eval.baselines["log_replay"].wosac.is_some());
     assert!(eval.wosac_scbg.is_some());
     // The world's own knob on the same scene: B at courtesy c = q by the world's rule, A's

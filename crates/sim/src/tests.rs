@@ -206,12 +206,13 @@ fn lane_keeping_holds_a_plan_beside_the_lane_near_it() {
         });
         sim.run(&mut planner).unwrap();
         let out = sim.to_scene();
+        let lanes = crate::lanes::LaneSegments::new(&log.map);
         out.tracks[1].states[11..]
             .iter()
             .map(|s| {
                 let mut p = [[s.x_m, s.y_m]];
                 // Distance to the nearest lane centre: how far keeping at 0 m moves the point.
-                crate::lanes::LaneSegments::new(&log.map).keep_near(&mut p, 0.0);
+                lanes.keep_near(&mut p, 0.0);
                 (p[0][0] - s.x_m).hypot(p[0][1] - s.y_m)
             })
             .sum::<f64>()

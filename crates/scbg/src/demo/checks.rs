@@ -173,24 +173,17 @@ pub fn acceptance_checks(
         }
     }
     if let Some(c) = closed_loop {
+        let pooled_value = |m: &crate::sim_eval::PerFamily| m.get("all").copied().flatten();
         let pooled_of = |m: &crate::sim_eval::PerFamily| {
-            m.get("all")
-                .copied()
-                .flatten()
-                .map_or("-".into(), |r| format!("{r:.3}"))
+            pooled_value(m).map_or("-".into(), |r| format!("{r:.3}"))
         };
-        let pooled = c
-            .spearman_quantile_a_speed
-            .get("all")
-            .copied()
-            .flatten()
-            .unwrap_or(f64::NAN);
+        let pooled = pooled_value(&c.curve.spearman_quantile_a_speed).unwrap_or(f64::NAN);
         out.push(Check {
             key: "closed_loop_spearman_0_6",
             passed: pooled >= 0.6,
             text: format!(
                 "closed loop: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}){}",
-                pooled_of(&c.spearman_quantile_realised_courtesy),
+                pooled_of(&c.curve.spearman_quantile_realised_courtesy),
                 c.world_knob.as_ref().map_or(String::new(), |w| format!(
                     "; the world's own B at courtesy c = q on the same scenes: {} pooled, {} with each scene's level removed",
                     pooled_of(&w.spearman_quantile_a_speed),
@@ -200,10 +193,11 @@ pub fn acceptance_checks(
         });
         out.push(Check {
             key: "closed_loop_curve_rises",
-            passed: c.a_speed_curve_rises,
+            passed: c.curve.a_speed_curve_rises,
             text: format!(
                 "closed loop: A's mean realised speed rises with the quantile ({})",
-                c.per_quantile
+                c.curve
+                    .per_quantile
                     .iter()
                     .map(|r| format!("{:.2}", r.a_avg_speed_mps))
                     .collect::<Vec<_>>()
@@ -212,10 +206,10 @@ pub fn acceptance_checks(
         });
         out.push(Check {
             key: "closed_loop_b_collision_2pct",
-            passed: c.max_b_collision_rate <= 0.02,
+            passed: c.curve.max_b_collision_rate <= 0.02,
             text: format!(
                 "closed loop: B's collision rate ≤ 2 % at every quantile (max {:.3})",
-                c.max_b_collision_rate
+                c.curve.max_b_collision_rate
             ),
         });
         let meta = |w: Option<&crate::sim_eval::WosacSummary>| {
