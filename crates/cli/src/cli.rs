@@ -200,6 +200,11 @@ pub struct TrainGeneratorArgs {
     /// Tell the generator and range predictor who A is (A's context after B's embedding).
     #[arg(long)]
     pub condition_on_a: bool,
+    /// Synthetic data only, an experiment: train on the simulator's ψ_true instead of the
+    /// predictor's labels (the ground-truth sidecar `ground_truth.jsonl` of `scbg synth`). Keeps
+    /// the ground truth's pair role of each scene, the one the oracle scores.
+    #[arg(long, value_name = "GROUND_TRUTH_JSONL")]
+    pub oracle_labels: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -180,6 +180,11 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Train(TrainCommand::Generator(a)) => {
             let labels =
                 label_options(&a.estimator, a.samples, scbg::choices::Reward::AverageSpeed)?;
+            let truth = a
+                .oracle_labels
+                .as_deref()
+                .map(scbg::synth::read_ground_truth)
+                .transpose()?;
             scbg::generator::train_generator(
                 &a.predictor,
                 &a.data,
@@ -195,8 +200,10 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     range_steps: a.range_steps,
                     seed: a.seed,
                     labels,
+                    oracle_labels: truth.is_some(),
                 },
                 a.condition_on_a,
+                truth.as_deref(),
                 progress,
             )?;
         }

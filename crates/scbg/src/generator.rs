@@ -51,6 +51,10 @@ pub struct GeneratorCheckpoint {
     /// How the training labels were made (futures sampled per pair role, reward, estimator of
     /// E[r(Y_A) | x], noise scale of the samples): inference labels the same way.
     pub labels: LabelOptions,
+    /// Whether the labels were the simulator's ψ_true ([`crate::labels::oracle_labelled`];
+    /// synthetic data, an experiment) instead of the predictor's.
+    #[serde(default)]
+    pub oracle_labels: bool,
     /// Weight α of the sampled futures' trajectory loss.
     pub alpha: f32,
     /// Weight β of the courtesy loss.
@@ -198,12 +202,30 @@ pub fn examples_for_split(
     condition_on_a: bool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Vec<Example>> {
+    let labelled = labelled_split(predictor, ckpt, device, data, split, labels, seed, progress)?;
+    Ok(examples_of(predictor, device, labelled, condition_on_a))
+}
+
+/// Every pair role in one split of a prepared cache (`None` = every scene), labelled through
+/// the one labelling path ([`label_scenes`]); [`examples_for_split`] before the examples are
+/// made. Runs on the plain device.
+#[allow(clippy::too_many_arguments)]
+pub fn labelled_split(
+    predictor: &Multipath,
+    ckpt: &Checkpoint,
+    device: &Device,
+    data: &Path,
+    split: Option<Split>,
+    labels: LabelOptions,
+    seed: u64,
+    progress: &dyn Progress,
+) -> anyhow::Result<Vec<SceneLabels>> {
     let dataset = PreparedDataset::open(data)?;
     let vf = ckpt.train_config.validation_fraction;
     let keep = |scene: &scbg_features::PreparedScene| {
         split.is_none_or(|split| split_of(&scene.scenario_id, vf) == split)
     };
-    let labelled = label_scenes(
+    label_scenes(
         predictor,
         ckpt,
         device,
@@ -213,8 +235,7 @@ pub fn examples_for_split(
         labels,
         seed,
         progress,
-    )?;
-    Ok(examples_of(predictor, device, labelled, condition_on_a))
+    )
 }
 
 /// Training settings of one variant.
@@ -240,6 +261,8 @@ pub struct VariantSettings {
     pub seed: u64,
     /// How the examples were labelled (recorded in generator.json).
     pub labels: LabelOptions,
+    /// The examples carry the oracle's ψ_true (recorded in generator.json).
+    pub oracle_labels: bool,
 }
 
 impl VariantSettings {
@@ -256,6 +279,7 @@ impl VariantSettings {
             range_steps: 300,
             seed: 0,
             labels,
+            oracle_labels: false,
         }
     }
 }
@@ -401,6 +425,7 @@ pub fn train_variant(
         generator: gen_config,
         range_hidden,
         labels: s.labels,
+        oracle_labels: s.oracle_labels,
         alpha: s.alpha,
         beta: s.beta,
         threshold: s.threshold,
@@ -427,21 +452,28 @@ static DEVICE_STREAM: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// What `scbg train generator` does: labels the training split of `data` with the predictor
 /// in `predictor` and trains one variant into `out`, told who A is with `condition_on_a`
-/// (see [`examples_of`]).
+/// (see [`examples_of`]). With `oracle_truth` (the synthetic ground truth; requires
+/// `settings.oracle_labels`) the labels are the simulator's ψ_true instead
+/// ([`crate::labels::oracle_labelled`]).
 pub fn train_generator(
     predictor: &Path,
     data: &Path,
     out: &Path,
     settings: &VariantSettings,
     condition_on_a: bool,
+    oracle_truth: Option<&[scbg_synth::GroundTruth]>,
     progress: &dyn Progress,
 ) -> anyhow::Result<GeneratorCheckpoint> {
+    ensure_request!(
+        settings.oracle_labels == oracle_truth.is_some(),
+        "oracle labels need the synthetic ground truth, and the ground truth is only read for them"
+    );
     let p = load_predictors(predictor)?;
     progress.note(&format!(
         "labelling the training split ({} futures of B per pair role)",
         1 + settings.labels.samples
     ));
-    let examples = examples_for_split(
+    let mut labelled = labelled_split(
         &p.plain,
         &p.ckpt,
         &p.plain_device,
@@ -449,9 +481,17 @@ pub fn train_generator(
         Some(Split::Train),
         settings.labels,
         settings.seed,
-        condition_on_a,
         progress,
     )?;
+    if let Some(truth) = oracle_truth {
+        let (kept, count) = crate::labels::oracle_labelled(labelled, truth);
+        progress.note(&format!(
+            "oracle labels: {} roles ({} futures) kept with ψ_true; dropped: {} roles that are not a scene's ground-truth role, {} futures the oracle could not score",
+            count.roles, count.futures, count.dropped_roles, count.dropped_futures
+        ));
+        labelled = kept;
+    }
+    let examples = examples_of(&p.plain, &p.plain_device, labelled, condition_on_a);
     ensure_request!(
         !examples.is_empty(),
         "no interacting pairs in the training split of {}",

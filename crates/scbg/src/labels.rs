@@ -60,6 +60,81 @@ impl SceneLabels {
     }
 }
 
+/// What [`oracle_labelled`] kept and dropped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct OracleLabelCount {
+    /// Pair roles kept (the ground truth's role of a scene, its logged future scored).
+    pub roles: usize,
+    /// Futures of B kept with their ψ_true (logged and sampled).
+    pub futures: usize,
+    /// Pair roles dropped: not a ground-truth role, or no ground truth for the scene.
+    pub dropped_roles: usize,
+    /// Sampled futures dropped because the oracle could not score them.
+    pub dropped_futures: usize,
+}
+
+/// Synthetic data only: the labelled scenes with every learned ψ replaced by the simulator's
+/// ψ_true ([`crate::fidelity::psi_true_of_role`]) — the labels a perfect J_φ would give. Only
+/// the role the ground truth describes is kept in each scene (the oracle scores B toward A
+/// alone), and of its futures those the oracle can score; a role whose logged future it cannot
+/// score is dropped. `e_cond` is left as the predictor's (the full variant's courtesy loss
+/// still goes through J_φ, whose scale differs from ψ_true's).
+///
+/// An upper bound for the experiment "are the labels what limits control?", not the paper's
+/// method: real data has no oracle.
+pub fn oracle_labelled(
+    labelled: Vec<SceneLabels>,
+    truth: &[GroundTruth],
+) -> (Vec<SceneLabels>, OracleLabelCount) {
+    use rayon::prelude::*;
+    let index = crate::fidelity::TruthIndex::new(truth);
+    let scenes: Vec<(SceneLabels, OracleLabelCount)> = labelled
+        .into_par_iter()
+        .map(|mut scene| {
+            let mut count = OracleLabelCount::default();
+            let t = index.get(&scene.scenario_id);
+            let roles = std::mem::take(&mut scene.roles);
+            for mut role in roles {
+                let scores = t
+                    .map(|t| crate::fidelity::psi_true_of_role(t, &role))
+                    .unwrap_or_default();
+                if scores.first().copied().flatten().is_none() {
+                    count.dropped_roles += 1;
+                    continue;
+                }
+                let labels = &mut role.labels;
+                let keep: Vec<usize> = (0..labels.psi.len())
+                    .filter(|&k| scores.get(k).copied().flatten().is_some())
+                    .collect();
+                count.dropped_futures += labels.psi.len() - keep.len();
+                labels.psi = keep.iter().map(|&k| scores[k].unwrap_or_default()).collect();
+                labels.e_cond = keep.iter().map(|&k| labels.e_cond[k]).collect();
+                labels.futures_in_a = keep
+                    .iter()
+                    .map(|&k| std::mem::take(&mut labels.futures_in_a[k]))
+                    .collect();
+                count.roles += 1;
+                count.futures += keep.len();
+                scene.roles.push(role);
+            }
+            (scene, count)
+        })
+        .collect();
+    let mut total = OracleLabelCount::default();
+    let kept = scenes
+        .into_iter()
+        .map(|(scene, c)| {
+            total.roles += c.roles;
+            total.futures += c.futures;
+            total.dropped_roles += c.dropped_roles;
+            total.dropped_futures += c.dropped_futures;
+            scene
+        })
+        .filter(|s| !s.roles.is_empty())
+        .collect();
+    (kept, total)
+}
+
 /// The labelling path: every pair role of the cache scenes `range` for which `keep` holds,
 /// labelled with the predictor of `ckpt` (standardised by its statistics, its feature
 /// settings). Scene `i` draws B's sampled futures from its own stream

@@ -145,6 +145,7 @@ fn label_train_and_generate_through_the_library() {
 
     closed_loop_through_the_library(&model, &scene, t, dir.path());
     courtesy_toward_neighbours(&predictors, &scene, t, dir.path());
+    oracle_labels(&predictors, &rows, &truth, dir.path());
 
     // A predictor folder is not a generator folder; an old generator.json is refused clearly.
     let err = generator::load_scbg(&p("model"), None).unwrap_err();
@@ -161,6 +162,84 @@ fn label_train_and_generate_through_the_library() {
     std::fs::write(&json, old.to_string()).unwrap();
     let err = generator::load_scbg(&p("gen"), None).unwrap_err();
     assert!(format!("{err:#}").contains("older scbg"), "{err:#}");
+}
+
+/// The oracle-label experiment: the ground truth's role of each scene keeps its futures with
+/// the label table's ψ_true as ψ, every other role is dropped, and a generator trained on them
+/// says so in generator.json.
+fn oracle_labels(
+    predictors: &generator::Predictors,
+    rows: &[labels::LabelRow],
+    truth: &[scbg::synth::GroundTruth],
+    dir: &std::path::Path,
+) {
+    let options =
+        labels::label_options(2, Reward::AverageSpeed, MarginalEstimate::default(), 1.0).unwrap();
+    let labelled = generator::labelled_split(
+        &predictors.plain,
+        &predictors.ckpt,
+        &predictors.plain_device,
+        &dir.join("cache"),
+        None,
+        options,
+        0,
+        &Quiet,
+    )
+    .unwrap();
+    let (kept, count) = labels::oracle_labelled(labelled, truth);
+    let scored: Vec<&labels::LabelRow> = rows.iter().filter(|r| r.psi_true.is_some()).collect();
+    assert_eq!(count.roles, kept.iter().map(|s| s.roles.len()).sum::<usize>());
+    assert_eq!(count.roles + count.dropped_roles, 32);
+    assert_eq!(count.futures, scored.len());
+    assert!(count.roles >= 14, "{count:?}");
+    for scene in &kept {
+        let t = truth.iter().find(|t| t.scenario_id == scene.scenario_id).unwrap();
+        let [role] = &scene.roles[..] else {
+            panic!("{} keeps {} roles", scene.scenario_id, scene.roles.len())
+        };
+        assert_eq!((role.a_id, role.b_id), (t.a_id, t.b_id));
+        let expected: Vec<f32> = scored
+            .iter()
+            .filter(|r| r.scenario_id == scene.scenario_id)
+            .map(|r| r.psi_true.unwrap())
+            .collect();
+        assert_eq!(role.labels.psi, expected);
+        assert_eq!(role.labels.futures_in_a.len(), expected.len());
+    }
+    let saved = generator::train_generator(
+        &dir.join("model"),
+        &dir.join("cache"),
+        &dir.join("gen_oracle"),
+        &generator::VariantSettings {
+            epochs: 1,
+            batch_size: 8,
+            range_steps: 10,
+            oracle_labels: true,
+            ..generator::VariantSettings::new(Variant::Augmented, options)
+        },
+        false,
+        Some(truth),
+        &Quiet,
+    )
+    .unwrap();
+    assert!(saved.oracle_labels && saved.examples <= count.roles);
+    let read = generator::GeneratorCheckpoint::read(&dir.join("gen_oracle")).unwrap();
+    assert!(read.oracle_labels);
+    // Without the ground truth there is nothing to take ψ_true from.
+    let err = generator::train_generator(
+        &dir.join("model"),
+        &dir.join("cache"),
+        &dir.join("gen_oracle2"),
+        &generator::VariantSettings {
+            oracle_labels: true,
+            ..generator::VariantSettings::new(Variant::Augmented, options)
+        },
+        false,
+        None,
+        &Quiet,
+    )
+    .unwrap_err();
+    assert!(scbg::is_invalid_request(&err), "{err:#}");
 }
 
 /// The closed-loop API on a trained (tiny) model: plans equal generations, a rollout in the
