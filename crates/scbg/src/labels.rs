@@ -107,7 +107,10 @@ pub fn oracle_labelled(
                     .filter(|&k| scores.get(k).copied().flatten().is_some())
                     .collect();
                 count.dropped_futures += labels.psi.len() - keep.len();
-                labels.psi = keep.iter().map(|&k| scores[k].unwrap_or_default()).collect();
+                labels.psi = keep
+                    .iter()
+                    .map(|&k| scores[k].unwrap_or_default())
+                    .collect();
                 labels.e_cond = keep.iter().map(|&k| labels.e_cond[k]).collect();
                 labels.futures_in_a = keep
                     .iter()

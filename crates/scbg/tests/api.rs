@@ -188,12 +188,18 @@ fn oracle_labels(
     .unwrap();
     let (kept, count) = labels::oracle_labelled(labelled, truth);
     let scored: Vec<&labels::LabelRow> = rows.iter().filter(|r| r.psi_true.is_some()).collect();
-    assert_eq!(count.roles, kept.iter().map(|s| s.roles.len()).sum::<usize>());
+    assert_eq!(
+        count.roles,
+        kept.iter().map(|s| s.roles.len()).sum::<usize>()
+    );
     assert_eq!(count.roles + count.dropped_roles, 32);
     assert_eq!(count.futures, scored.len());
     assert!(count.roles >= 14, "{count:?}");
     for scene in &kept {
-        let t = truth.iter().find(|t| t.scenario_id == scene.scenario_id).unwrap();
+        let t = truth
+            .iter()
+            .find(|t| t.scenario_id == scene.scenario_id)
+            .unwrap();
         let [role] = &scene.roles[..] else {
             panic!("{} keeps {} roles", scene.scenario_id, scene.roles.len())
         };
