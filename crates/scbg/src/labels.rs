@@ -93,8 +93,8 @@ pub fn oracle_labelled(
         .map(|mut scene| {
             let mut count = OracleLabelCount::default();
             let t = index.get(&scene.scenario_id);
-            let roles = std::mem::take(&mut scene.roles);
-            for mut role in roles {
+            for mut role in std::mem::take(&mut scene.roles) {
+                // One score per future of B, in order (empty for another role).
                 let scores = t
                     .map(|t| crate::fidelity::psi_true_of_role(t, &role))
                     .unwrap_or_default();
@@ -103,38 +103,37 @@ pub fn oracle_labelled(
                     continue;
                 }
                 let labels = &mut role.labels;
-                let keep: Vec<usize> = (0..labels.psi.len())
-                    .filter(|&k| scores.get(k).copied().flatten().is_some())
-                    .collect();
-                count.dropped_futures += labels.psi.len() - keep.len();
-                labels.psi = keep
-                    .iter()
-                    .map(|&k| scores[k].unwrap_or_default())
-                    .collect();
-                labels.e_cond = keep.iter().map(|&k| labels.e_cond[k]).collect();
-                labels.futures_in_a = keep
-                    .iter()
-                    .map(|&k| std::mem::take(&mut labels.futures_in_a[k]))
-                    .collect();
+                let futures = std::mem::take(&mut labels.futures_in_a);
+                let (mut psi, mut e_cond) = (Vec::new(), Vec::new());
+                for ((score, e), future) in scores.iter().zip(&labels.e_cond).zip(futures) {
+                    match score {
+                        Some(v) => {
+                            psi.push(*v);
+                            e_cond.push(*e);
+                            labels.futures_in_a.push(future);
+                        }
+                        None => count.dropped_futures += 1,
+                    }
+                }
+                (labels.psi, labels.e_cond) = (psi, e_cond);
                 count.roles += 1;
-                count.futures += keep.len();
+                count.futures += labels.psi.len();
                 scene.roles.push(role);
             }
             (scene, count)
         })
         .collect();
     let mut total = OracleLabelCount::default();
-    let kept = scenes
-        .into_iter()
-        .map(|(scene, c)| {
-            total.roles += c.roles;
-            total.futures += c.futures;
-            total.dropped_roles += c.dropped_roles;
-            total.dropped_futures += c.dropped_futures;
-            scene
-        })
-        .filter(|s| !s.roles.is_empty())
-        .collect();
+    let mut kept = Vec::new();
+    for (scene, c) in scenes {
+        total.roles += c.roles;
+        total.futures += c.futures;
+        total.dropped_roles += c.dropped_roles;
+        total.dropped_futures += c.dropped_futures;
+        if !scene.roles.is_empty() {
+            kept.push(scene);
+        }
+    }
     (kept, total)
 }
 
