@@ -205,6 +205,16 @@ pub struct TrainGeneratorArgs {
     /// the ground truth's pair role of each scene, the one the oracle scores.
     #[arg(long, value_name = "GROUND_TRUTH_JSONL")]
     pub oracle_labels: Option<PathBuf>,
+    /// With --oracle-labels: replace B's sampled futures by K futures of the synthetic world's
+    /// own B, driving with courtesy (k + 0.5) / K from the current step on (everyone else
+    /// reacting), each scored by the oracle.
+    #[arg(
+        long,
+        value_name = "K",
+        default_value_t = 0,
+        requires = "oracle_labels"
+    )]
+    pub world_futures: usize,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -201,6 +201,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     seed: a.seed,
                     labels,
                     oracle_labels: truth.is_some(),
+                    world_futures: a.world_futures,
                 },
                 a.condition_on_a,
                 truth.as_deref(),

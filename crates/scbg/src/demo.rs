@@ -133,6 +133,9 @@ pub struct DemoReport {
     pub truth_control: serde_json::Value,
     /// The same with the standard deviation over the seeds.
     pub truth_control_seed_std: serde_json::Value,
+    /// The yardstick of `truth_control`: the same scoring of the synthetic world's own B at
+    /// courtesy c = q ([`crate::fidelity::WorldKnob`]); `null` without a ground truth.
+    pub truth_control_world: Option<crate::fidelity::WorldKnob>,
     /// The evaluation's settings and figures.
     pub scbg_eval: ScbgEvalSummary,
     /// The closed-loop stage (full variant, first seed, held-out scenes): realised courtesy,
@@ -538,6 +541,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         variants_per_seed: per_seed.iter().map(ScbgEval::variants_json).collect(),
         truth_control: truth_mean,
         truth_control_seed_std: truth_std,
+        truth_control_world: scbg.world_knob.clone(),
         scbg_eval: ScbgEvalSummary {
             examples: scbg.examples,
             high_threshold_psi: scbg.high_threshold_psi,
@@ -674,6 +678,22 @@ impl DemoReport {
                 cell(name, &["traj_ade", "mean"], false),
                 cell(name, &["corr_quantile"], false),
                 cell(name, &["corr_quantile_high"], false),
+                rho(crate::fidelity::POOLED),
+                rho("merge"),
+                rho("crossing"),
+                rho("cutin"),
+            );
+        }
+        if let Some(w) = &self.truth_control_world {
+            let rho = |k: &str| {
+                w.spearman_quantile_psi_true
+                    .get(k)
+                    .copied()
+                    .flatten()
+                    .map_or("-".into(), |x| format!("{x:.3}"))
+            };
+            out += &format!(
+                "| the world's own B at c = q (yardstick) | | | | | | | {} | {} | {} | {} |\n",
                 rho(crate::fidelity::POOLED),
                 rho("merge"),
                 rho("crossing"),

@@ -276,6 +276,50 @@ pub struct TruthControl {
     pub achieved_vs_true: Agreement,
 }
 
+/// A scored example: its family and ψ_true of B's future at each of `EVAL_QUANTILES`.
+type QuantileRow = (&'static str, Vec<f64>);
+
+/// Spearman(input quantile, ψ_true) per family and pooled, the examples per family and the
+/// mean ψ_true per quantile of `rows` (the fields of a [`WorldKnob`], and of a
+/// [`TruthControl`] beside J_φ's agreement).
+fn quantile_summary(rows: &[QuantileRow]) -> WorldKnob {
+    use scbg_generator::eval::EVAL_QUANTILES;
+    let mut q_by: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    for (family, truths) in rows {
+        for key in [*family, POOLED] {
+            let e = q_by.entry(key.to_string()).or_default();
+            for (j, v) in truths.iter().enumerate() {
+                e.0.push(f64::from(EVAL_QUANTILES[j]));
+                e.1.push(*v);
+            }
+        }
+    }
+    let per_quantile = EVAL_QUANTILES
+        .iter()
+        .enumerate()
+        .filter_map(|(j, &q)| {
+            let v: Vec<f64> = rows.iter().map(|s| s.1[j]).collect();
+            let m = scbg_generator::eval::MeanStd::of(&v)?;
+            Some(QuantileTruth {
+                quantile: q,
+                psi_true_mean: m.mean,
+                psi_true_std: m.std,
+            })
+        })
+        .collect();
+    WorldKnob {
+        spearman_quantile_psi_true: q_by
+            .iter()
+            .map(|(k, (q, t))| (k.clone(), scbg_metrics::spearman(q, t)))
+            .collect(),
+        examples: q_by
+            .iter()
+            .map(|(k, (q, _))| (k.clone(), q.len() / EVAL_QUANTILES.len()))
+            .collect(),
+        per_quantile,
+    }
+}
+
 /// Scores the quantile futures of an evaluation (`measured` as
 /// [`scbg_generator::eval::evaluate_measured`] returns it) with the oracle; `None` when no
 /// example is a ground-truth role.
@@ -286,23 +330,13 @@ pub fn truth_control(
 ) -> Option<TruthControl> {
     use rayon::prelude::*;
     use scbg_generator::eval::EVAL_QUANTILES;
-    // Per scored example: (family, [ψ_true per quantile], [achieved ψ per quantile]).
-    let scored: Vec<(&'static str, Vec<f64>, Vec<f64>)> = examples
+    // Per scored example: (family, [ψ_true per quantile]) and [achieved ψ per quantile].
+    let scored: Vec<(QuantileRow, Vec<f64>)> = examples
         .par_iter()
         .enumerate()
         .filter_map(|(i, e)| {
-            let t = truth.get(&e.scenario_id)?;
-            let role = is_truth_role(
-                t,
-                e.a.window.current_step,
-                e.a.target_track_id,
-                e.b.target_track_id,
-            );
-            if !role {
-                return None;
-            }
-            let oracle_scenario = Scenario::of_truth(t).ok()?;
-            let oracle = oracle_scenario.oracle();
+            let (t, scenario) = truth_scenario(e, truth)?;
+            let oracle = scenario.oracle();
             let mut truths = Vec::new();
             let mut achieved = Vec::new();
             for j in 0..EVAL_QUANTILES.len() {
@@ -311,50 +345,109 @@ pub fn truth_control(
                 truths.push(oracle.psi_true(&world).ok()?);
                 achieved.push(f64::from(measured.psi[i][1 + j]));
             }
-            Some((t.family.name(), truths, achieved))
+            Some(((t.family.name(), truths), achieved))
         })
         .collect();
     if scored.is_empty() {
         return None;
     }
-    let mut q_by: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
-    let (mut all_true, mut all_achieved) = (Vec::new(), Vec::new());
-    for (family, truths, achieved) in &scored {
-        for key in [*family, POOLED] {
-            let e = q_by.entry(key.to_string()).or_default();
-            for (j, v) in truths.iter().enumerate() {
-                e.0.push(f64::from(EVAL_QUANTILES[j]));
-                e.1.push(*v);
-            }
-        }
-        all_true.extend(truths);
-        all_achieved.extend(achieved);
-    }
-    let per_quantile = EVAL_QUANTILES
-        .iter()
-        .enumerate()
-        .map(|(j, &q)| {
-            let v: Vec<f64> = scored.iter().map(|s| s.1[j]).collect();
-            let m = scbg_generator::eval::MeanStd::of(&v).expect("non-empty");
-            QuantileTruth {
-                quantile: q,
-                psi_true_mean: m.mean,
-                psi_true_std: m.std,
-            }
-        })
-        .collect();
+    let (rows, achieved): (Vec<_>, Vec<_>) = scored.into_iter().unzip();
+    let all_true: Vec<f64> = rows.iter().flat_map(|r| r.1.iter().copied()).collect();
+    let all_achieved: Vec<f64> = achieved.into_iter().flatten().collect();
+    let summary = quantile_summary(&rows);
     Some(TruthControl {
-        spearman_quantile_psi_true: q_by
-            .iter()
-            .map(|(k, (q, t))| (k.clone(), scbg_metrics::spearman(q, t)))
-            .collect(),
-        examples: q_by
-            .iter()
-            .map(|(k, (q, _))| (k.clone(), q.len() / EVAL_QUANTILES.len()))
-            .collect(),
-        per_quantile,
+        spearman_quantile_psi_true: summary.spearman_quantile_psi_true,
+        examples: summary.examples,
+        per_quantile: summary.per_quantile,
         achieved_vs_true: agreement(&all_achieved, &all_true),
     })
+}
+
+/// The ground truth of an evaluation example and its rebuilt scenario, when the example is the
+/// role the ground truth describes.
+fn truth_scenario<'t>(
+    e: &scbg_generator::Example,
+    truth: &TruthIndex<'t>,
+) -> Option<(&'t GroundTruth, Scenario)> {
+    let t = truth.get(&e.scenario_id)?;
+    is_truth_role(
+        t,
+        e.a.window.current_step,
+        e.a.target_track_id,
+        e.b.target_track_id,
+    )
+    .then(|| Scenario::of_truth(t).ok())
+    .flatten()
+    .map(|s| (t, s))
+}
+
+/// B's world-frame future (the steps after `window_step`) when the synthetic world's own B
+/// drives with courtesy `c` from the current step on, everyone else reacting
+/// ([`Scenario::tracks_with_courtesy`]); `None` when the scene has no track `b_id`.
+pub fn world_future_of_b(
+    scenario: &Scenario,
+    b_id: i64,
+    window_step: usize,
+    c: f64,
+) -> Option<Vec<[f64; 2]>> {
+    let tracks = scenario.tracks_with_courtesy(c);
+    let b = tracks.iter().find(|t| t.id == b_id)?;
+    Some(
+        b.states
+            .get(window_step + 1..)?
+            .iter()
+            .map(|s| [s.x_m, s.y_m])
+            .collect(),
+    )
+}
+
+/// The world's own knob in open loop, the yardstick of [`TruthControl`]: for the same scored
+/// examples, B is the synthetic world's B driving with courtesy `c = q` (B's prior is uniform,
+/// so its q-quantile is q) for every input quantile q, and its future is scored by the oracle
+/// like a generated one. A generator whose futures follow the quantile as faithfully as the
+/// world's B does reaches these Spearman values; the gap between B's courtesy and A's reward
+/// that the scene's own draws leave is in them.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct WorldKnob {
+    /// Spearman(q, ψ_true of the world's B at c = q), per family and pooled.
+    pub spearman_quantile_psi_true: BTreeMap<String, Option<f64>>,
+    /// Scored examples per family and pooled.
+    pub examples: BTreeMap<String, usize>,
+    /// Mean ψ_true per quantile (pooled).
+    pub per_quantile: Vec<QuantileTruth>,
+}
+
+/// [`WorldKnob`] over the ground-truth roles among `examples`; `None` when there is none.
+pub fn world_knob(
+    examples: &[&scbg_generator::Example],
+    truth: &TruthIndex<'_>,
+) -> Option<WorldKnob> {
+    use rayon::prelude::*;
+    use scbg_generator::eval::EVAL_QUANTILES;
+    let rows: Vec<QuantileRow> = examples
+        .par_iter()
+        .filter_map(|e| {
+            let (t, scenario) = truth_scenario(e, truth)?;
+            let oracle = scenario.oracle();
+            let truths = EVAL_QUANTILES
+                .iter()
+                .map(|&q| {
+                    let world = world_future_of_b(
+                        &scenario,
+                        t.b_id,
+                        e.a.window.current_step,
+                        f64::from(q),
+                    )?;
+                    oracle.psi_true(&world).ok()
+                })
+                .collect::<Option<Vec<f64>>>()?;
+            Some((t.family.name(), truths))
+        })
+        .collect();
+    if rows.is_empty() {
+        return None;
+    }
+    Some(quantile_summary(&rows))
 }
 
 #[cfg(test)]
@@ -373,6 +466,35 @@ mod tests {
         assert!((a.spread_ratio.unwrap() - 0.5).abs() < 1e-12);
         let flat = agreement(&[1.0, 2.0], &[3.0, 3.0]);
         assert_eq!((flat.slope, flat.spread_ratio), (None, None));
+    }
+
+    /// The world's B at the scene's own courtesy drives the logged future (so the world knob
+    /// at c = the latent courtesy scores ψ_true of the log); other courtesies change it in
+    /// some scenes (in others B's decision does not depend on it).
+    #[test]
+    fn the_worlds_b_at_its_own_courtesy_drives_the_logged_future() {
+        use scbg_synth::{Family, generate};
+        let mut changed = 0;
+        for index in 0..6 {
+            let g = generate(5, index, &Family::ALL);
+            let t = &g.truth;
+            let scenario = Scenario::of_truth(t).unwrap();
+            let logged: Vec<[f64; 2]> = g.scene.tracks[1].states[CURRENT_STEP + 1..]
+                .iter()
+                .map(|s| [s.x_m, s.y_m])
+                .collect();
+            let own = world_future_of_b(&scenario, t.b_id, CURRENT_STEP, t.courtesy).unwrap();
+            assert_eq!(own.len(), logged.len());
+            for (p, q) in own.iter().zip(&logged) {
+                assert!((p[0] - q[0]).abs() < 1e-3 && (p[1] - q[1]).abs() < 1e-3);
+            }
+            let psi = scenario.oracle().psi_true(&own).unwrap();
+            assert!((psi - t.psi_true).abs() < 1e-3, "{psi} vs {}", t.psi_true);
+            let other = world_future_of_b(&scenario, t.b_id, CURRENT_STEP, 1.0 - t.courtesy);
+            changed += usize::from(other.unwrap() != own);
+            assert!(world_future_of_b(&scenario, 999, CURRENT_STEP, 0.5).is_none());
+        }
+        assert!(changed >= 2, "{changed} of 6 scenes");
     }
 
     #[test]

@@ -55,6 +55,10 @@ pub struct GeneratorCheckpoint {
     /// synthetic data, an experiment) instead of the predictor's.
     #[serde(default)]
     pub oracle_labels: bool,
+    /// With oracle labels: B's sampled futures replaced by this many futures of the synthetic
+    /// world's own B at spread courtesies ([`crate::labels::oracle_labelled`]; 0: none).
+    #[serde(default)]
+    pub world_futures: usize,
     /// Weight α of the sampled futures' trajectory loss.
     pub alpha: f32,
     /// Weight β of the courtesy loss.
@@ -263,6 +267,9 @@ pub struct VariantSettings {
     pub labels: LabelOptions,
     /// The examples carry the oracle's ψ_true (recorded in generator.json).
     pub oracle_labels: bool,
+    /// With `oracle_labels`: B's sampled futures replaced by this many of the synthetic
+    /// world's own futures of B ([`crate::labels::oracle_labelled`]; 0: none).
+    pub world_futures: usize,
 }
 
 impl VariantSettings {
@@ -280,6 +287,7 @@ impl VariantSettings {
             seed: 0,
             labels,
             oracle_labels: false,
+            world_futures: 0,
         }
     }
 }
@@ -426,6 +434,7 @@ pub fn train_variant(
         range_hidden,
         labels: s.labels,
         oracle_labels: s.oracle_labels,
+        world_futures: s.world_futures,
         alpha: s.alpha,
         beta: s.beta,
         threshold: s.threshold,
@@ -468,6 +477,10 @@ pub fn train_generator(
         settings.oracle_labels == oracle_truth.is_some(),
         "oracle labels need the synthetic ground truth, and the ground truth is only read for them"
     );
+    ensure_request!(
+        settings.world_futures == 0 || settings.oracle_labels,
+        "world futures are scored by the oracle: they need oracle labels"
+    );
     let p = load_predictors(predictor)?;
     progress.note(&format!(
         "labelling the training split ({} futures of B per pair role)",
@@ -484,7 +497,7 @@ pub fn train_generator(
         progress,
     )?;
     if let Some(truth) = oracle_truth {
-        let (kept, count) = crate::labels::oracle_labelled(labelled, truth);
+        let (kept, count) = crate::labels::oracle_labelled(labelled, truth, settings.world_futures);
         progress.note(&format!(
             "oracle labels: {} roles ({} futures) kept with ψ_true; dropped: {} roles that are not a scene's ground-truth role, {} futures the oracle could not score",
             count.roles, count.futures, count.dropped_roles, count.dropped_futures

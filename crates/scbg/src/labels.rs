@@ -80,11 +80,17 @@ pub struct OracleLabelCount {
 /// score is dropped. `e_cond` is left as the predictor's (the full variant's courtesy loss
 /// still goes through J_φ, whose scale differs from ψ_true's).
 ///
+/// With `world_futures` K > 0, B's sampled futures are replaced by the synthetic world's own
+/// futures of B at courtesy `c' = (k + 0.5) / K` ([`world_futures_in_a`]): what B does when it
+/// is faithful to a courtesy, everyone else reacting (their `e_cond` is NaN: J_φ does not see
+/// them).
+///
 /// An upper bound for the experiment "are the labels what limits control?", not the paper's
 /// method: real data has no oracle.
 pub fn oracle_labelled(
     labelled: Vec<SceneLabels>,
     truth: &[GroundTruth],
+    world_futures: usize,
 ) -> (Vec<SceneLabels>, OracleLabelCount) {
     use rayon::prelude::*;
     let index = crate::fidelity::TruthIndex::new(truth);
@@ -94,6 +100,16 @@ pub fn oracle_labelled(
             let mut count = OracleLabelCount::default();
             let t = index.get(&scene.scenario_id);
             for mut role in std::mem::take(&mut scene.roles) {
+                if let Some(world) = t
+                    .filter(|_| world_futures > 0)
+                    .and_then(|t| world_futures_in_a(t, &role, world_futures))
+                {
+                    let labels = &mut role.labels;
+                    labels.futures_in_a.truncate(1);
+                    labels.e_cond.truncate(1);
+                    labels.e_cond.resize(1 + world.len(), f32::NAN);
+                    labels.futures_in_a.extend(world);
+                }
                 // One score per future of B, in order (empty for another role).
                 let scores = t
                     .map(|t| crate::fidelity::psi_true_of_role(t, &role))
@@ -135,6 +151,38 @@ pub fn oracle_labelled(
         }
     }
     (kept, total)
+}
+
+/// B's futures (the steps after the window's, in A's frame of `role`) when the synthetic
+/// world's B drives with courtesy `(k + 0.5) / count` for k in 0..count from the current step
+/// on, everyone else reacting ([`crate::fidelity::world_future_of_b`]); `None` when `role` is
+/// not the role `truth` describes or the scenario cannot be rebuilt.
+pub fn world_futures_in_a(
+    truth: &GroundTruth,
+    role: &LabelledRole,
+    count: usize,
+) -> Option<Vec<Vec<[f32; 2]>>> {
+    if !crate::fidelity::is_truth_role(truth, role.window_step, role.a_id, role.b_id) {
+        return None;
+    }
+    let scenario = scbg_synth::Scenario::of_truth(truth).ok()?;
+    let frame = &role.a.world_from_agent;
+    (0..count)
+        .map(|k| {
+            let c = (k as f64 + 0.5) / count as f64;
+            let world =
+                crate::fidelity::world_future_of_b(&scenario, role.b_id, role.window_step, c)?;
+            Some(
+                world
+                    .iter()
+                    .map(|p| {
+                        let (x, y) = frame.agent_from_world(p[0], p[1]);
+                        [x as f32, y as f32]
+                    })
+                    .collect(),
+            )
+        })
+        .collect()
 }
 
 /// The labelling path: every pair role of the cache scenes `range` for which `keep` holds,

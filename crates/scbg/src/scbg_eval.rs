@@ -2,6 +2,7 @@
 //! or more generator variants sharing one predictor, as a report that serialises to the report
 //! JSON.
 
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -33,6 +34,9 @@ pub struct ScbgEval {
     /// Per variant (same order), the generated futures scored by the synthetic simulator's
     /// oracle (synthetic data with its ground truth only).
     pub truth_control: Vec<(String, crate::fidelity::TruthControl)>,
+    /// The same scoring of the synthetic world's own B at courtesy c = q: the yardstick of
+    /// `truth_control` (synthetic data with its ground truth only).
+    pub world_knob: Option<crate::fidelity::WorldKnob>,
 }
 
 fn ms_json(m: &Option<MeanStd>) -> serde_json::Value {
@@ -75,6 +79,7 @@ impl ScbgEval {
             figures: Vec::new(),
             not_evaluated: Some(why),
             truth_control: Vec::new(),
+            world_knob: None,
         }
     }
 
@@ -116,12 +121,13 @@ impl ScbgEval {
         )
     }
 
-    /// The report JSON: `{variants, truth_control, examples, high_threshold_psi, psi_min,
-    /// psi_max, figures}`.
+    /// The report JSON: `{variants, truth_control, world_knob, examples, high_threshold_psi,
+    /// psi_min, psi_max, figures}`.
     pub fn to_json(&self) -> serde_json::Value {
         json!({
             "variants": self.variants_json(),
             "truth_control": self.truth_control_json(),
+            "world_knob": self.world_knob,
             "examples": self.examples,
             "high_threshold_psi": self.high_threshold_psi,
             "psi_min": self.psi_range.0,
@@ -154,28 +160,36 @@ impl ScbgEval {
         }
         if !self.truth_control.is_empty() {
             s.push_str("\nControl in truth — Spearman(input quantile, ψ_true of the generated future), oracle of the synthetic simulator:\n\n| model | all | merge | crossing | cutin | scored pair roles | Pearson(achieved ψ, ψ_true) |\n|---|---|---|---|---|---|---|\n");
+            let row = |label: &str,
+                       rho: &BTreeMap<String, Option<f64>>,
+                       examples: &BTreeMap<String, usize>,
+                       pearson: Option<f64>| {
+                let c = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:.3}"));
+                let at = |k: &str| c(rho.get(k).copied().flatten());
+                format!(
+                    "| {label} | {} | {} | {} | {} | {} | {} |\n",
+                    at(crate::fidelity::POOLED),
+                    at("merge"),
+                    at("crossing"),
+                    at("cutin"),
+                    examples.get(crate::fidelity::POOLED).copied().unwrap_or(0),
+                    c(pearson),
+                )
+            };
             for (name, t) in &self.truth_control {
-                let c = |k: &str| {
-                    t.spearman_quantile_psi_true
-                        .get(k)
-                        .copied()
-                        .flatten()
-                        .map_or("-".into(), |x| format!("{x:.3}"))
-                };
-                s.push_str(&format!(
-                    "| {} | {} | {} | {} | {} | {} | {} |\n",
+                s.push_str(&row(
                     label_of(name),
-                    c(crate::fidelity::POOLED),
-                    c("merge"),
-                    c("crossing"),
-                    c("cutin"),
-                    t.examples
-                        .get(crate::fidelity::POOLED)
-                        .copied()
-                        .unwrap_or(0),
-                    t.achieved_vs_true
-                        .pearson
-                        .map_or("-".into(), |x| format!("{x:.3}")),
+                    &t.spearman_quantile_psi_true,
+                    &t.examples,
+                    t.achieved_vs_true.pearson,
+                ));
+            }
+            if let Some(w) = &self.world_knob {
+                s.push_str(&row(
+                    "the world's own B at c = q (yardstick)",
+                    &w.spearman_quantile_psi_true,
+                    &w.examples,
+                    None,
                 ));
             }
         }
@@ -307,6 +321,9 @@ pub fn evaluate_examples(
         figures: written,
         not_evaluated: None,
         truth_control,
+        world_knob: index
+            .as_ref()
+            .and_then(|index| crate::fidelity::world_knob(&refs, index)),
     })
 }
 

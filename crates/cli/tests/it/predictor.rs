@@ -217,6 +217,14 @@ fn demo_writes_a_report() {
     let held_out = report["fidelity"]["logged"]["all"]["n"].as_u64().unwrap();
     assert!((1..40).contains(&held_out), "{report}");
     assert!(report["truth_control"]["full"]["spearman_quantile_psi_true"].is_object());
+    // Its yardstick scores the same held-out roles.
+    let world = &report["truth_control_world"];
+    assert_eq!(
+        world["examples"]["all"].as_f64(),
+        report["truth_control"]["full"]["examples"]["all"].as_f64(),
+        "{report}"
+    );
+    assert_eq!(world["per_quantile"].as_array().unwrap().len(), 9);
     for key in [
         "oracle_consistency_95",
         "fidelity_logged_spearman_0_7",
