@@ -50,8 +50,10 @@ fn featurize_file(path: &PathBuf, samples_too: bool) -> anyhow::Result<(usize, u
         let Ok(prepared) = PreparedScene::from_scene(&scene, &window, &pair, ROAD_SUBSAMPLE) else {
             continue;
         };
-        bytes += prepared.encode().len() as u64;
         if !samples_too {
+            // The cache record (`scbg data prepare`); building samples needs only the
+            // prepared scene, so decode+features does not pay for it.
+            bytes += prepared.encode().len() as u64;
             continue;
         }
         let mut builder = SampleBuilder::new(&prepared, &features);
@@ -106,8 +108,8 @@ pub struct IngestBench {
     pub repeat: usize,
     /// Rows at 1 thread and at every thread.
     pub rows: Vec<IngestRow>,
-    /// Bytes of the prepared records of one pass.
-    pub prepared_bytes: u64,
+    /// Bytes of the prepared records of one pass (measured by the `decode+prepare` stage).
+    pub prepared_bytes: Option<u64>,
     /// Peak resident memory, MiB.
     pub peak_rss_mib: Option<f64>,
 }
@@ -137,12 +139,16 @@ impl IngestBench {
                 r.raw_mb_per_s
             );
         }
-        s += &format!(
-            "prepared cache bytes per raw byte: {:.3} ({} / {})\n",
-            self.prepared_bytes as f64 / self.raw_bytes.max(1) as f64,
-            self.prepared_bytes,
-            self.raw_bytes
-        );
+        match self.prepared_bytes {
+            Some(b) => {
+                s += &format!(
+                    "prepared cache bytes per raw byte: {:.3} ({b} / {})\n",
+                    b as f64 / self.raw_bytes.max(1) as f64,
+                    self.raw_bytes
+                );
+            }
+            None => s += "prepared cache bytes per raw byte: (measured by --stage prepare)\n",
+        }
         if let Some(rss) = self.peak_rss_mib {
             s += &format!("peak RSS: {rss:.1} MiB\n");
         }
@@ -194,7 +200,7 @@ pub fn ingest(
         raw_bytes,
         repeat,
         rows: Vec::new(),
-        prepared_bytes: 0,
+        prepared_bytes: None,
         peak_rss_mib: None,
     };
     let mb_per_s = |secs: f64| (raw_bytes * repeat as u64) as f64 / secs / 1e6;
@@ -234,7 +240,9 @@ pub fn ingest(
             let (scenes, samples): (usize, usize) = results
                 .iter()
                 .fold((0, 0), |acc, r| (acc.0 + r.0, acc.1 + r.1));
-            out.prepared_bytes = results.iter().map(|r| r.2).sum::<u64>() / repeat as u64;
+            if !samples_too {
+                out.prepared_bytes = Some(results.iter().map(|r| r.2).sum::<u64>() / repeat as u64);
+            }
             out.rows.push(IngestRow {
                 stage,
                 threads,
@@ -696,12 +704,18 @@ mod tests {
             assert_eq!(r.stage, "decode+features");
             assert!(r.samples_per_s.is_some_and(|v| v > 0.0));
         }
-        assert!(only.prepared_bytes > 0);
+        assert_eq!(
+            only.prepared_bytes, None,
+            "the cache record is the prepare stage's"
+        );
+        assert!(only.to_text().contains("--stage prepare"));
         let all = ingest(&input, 1, &[]).unwrap();
         let stages: Vec<_> = all.rows.iter().take(3).map(|r| r.stage).collect();
         assert_eq!(stages, ["decode", "decode+prepare", "decode+features"]);
         assert_eq!(all.rows.len(), 3 * only.rows.len());
-        assert_eq!(all.prepared_bytes, only.prepared_bytes);
+        let prepared = ingest(&input, 1, &[IngestStage::Prepare]).unwrap();
+        assert!(prepared.prepared_bytes.is_some_and(|b| b > 0));
+        assert_eq!(all.prepared_bytes, prepared.prepared_bytes);
         let decode = ingest(&input, 1, &[IngestStage::Decode]).unwrap();
         assert!(decode.rows.iter().all(|r| r.stage == "decode"));
     }
