@@ -32,10 +32,11 @@ fn decode_file(path: &PathBuf) -> anyhow::Result<usize> {
     Ok(n)
 }
 
-/// Decodes and prepares every scene (what `scbg data prepare` does: `PreparedScene` and its
-/// encoded cache record) and, with `samples`, builds features for every valid vehicle of every
-/// window (marginal) and both directions of every pair (conditional). Returns (scenes,
-/// samples, prepared bytes).
+/// Decodes and prepares every scene and then either encodes its cache record (what `scbg data
+/// prepare` does) or, with `samples_too`, builds features for every valid vehicle of every
+/// window (marginal) and both directions of every pair (conditional) — samples need the
+/// prepared scene, not its record. Returns (scenes, samples, cache record bytes; 0 with
+/// `samples_too`).
 fn featurize_file(path: &PathBuf, samples_too: bool) -> anyhow::Result<(usize, usize, u64)> {
     let file = WomdFile::open(path)?;
     let (window, pair, features) = (
@@ -85,7 +86,7 @@ fn run_in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> anyhow:
 #[derive(Debug, Clone, PartialEq)]
 pub struct IngestRow {
     /// `decode`, `decode+prepare` (the cache record, as `scbg data prepare`) or
-    /// `decode+features` (every sample built as well).
+    /// `decode+features` (the prepared scene and every sample built from it, no record).
     pub stage: &'static str,
     /// Rayon threads.
     pub threads: usize,

@@ -541,7 +541,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         variants_per_seed: per_seed.iter().map(ScbgEval::variants_json).collect(),
         truth_control: truth_mean,
         truth_control_seed_std: truth_std,
-        truth_control_world: scbg.world_knob.clone(),
+        truth_control_world: scbg.truth_control_world.clone(),
         scbg_eval: ScbgEvalSummary {
             examples: scbg.examples,
             high_threshold_psi: scbg.high_threshold_psi,

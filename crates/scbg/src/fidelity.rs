@@ -381,20 +381,16 @@ fn truth_scenario<'t>(
     .map(|s| (t, s))
 }
 
-/// B's world-frame future (the steps after `window_step`) when the synthetic world's own B
-/// drives with courtesy `c` from the current step on, everyone else reacting
-/// ([`Scenario::tracks_with_courtesy`]); `None` when the scene has no track `b_id`.
-pub fn world_future_of_b(
-    scenario: &Scenario,
-    b_id: i64,
-    window_step: usize,
-    c: f64,
-) -> Option<Vec<[f64; 2]>> {
+/// B's world-frame future (the steps after the scene's current step, where the oracle's roles
+/// are) when the synthetic world's own B drives with courtesy `c` from the current step on,
+/// everyone else reacting ([`Scenario::tracks_with_courtesy`]); `None` when the scene has no
+/// track `b_id`.
+pub fn world_future_of_b(scenario: &Scenario, b_id: i64, c: f64) -> Option<Vec<[f64; 2]>> {
     let tracks = scenario.tracks_with_courtesy(c);
     let b = tracks.iter().find(|t| t.id == b_id)?;
     Some(
         b.states
-            .get(window_step + 1..)?
+            .get(CURRENT_STEP + 1..)?
             .iter()
             .map(|s| [s.x_m, s.y_m])
             .collect(),
@@ -418,7 +414,7 @@ pub struct WorldKnob {
 }
 
 /// [`WorldKnob`] over the ground-truth roles among `examples`; `None` when there is none.
-pub fn world_knob(
+pub fn world_truth_control(
     examples: &[&scbg_generator::Example],
     truth: &TruthIndex<'_>,
 ) -> Option<WorldKnob> {
@@ -432,12 +428,7 @@ pub fn world_knob(
             let truths = EVAL_QUANTILES
                 .iter()
                 .map(|&q| {
-                    let world = world_future_of_b(
-                        &scenario,
-                        t.b_id,
-                        e.a.window.current_step,
-                        f64::from(q),
-                    )?;
+                    let world = world_future_of_b(&scenario, t.b_id, f64::from(q))?;
                     oracle.psi_true(&world).ok()
                 })
                 .collect::<Option<Vec<f64>>>()?;
@@ -483,16 +474,16 @@ mod tests {
                 .iter()
                 .map(|s| [s.x_m, s.y_m])
                 .collect();
-            let own = world_future_of_b(&scenario, t.b_id, CURRENT_STEP, t.courtesy).unwrap();
+            let own = world_future_of_b(&scenario, t.b_id, t.courtesy).unwrap();
             assert_eq!(own.len(), logged.len());
             for (p, q) in own.iter().zip(&logged) {
                 assert!((p[0] - q[0]).abs() < 1e-3 && (p[1] - q[1]).abs() < 1e-3);
             }
             let psi = scenario.oracle().psi_true(&own).unwrap();
             assert!((psi - t.psi_true).abs() < 1e-3, "{psi} vs {}", t.psi_true);
-            let other = world_future_of_b(&scenario, t.b_id, CURRENT_STEP, 1.0 - t.courtesy);
+            let other = world_future_of_b(&scenario, t.b_id, 1.0 - t.courtesy);
             changed += usize::from(other.unwrap() != own);
-            assert!(world_future_of_b(&scenario, 999, CURRENT_STEP, 0.5).is_none());
+            assert!(world_future_of_b(&scenario, 999, 0.5).is_none());
         }
         assert!(changed >= 2, "{changed} of 6 scenes");
     }

@@ -483,8 +483,16 @@ pub fn train_generator(
     );
     let p = load_predictors(predictor)?;
     progress.note(&format!(
-        "labelling the training split ({} futures of B per pair role)",
-        1 + settings.labels.samples
+        "labelling the training split ({} futures of B per pair role{})",
+        1 + settings.labels.samples,
+        if settings.world_futures > 0 {
+            format!(
+                "; the sampled ones then replaced by {} of the world's own",
+                settings.world_futures
+            )
+        } else {
+            String::new()
+        }
     ));
     let mut labelled = labelled_split(
         &p.plain,

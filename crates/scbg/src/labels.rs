@@ -65,11 +65,11 @@ impl SceneLabels {
 pub struct OracleLabelCount {
     /// Pair roles kept (the ground truth's role of a scene, its logged future scored).
     pub roles: usize,
-    /// Futures of B kept with their ψ_true (logged and sampled).
+    /// Futures of B kept with their ψ_true (logged, and sampled or the world's own).
     pub futures: usize,
     /// Pair roles dropped: not a ground-truth role, or no ground truth for the scene.
     pub dropped_roles: usize,
-    /// Sampled futures dropped because the oracle could not score them.
+    /// Futures other than the logged one dropped because the oracle could not score them.
     pub dropped_futures: usize,
 }
 
@@ -170,8 +170,7 @@ pub fn world_futures_in_a(
     (0..count)
         .map(|k| {
             let c = (k as f64 + 0.5) / count as f64;
-            let world =
-                crate::fidelity::world_future_of_b(&scenario, role.b_id, role.window_step, c)?;
+            let world = crate::fidelity::world_future_of_b(&scenario, role.b_id, c)?;
             Some(
                 world
                     .iter()

@@ -36,7 +36,7 @@ pub struct ScbgEval {
     pub truth_control: Vec<(String, crate::fidelity::TruthControl)>,
     /// The same scoring of the synthetic world's own B at courtesy c = q: the yardstick of
     /// `truth_control` (synthetic data with its ground truth only).
-    pub world_knob: Option<crate::fidelity::WorldKnob>,
+    pub truth_control_world: Option<crate::fidelity::WorldKnob>,
 }
 
 fn ms_json(m: &Option<MeanStd>) -> serde_json::Value {
@@ -79,7 +79,7 @@ impl ScbgEval {
             figures: Vec::new(),
             not_evaluated: Some(why),
             truth_control: Vec::new(),
-            world_knob: None,
+            truth_control_world: None,
         }
     }
 
@@ -121,13 +121,13 @@ impl ScbgEval {
         )
     }
 
-    /// The report JSON: `{variants, truth_control, world_knob, examples, high_threshold_psi,
-    /// psi_min, psi_max, figures}`.
+    /// The report JSON: `{variants, truth_control, truth_control_world, examples,
+    /// high_threshold_psi, psi_min, psi_max, figures}`.
     pub fn to_json(&self) -> serde_json::Value {
         json!({
             "variants": self.variants_json(),
             "truth_control": self.truth_control_json(),
-            "world_knob": self.world_knob,
+            "truth_control_world": self.truth_control_world,
             "examples": self.examples,
             "high_threshold_psi": self.high_threshold_psi,
             "psi_min": self.psi_range.0,
@@ -184,7 +184,7 @@ impl ScbgEval {
                     t.achieved_vs_true.pearson,
                 ));
             }
-            if let Some(w) = &self.world_knob {
+            if let Some(w) = &self.truth_control_world {
                 s.push_str(&row(
                     "the world's own B at c = q (yardstick)",
                     &w.spearman_quantile_psi_true,
@@ -321,9 +321,9 @@ pub fn evaluate_examples(
         figures: written,
         not_evaluated: None,
         truth_control,
-        world_knob: index
+        truth_control_world: index
             .as_ref()
-            .and_then(|index| crate::fidelity::world_knob(&refs, index)),
+            .and_then(|index| crate::fidelity::world_truth_control(&refs, index)),
     })
 }
 

@@ -260,7 +260,7 @@ fn oracle_labels(
             .find(|t| t.scenario_id == w.scenario_id)
             .unwrap();
         let scenario = scbg_synth::Scenario::of_truth(t).unwrap();
-        let mid = scbg::fidelity::world_future_of_b(&scenario, t.b_id, 10, 0.5).unwrap();
+        let mid = scbg::fidelity::world_future_of_b(&scenario, t.b_id, 0.5).unwrap();
         let in_a = &wr.labels.futures_in_a[2];
         let back = scbg::fidelity::world_points(&wr.a.world_from_agent, in_a);
         assert!(

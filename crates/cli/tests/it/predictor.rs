@@ -220,8 +220,10 @@ fn demo_writes_a_report() {
     // Its yardstick scores the same held-out roles.
     let world = &report["truth_control_world"];
     assert_eq!(
-        world["examples"]["all"].as_f64(),
-        report["truth_control"]["full"]["examples"]["all"].as_f64(),
+        world["examples"]["all"].as_f64().unwrap(),
+        report["truth_control"]["full"]["examples"]["all"]
+            .as_f64()
+            .unwrap(),
         "{report}"
     );
     assert_eq!(world["per_quantile"].as_array().unwrap().len(), 9);
@@ -507,11 +509,23 @@ fn train_generator_saves_generator_and_range_predictor() {
         &p("cache"),
         "--split",
         "all",
+        "--ground-truth",
+        &p("synth/ground_truth.jsonl"),
         "--json",
         "--figures",
         &p("figs"),
     ]);
     let eval: Value = serde_json::from_str(&out).unwrap();
+    // Control in truth for each variant, and its yardstick over the same roles.
+    let roles = eval["truth_control"]["full"]["examples"]["all"]
+        .as_u64()
+        .unwrap();
+    assert!(roles > 0, "{eval}");
+    assert_eq!(
+        eval["truth_control_world"]["examples"]["all"].as_u64(),
+        Some(roles)
+    );
+    assert!(eval["truth_control_world"]["spearman_quantile_psi_true"]["all"].is_number());
     for variant in ["baseline", "full"] {
         let v = &eval["variants"][variant];
         for key in [
