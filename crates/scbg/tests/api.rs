@@ -186,7 +186,7 @@ fn oracle_labels(
         &Quiet,
     )
     .unwrap();
-    let (kept, count) = labels::oracle_labelled(labelled, truth, 0);
+    let (kept, count) = labels::oracle_labelled(labelled.clone(), truth, 0);
     let scored: Vec<&labels::LabelRow> = rows.iter().filter(|r| r.psi_true.is_some()).collect();
     assert_eq!(
         count.roles,
@@ -234,17 +234,6 @@ fn oracle_labels(
     assert!(read.oracle_labels && read.world_futures == 0);
     // The world's own futures of B in place of the sampled ones: the logged future and its
     // ψ_true stay, the world's futures are scored by the oracle like any other.
-    let labelled = generator::labelled_split(
-        &predictors.plain,
-        &predictors.ckpt,
-        &predictors.plain_device,
-        &dir.join("cache"),
-        None,
-        options,
-        0,
-        &Quiet,
-    )
-    .unwrap();
     let (world, world_count) = labels::oracle_labelled(labelled, truth, 3);
     assert_eq!(world_count.roles, count.roles);
     assert_eq!(world_count.futures, 4 * count.roles, "{world_count:?}");
