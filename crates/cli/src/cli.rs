@@ -350,6 +350,13 @@ pub struct EvalSimArgs {
     /// Scenes scored with WOSAC realism (32 rollouts per quantile and baseline).
     #[arg(long, default_value_t = 8)]
     pub wosac_scenes: usize,
+    /// Quantiles scored with WOSAC realism (32 rollouts each).
+    #[arg(long, num_args = 1.., default_values_t = [0.1f32, 0.5, 0.9])]
+    pub wosac_quantiles: Vec<f32>,
+    /// Width of the band of quantiles a quantile's 32 WOSAC rollouts spread over (1 with
+    /// quantile 0.5: the rollouts cover the whole range, the knob drawn from its prior).
+    #[arg(long, default_value_t = 0.2)]
+    pub spread: f32,
     #[command(flatten)]
     pub loop_args: LoopArgs,
     /// Output folder (eval_sim.json, sim_courtesy.png, sim_realism.png).

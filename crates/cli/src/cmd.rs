@@ -150,6 +150,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             let options = scbg::sim_eval::SimEvalOptions {
                 scenes: a.scenes,
                 wosac_scenes: a.wosac_scenes,
+                wosac_quantiles: a.wosac_quantiles.clone(),
+                spread: a.spread,
                 config: loop_config(&a.loop_args, scbg::sim::OthersMode::Reactive),
                 ..Default::default()
             };
@@ -392,6 +394,7 @@ fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
         "Spearman(quantile, realised courtesy): {}",
         fmt(&e.curve.spearman_quantile_realised_courtesy)
     );
+    println!("{}", e.realism_line());
 }
 
 fn label_options(

@@ -38,6 +38,9 @@ pub struct SimEvalOptions {
     pub rollouts: usize,
     /// Width of the band of quantiles the rollouts spread over.
     pub spread: f32,
+    /// Also score scbg with the knob drawn from its prior: rollout `r` of `n` at quantile
+    /// `(r + ½)/n`, the whole range (`wosac_scbg_prior`).
+    pub wosac_prior: bool,
     /// Closed-loop settings (default: re-plan every 10 steps, A and the others reactive).
     pub config: SimConfig,
     /// The WOSAC definition.
@@ -53,6 +56,7 @@ impl Default for SimEvalOptions {
             wosac_quantiles: vec![0.1, 0.5, 0.9],
             rollouts: scbg_metrics::wosac::ROLLOUTS_PER_SCENARIO,
             spread: 0.2,
+            wosac_prior: true,
             config: SimConfig {
                 others: OthersMode::Reactive,
                 ..SimConfig::default()
@@ -136,6 +140,69 @@ pub struct BaselineSim {
     pub wosac: Option<WosacSummary>,
 }
 
+impl SimEval {
+    /// One line on realism: scbg's WOSAC meta-metric over its quantiles and with the knob
+    /// drawn from its prior, each with its per-scene difference to IDM-only, and the baselines.
+    pub fn realism_line(&self) -> String {
+        let meta =
+            |w: Option<&WosacSummary>| w.map_or("-".into(), |w| format!("{:.4}", w.metametric));
+        let diff = |d: &Option<PairedDifference>| {
+            d.as_ref().map_or(String::new(), |d| {
+                format!(
+                    " (minus IDM-only per scene {:+.4} ± {:.4} s.e.)",
+                    d.mean, d.std_error
+                )
+            })
+        };
+        let baseline = |name: &str| meta(self.baselines.get(name).and_then(|b| b.wosac.as_ref()));
+        format!(
+            "WOSAC meta-metric on {} scenes: scbg over its quantiles {}{}; scbg with the knob drawn from its prior {}{}; IDM-only {}, constant velocity {}, log replay {}",
+            self.baselines
+                .get("idm_only")
+                .and_then(|b| b.wosac.as_ref())
+                .map_or(0, |w| w.scenes),
+            meta(self.wosac_scbg.as_ref()),
+            diff(&self.wosac_scbg_minus_idm),
+            meta(self.wosac_scbg_prior.as_ref()),
+            diff(&self.wosac_prior_minus_idm),
+            baseline("idm_only"),
+            baseline("constant_velocity"),
+            baseline("log_replay"),
+        )
+    }
+}
+
+/// A per-scene difference of two methods' meta-metrics on the same scenes.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct PairedDifference {
+    /// Scenes with both methods scored.
+    pub scenes: usize,
+    /// Mean difference.
+    pub mean: f64,
+    /// Standard error of the mean (sample standard deviation / √scenes; 0 for one scene).
+    pub std_error: f64,
+}
+
+impl PairedDifference {
+    fn of(diffs: &[f64]) -> Option<Self> {
+        let n = diffs.len();
+        if n == 0 {
+            return None;
+        }
+        let mean = diffs.iter().sum::<f64>() / n as f64;
+        let var = if n > 1 {
+            diffs.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1) as f64
+        } else {
+            0.0
+        };
+        Some(Self {
+            scenes: n,
+            mean,
+            std_error: (var / n as f64).sqrt(),
+        })
+    }
+}
+
 /// Spearman correlations per family and pooled (`all`).
 pub type PerFamily = BTreeMap<String, Option<f64>>;
 
@@ -154,12 +221,23 @@ pub struct SimEval {
     /// (A and the others reacting alike) on the scenes with ground truth: what a B faithful
     /// to its courtesy achieves in this world, the ceiling of the generator's curve.
     pub world_knob: Option<KnobCurve>,
-    /// scbg over every WOSAC quantile together.
+    /// scbg over every WOSAC quantile together (its `scenes` counts scene × quantile runs).
     pub wosac_scbg: Option<WosacSummary>,
     /// Baselines on the WOSAC scenes: `log_replay`, `constant_velocity`, `idm_only`.
     pub baselines: BTreeMap<String, BaselineSim>,
     /// Whether scbg's WOSAC meta-metric beats constant velocity and IDM-only.
     pub wosac_above_baselines: Option<bool>,
+    /// scbg's meta-metric minus IDM-only's, per WOSAC scene (scbg's over every WOSAC quantile
+    /// of the scene), with its standard error over scenes.
+    pub wosac_scbg_minus_idm: Option<PairedDifference>,
+    /// scbg with the knob drawn from its prior (the 32 rollouts' quantiles cover [0, 1]
+    /// evenly): the distribution of drivers the logged B was drawn from, so the like-for-like
+    /// realism comparison with the baselines (`SimEvalOptions::wosac_prior`).
+    pub wosac_scbg_prior: Option<WosacSummary>,
+    /// `wosac_scbg_prior`'s meta-metric minus IDM-only's, per WOSAC scene.
+    pub wosac_prior_minus_idm: Option<PairedDifference>,
+    /// Whether `wosac_scbg_prior` beats constant velocity and IDM-only.
+    pub wosac_prior_above_baselines: Option<bool>,
     /// Mean wall time of one courtesy-curve rollout, ms (all threads busy).
     pub rollout_ms: f64,
     /// Wall time of the whole evaluation, s.
@@ -277,9 +355,10 @@ fn scbg_rollouts(
     model: &LoadedScbg,
     s: &SimScene,
     q: f32,
+    spread: f32,
     options: &SimEvalOptions,
 ) -> anyhow::Result<Rollouts> {
-    let scenes = rollout_quantiles(q, options.rollouts, options.spread)
+    let scenes = rollout_quantiles(q, options.rollouts, spread)
         .into_iter()
         .map(|qr| {
             let controlled = [ControlledAgent {
@@ -298,6 +377,9 @@ fn scbg_rollouts(
         .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(wosac_rollouts(&s.scene, &scenes))
 }
+
+/// The WOSAC method name of scbg with the knob drawn from its prior.
+const PRIOR: &str = "prior";
 
 /// IDM-only agents: nobody controlled, A and the others IDM along their logged paths.
 fn idm_only(s: &SimScene) -> anyhow::Result<Scene> {
@@ -334,8 +416,12 @@ fn wosac_scene(
     let mut rollout_metrics = BTreeMap::new();
     let score = |r: &Rollouts| scbg_metrics::wosac::scenario_metrics(&s.scene, r, options.wosac);
     for &q in &options.wosac_quantiles {
-        let r = scbg_rollouts(model, s, q, options)?;
+        let r = scbg_rollouts(model, s, q, options.spread, options)?;
         metrics.insert(format!("q={q:.1}"), score(&r)?);
+    }
+    if options.wosac_prior {
+        let r = scbg_rollouts(model, s, 0.5, 1.0, options)?;
+        metrics.insert(PRIOR.to_string(), score(&r)?);
     }
     let idm_scene = idm_only(s)?;
     let idm = wosac_rollouts(&s.scene, &vec![idm_scene; n]);
@@ -594,11 +680,33 @@ pub fn evaluate_sim(
             },
         );
     }
-    let wosac_above_baselines = wosac_scbg.as_ref().and_then(|w| {
+    let above_baselines = |w: &Option<WosacSummary>| {
+        let w = w.as_ref()?;
         let cv = baselines["constant_velocity"].wosac.as_ref()?.metametric;
         let idm = baselines["idm_only"].wosac.as_ref()?.metametric;
         Some(w.metametric > cv && w.metametric > idm)
-    });
+    };
+    let wosac_above_baselines = above_baselines(&wosac_scbg);
+    let wosac_scbg_prior = aggregate(PRIOR).map(|m| WosacSummary::of(&m));
+    let wosac_prior_above_baselines = above_baselines(&wosac_scbg_prior);
+    // Per scene: the mean meta-metric of the chosen scbg runs minus IDM-only's.
+    let minus_idm = |pick: &dyn Fn(&str) -> bool| {
+        let diffs: Vec<f64> = scored
+            .iter()
+            .filter_map(|(_, m)| {
+                let idm = f64::from(m.get("idm_only")?.metametric);
+                let ours: Vec<f64> = m
+                    .iter()
+                    .filter(|(k, _)| pick(k))
+                    .map(|(_, v)| f64::from(v.metametric))
+                    .collect();
+                (!ours.is_empty()).then(|| ours.iter().sum::<f64>() / ours.len() as f64 - idm)
+            })
+            .collect();
+        PairedDifference::of(&diffs)
+    };
+    let wosac_scbg_minus_idm = minus_idm(&|k| k.starts_with("q="));
+    let wosac_prior_minus_idm = minus_idm(&|k| k == PRIOR);
     // The world's own knob on the same scenes (synthetic scenes only).
     let world = kept_counting_skips(
         scenes
@@ -618,6 +726,10 @@ pub fn evaluate_sim(
         wosac_scbg,
         baselines,
         wosac_above_baselines,
+        wosac_scbg_minus_idm,
+        wosac_scbg_prior,
+        wosac_prior_minus_idm,
+        wosac_prior_above_baselines,
         rollout_ms: 1e3 * curve_seconds / rollouts_done.max(1) as f64,
         seconds: started.elapsed().as_secs_f64(),
     })
@@ -787,4 +899,20 @@ pub fn eval_sim_files(
     crate::write_json(out.join("eval_sim.json"), &eval)?;
     write_figures(&eval, out)?;
     Ok(eval)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::PairedDifference;
+
+    #[test]
+    fn paired_difference_is_mean_and_standard_error() {
+        assert_eq!(PairedDifference::of(&[]), None);
+        let one = PairedDifference::of(&[0.25]).unwrap();
+        assert_eq!((one.scenes, one.mean, one.std_error), (1, 0.25, 0.0));
+        // 1, 2, 3, 6: mean 3, sample variance (4 + 1 + 0 + 9) / 3 = 14/3.
+        let d = PairedDifference::of(&[1.0, 2.0, 3.0, 6.0]).unwrap();
+        assert_eq!((d.scenes, d.mean), (4, 3.0));
+        assert!((d.std_error - (14.0f64 / 3.0 / 4.0).sqrt()).abs() < 1e-12);
+    }
 }

@@ -399,6 +399,22 @@ fn closed_loop_through_the_library(
     assert_eq!(eval.curve.per_quantile[1].realised_courtesy_mps, 0.0);
     assert!(eval.baselines["log_replay"].wosac.is_some());
     assert!(eval.wosac_scbg.is_some());
+    // The knob drawn from its prior is scored too, and both scbg runs are compared with
+    // IDM-only scene by scene (one scene: the difference of the two meta-metrics, no spread).
+    let idm = eval.baselines["idm_only"]
+        .wosac
+        .as_ref()
+        .unwrap()
+        .metametric;
+    for (summary, diff) in [
+        (&eval.wosac_scbg, &eval.wosac_scbg_minus_idm),
+        (&eval.wosac_scbg_prior, &eval.wosac_prior_minus_idm),
+    ] {
+        let (summary, diff) = (summary.as_ref().unwrap(), diff.as_ref().unwrap());
+        assert_eq!((diff.scenes, diff.std_error), (1, 0.0));
+        assert!((diff.mean - f64::from(summary.metametric - idm)).abs() < 1e-6);
+    }
+    assert!(eval.realism_line().contains("knob drawn from its prior"));
     // The world's own knob on the same scene: B at courtesy c = q by the world's rule, A's
     // realised speed what the oracle says for that future of B.
     let world = eval

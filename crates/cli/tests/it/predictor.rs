@@ -203,6 +203,9 @@ fn demo_writes_a_report() {
     assert_eq!(cl["per_quantile"].as_array().unwrap().len(), 9);
     assert!(cl["baselines"]["constant_velocity"]["wosac"]["metametric"].is_number());
     assert!(report["checks"]["closed_loop_b_collision_2pct"].is_boolean());
+    assert!(report["checks"]["closed_loop_wosac_prior_above_baselines"].is_boolean());
+    assert!(cl["wosac_scbg_prior"]["metametric"].is_number());
+    assert!(cl["wosac_prior_minus_idm"]["std_error"].is_number());
     // Two generator seeds: seed means, their spread, each seed's numbers.
     assert_eq!(report["generator_seeds"], serde_json::json!([0, 1]));
     assert_eq!(report["variants_per_seed"].as_array().unwrap().len(), 2);
@@ -626,6 +629,10 @@ fn train_generator_saves_generator_and_range_predictor() {
         "2",
         "--wosac-scenes",
         "1",
+        "--wosac-quantiles",
+        "0.5",
+        "--spread",
+        "0.1",
         "--out",
         &p("evalsim"),
         "--json",
@@ -638,6 +645,16 @@ fn train_generator_saves_generator_and_range_predictor() {
             .as_f64()
             .is_some()
     );
+    // Only the quantile asked for is scored around its band, and the prior beside it.
+    let wosac_rows: Vec<f64> = eval["per_quantile"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| !r["wosac"].is_null())
+        .map(|r| r["quantile"].as_f64().unwrap())
+        .collect();
+    assert_eq!(wosac_rows, [0.5]);
+    assert_eq!(eval["wosac_prior_minus_idm"]["scenes"], 1);
     for f in ["eval_sim.json", "sim_courtesy.png", "sim_realism.png"] {
         assert!(dir.path().join("evalsim").join(f).is_file(), "{f}");
     }

@@ -226,6 +226,17 @@ pub fn acceptance_checks(
                 meta(c.baselines.get("log_replay").and_then(|b| b.wosac.as_ref())),
             ),
         });
+        out.push(Check {
+            key: "closed_loop_wosac_prior_above_baselines",
+            passed: c.wosac_prior_above_baselines == Some(true),
+            text: format!(
+                "closed loop: WOSAC meta-metric of scbg with the knob drawn from its prior {} above constant velocity and IDM-only (minus IDM-only per scene {})",
+                meta(c.wosac_scbg_prior.as_ref()),
+                c.wosac_prior_minus_idm
+                    .as_ref()
+                    .map_or("-".into(), |d| format!("{:+.4} ± {:.4} s.e.", d.mean, d.std_error)),
+            ),
+        });
     }
     out
 }
