@@ -798,17 +798,23 @@ pub fn write_figures(eval: &SimEval, dir: &Path) -> anyhow::Result<()> {
             .collect(),
         band: None,
     }];
-    for (name, b) in &eval.baselines {
-        if let Some(w) = &b.wosac {
-            series.push(Series {
-                label: name.clone(),
-                points: vec![
-                    (0.1, f64::from(w.metametric)),
-                    (0.9, f64::from(w.metametric)),
-                ],
-                band: None,
-            });
-        }
+    let prior = eval
+        .wosac_scbg_prior
+        .as_ref()
+        .map(|w| ("scbg, knob drawn from its prior".to_string(), w));
+    let baselines = eval
+        .baselines
+        .iter()
+        .filter_map(|(name, b)| Some((name.clone(), b.wosac.as_ref()?)));
+    for (name, w) in prior.into_iter().chain(baselines) {
+        series.push(Series {
+            label: name,
+            points: vec![
+                (0.1, f64::from(w.metametric)),
+                (0.9, f64::from(w.metametric)),
+            ],
+            band: None,
+        });
     }
     if series[0].points.is_empty() {
         return Ok(());
