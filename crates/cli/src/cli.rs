@@ -625,6 +625,9 @@ pub struct BenchSimArgs {
     /// Generator folder (e.g. a demo's `generator_full_s0`).
     #[arg(long)]
     pub model: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
     /// Synthetic scenes to time.
     #[arg(long, default_value_t = 12)]
     pub scenes: usize,

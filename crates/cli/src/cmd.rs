@@ -106,7 +106,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             );
         }
         Command::Bench(BenchCommand::Sim(a)) => {
-            let model = scbg::generator::load_scbg(&a.model, None)?;
+            let model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
             print!("{}", scbg::bench::sim(&model, a.scenes)?.to_text());
             println!();
         }

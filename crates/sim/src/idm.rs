@@ -112,10 +112,20 @@ pub(crate) fn leader_on_path(
     best
 }
 
+/// Steps of [`crossing_conflict`]'s look-ahead: the other agent's position every 0.5 s up to
+/// 5 s ahead.
+const CONFLICT_HORIZON_STEPS: u32 = 10;
+const CONFLICT_STEP_S: f64 = 0.5;
+/// A crossing conflict is two arrivals at the same point less than this many seconds apart.
+/// (With 3 s and 1 s, the controlled B of the synthetic crossings stopped with its nose in the
+/// cross traffic's lane in 2–4 % of closed-loop rollouts; with 5 s and 2 s in ≤ 1 %,
+/// BENCHMARKS.md.)
+const CONFLICT_WINDOW_S: f64 = 2.0;
+
 /// A crossing conflict ahead of an agent at `s_m` on `path` that follows `arrival` (the time,
 /// s from now, at which it reaches each arclength, increasing): another agent whose position
-/// extrapolated at constant velocity 0.5, 1, …, 3 s ahead lies in the corridor ahead at an
-/// arclength the agent reaches within 1 s of the same time. The conflict point is returned as
+/// extrapolated at constant velocity 0.5, 1, …, 5 s ahead lies in the corridor ahead at an
+/// arclength the agent reaches within 2 s of the same time. The conflict point is returned as
 /// a standing leader `(bumper gap m, 0)`; the nearest one counts.
 pub(crate) fn crossing_conflict(
     path: &RefPath,
@@ -131,15 +141,15 @@ pub(crate) fn crossing_conflict(
             continue;
         }
         let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
-        for k in 1..=6 {
-            let tau = 0.5 * f64::from(k);
+        for k in 1..=CONFLICT_HORIZON_STEPS {
+            let tau = CONFLICT_STEP_S * f64::from(k);
             let (x, y) = (o.x_m + vx * tau, o.y_m + vy * tau);
             let (s, d) = path.project(x, y, Some(s_m + 25.0));
             let ahead = s - s_m;
             if ahead <= 0.0 || ahead > LOOKAHEAD_M || d.abs() > half {
                 continue;
             }
-            if arrival(s).is_some_and(|t| (t - tau).abs() < 1.0) {
+            if arrival(s).is_some_and(|t| (t - tau).abs() < CONFLICT_WINDOW_S) {
                 let gap = ahead - 0.5 * f64::from(me.length_m + o.length_m);
                 best = closer(best, Some((gap, 0.0)));
                 break;
@@ -269,6 +279,43 @@ mod tests {
         }
         assert!((free.speed_mps - 15.0).abs() < 0.5);
         assert!(me.y_m.abs() < 1e-6);
+    }
+
+    #[test]
+    fn crossing_conflicts_within_two_seconds_up_to_five_ahead() {
+        // Me at the origin heading +x at 10 m/s, my path straight along x (arrival at
+        // arclength s after s / 10 s). The other drives +y at 10 m/s and crosses my path at
+        // x = 30 m (I get there after 3 s) when `t_cross` s from now.
+        let me = AgentState {
+            length_m: 4.5,
+            width_m: 1.9,
+            velocity_x_mps: 10.0,
+            valid: true,
+            ..Default::default()
+        };
+        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let arrival = |s: f64| Some(s / 10.0);
+        let crossing_at = |t_cross: f64| AgentState {
+            x_m: 30.0,
+            y_m: -10.0 * t_cross,
+            heading_rad: std::f32::consts::FRAC_PI_2,
+            velocity_x_mps: 0.0,
+            velocity_y_mps: 10.0,
+            ..me
+        };
+        let conflict = |t_cross: f64| {
+            let other = crossing_at(t_cross);
+            crossing_conflict(&path, 0.0, &me, &[&other], arrival)
+        };
+        // 1.5 s apart (a near miss the old 1 s window let through) and 4.5 s ahead (beyond
+        // the old 3 s look-ahead) are conflicts; 3 s apart is not.
+        for t in [3.0, 1.5, 4.5] {
+            let (gap, v) = conflict(t).unwrap_or_else(|| panic!("no conflict at {t} s"));
+            assert!((gap - (30.0 - 4.5)).abs() < 1.0, "gap {gap}");
+            assert_eq!(v, 0.0);
+        }
+        assert_eq!(conflict(6.0), None);
+        assert_eq!(conflict(0.0), None, "it is through before I get there");
     }
 
     #[test]

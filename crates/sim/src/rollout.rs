@@ -101,7 +101,7 @@ pub struct SimConfig {
     /// IDM's (headway 1 s, standstill gap 2 m, comfortable braking 3 m/s²) toward the nearest
     /// agent ahead along the current plan (the leader rule of [`crate::idm`]) and toward the
     /// nearest crossing conflict (another agent that, at constant velocity, will be in the
-    /// plan's corridor within 1 s of when the plan gets there, up to 3 s ahead, taken as a
+    /// plan's corridor within 2 s of when the plan gets there, up to 5 s ahead, taken as a
     /// standing obstacle at that point), so a plan that runs into another agent is followed
     /// at a safe distance instead. On by default.
     pub safety_guard: bool,
