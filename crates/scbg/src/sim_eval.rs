@@ -6,22 +6,25 @@
 //! realism of 32 rollouts per quantile, beside log replay, constant velocity and IDM-only
 //! agents on the same scenes.
 
+mod figures;
+mod realism;
+
+pub use figures::write_figures;
+pub use realism::{BaselineSim, PairedDifference, WosacSummary};
+
 use std::collections::BTreeMap;
 use std::path::Path;
 
 use rayon::prelude::*;
 use scbg_generator::Courtesy;
-use scbg_metrics::wosac::{DatasetMetrics, Rollouts, ScenarioMetrics, WosacConfig};
+use scbg_metrics::wosac::WosacConfig;
 use scbg_scene::Scene;
-use scbg_sim::{SimConfig, Simulation};
+use scbg_sim::SimConfig;
 use scbg_synth::GroundTruth;
 use serde::Serialize;
 
 use crate::generator::LoadedScbg;
-use crate::sim::{
-    AgentRolloutMetrics, ControlledAgent, EgoMode, OthersMode, report, rollout, rollout_quantiles,
-    scene_of_rollout, wosac_rollouts,
-};
+use crate::sim::{AgentRolloutMetrics, ControlledAgent, OthersMode, report, rollout};
 
 /// What `eval sim` runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -66,42 +69,6 @@ impl Default for SimEvalOptions {
     }
 }
 
-/// WOSAC numbers of one method over the WOSAC scenes.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct WosacSummary {
-    /// Scenes scored.
-    pub scenes: usize,
-    /// Mean realism meta-metric.
-    pub metametric: f32,
-    /// Kinematic bucket.
-    pub kinematic: f32,
-    /// Interactive bucket.
-    pub interactive: f32,
-    /// Map-based bucket.
-    pub map_based: f32,
-    /// Mean minADE, m.
-    pub min_ade_m: f32,
-    /// Simulated collision rate (evaluated objects).
-    pub collision_rate: f32,
-    /// Simulated off-road rate (evaluated objects).
-    pub offroad_rate: f32,
-}
-
-impl WosacSummary {
-    fn of(m: &DatasetMetrics) -> Self {
-        Self {
-            scenes: m.num_scenarios,
-            metametric: m.metametric,
-            kinematic: m.buckets.kinematic,
-            interactive: m.buckets.interactive,
-            map_based: m.buckets.map_based,
-            min_ade_m: m.min_average_displacement_error_m,
-            collision_rate: m.simulated_collision_rate,
-            offroad_rate: m.simulated_offroad_rate,
-        }
-    }
-}
-
 /// The closed-loop numbers at one quantile (means over scenes).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct QuantileSim {
@@ -125,82 +92,6 @@ pub struct QuantileSim {
     pub b_progress_m: f64,
     /// WOSAC realism of 32 rollouts around this quantile (WOSAC quantiles only).
     pub wosac: Option<WosacSummary>,
-}
-
-/// A baseline on the WOSAC scenes.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct BaselineSim {
-    /// A's realised average speed, m/s.
-    pub a_avg_speed_mps: f64,
-    /// Fraction of scenes in which B collides.
-    pub b_collision_rate: f64,
-    /// Fraction of scenes in which B goes off-road.
-    pub b_offroad_rate: f64,
-    /// WOSAC realism.
-    pub wosac: Option<WosacSummary>,
-}
-
-impl SimEval {
-    /// One line on realism: scbg's WOSAC meta-metric over its quantiles and with the knob
-    /// drawn from its prior, each with its per-scene difference to IDM-only, and the baselines.
-    pub fn realism_line(&self) -> String {
-        let meta =
-            |w: Option<&WosacSummary>| w.map_or("-".into(), |w| format!("{:.4}", w.metametric));
-        let diff = |d: &Option<PairedDifference>| {
-            d.as_ref().map_or(String::new(), |d| {
-                format!(
-                    " (minus IDM-only per scene {:+.4} ± {:.4} s.e.)",
-                    d.mean, d.std_error
-                )
-            })
-        };
-        let baseline = |name: &str| meta(self.baselines.get(name).and_then(|b| b.wosac.as_ref()));
-        format!(
-            "WOSAC meta-metric on {} scenes: scbg over its quantiles {}{}; scbg with the knob drawn from its prior {}{}; IDM-only {}, constant velocity {}, log replay {}",
-            self.baselines
-                .get("idm_only")
-                .and_then(|b| b.wosac.as_ref())
-                .map_or(0, |w| w.scenes),
-            meta(self.wosac_scbg.as_ref()),
-            diff(&self.wosac_scbg_minus_idm),
-            meta(self.wosac_scbg_prior.as_ref()),
-            diff(&self.wosac_prior_minus_idm),
-            baseline("idm_only"),
-            baseline("constant_velocity"),
-            baseline("log_replay"),
-        )
-    }
-}
-
-/// A per-scene difference of two methods' meta-metrics on the same scenes.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct PairedDifference {
-    /// Scenes with both methods scored.
-    pub scenes: usize,
-    /// Mean difference.
-    pub mean: f64,
-    /// Standard error of the mean (sample standard deviation / √scenes; 0 for one scene).
-    pub std_error: f64,
-}
-
-impl PairedDifference {
-    fn of(diffs: &[f64]) -> Option<Self> {
-        let n = diffs.len();
-        if n == 0 {
-            return None;
-        }
-        let mean = diffs.iter().sum::<f64>() / n as f64;
-        let var = if n > 1 {
-            diffs.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1) as f64
-        } else {
-            0.0
-        };
-        Some(Self {
-            scenes: n,
-            mean,
-            std_error: (var / n as f64).sqrt(),
-        })
-    }
 }
 
 /// Spearman correlations per family and pooled (`all`).
@@ -328,120 +219,37 @@ fn rate(v: impl Iterator<Item = bool>) -> f64 {
     }
 }
 
-fn one_rollout(
+/// One rollout of scene `s` with B asked for quantile `q` (A and the others as `config`).
+fn rollout_at(
     model: &LoadedScbg,
     s: &SimScene,
     q: f32,
     config: SimConfig,
-) -> anyhow::Result<(AgentRolloutMetrics, AgentRolloutMetrics)> {
+) -> anyhow::Result<Scene> {
     let controlled = [ControlledAgent {
         id: s.controlled,
         courtesy: Courtesy::Quantile(q),
     }];
-    let out = rollout(
+    rollout(
         model,
         &s.scene,
         Some(s.ego),
         &controlled,
         config,
         s.truth.as_ref(),
-    )?;
-    let r = report(&out, s.ego, &[s.controlled])?;
-    Ok((r.ego, r.controlled[0]))
+    )
 }
 
-/// 32 rollouts of scbg around `q`, as WOSAC rollouts.
-fn scbg_rollouts(
+/// The (A, B) metrics of one rollout of scene `s` at quantile `q`.
+fn one_rollout(
     model: &LoadedScbg,
     s: &SimScene,
     q: f32,
-    spread: f32,
-    options: &SimEvalOptions,
-) -> anyhow::Result<Rollouts> {
-    let scenes = rollout_quantiles(q, options.rollouts, spread)
-        .into_iter()
-        .map(|qr| {
-            let controlled = [ControlledAgent {
-                id: s.controlled,
-                courtesy: Courtesy::Quantile(qr),
-            }];
-            rollout(
-                model,
-                &s.scene,
-                Some(s.ego),
-                &controlled,
-                options.config,
-                s.truth.as_ref(),
-            )
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    Ok(wosac_rollouts(&s.scene, &scenes))
-}
-
-/// The WOSAC method name of scbg with the knob drawn from its prior.
-const PRIOR: &str = "prior";
-
-/// IDM-only agents: nobody controlled, A and the others IDM along their logged paths.
-fn idm_only(s: &SimScene) -> anyhow::Result<Scene> {
-    let config = SimConfig {
-        ego: EgoMode::Reactive,
-        others: OthersMode::Reactive,
-        ..SimConfig::default()
-    };
-    let mut sim = Simulation::reset(&s.scene, Some(s.ego), &[], config, None)?;
-    struct Nobody;
-    impl scbg_sim::Planner for Nobody {
-        fn plan(&mut self, _: &Scene, id: i64) -> Result<Vec<[f64; 2]>, scbg_sim::PlanError> {
-            Err(scbg_sim::PlanError(format!("agent {id} is not controlled")))
-        }
-    }
-    sim.run(&mut Nobody)?;
-    Ok(sim.to_scene())
-}
-
-type Scored = (
-    BTreeMap<String, (AgentRolloutMetrics, AgentRolloutMetrics)>,
-    BTreeMap<String, ScenarioMetrics>,
-);
-
-/// The WOSAC part of one scene: metrics per method (`q=0.1`, …, baselines) and the baselines'
-/// rollout metrics (ego, B).
-fn wosac_scene(
-    model: &LoadedScbg,
-    s: &SimScene,
-    options: &SimEvalOptions,
-) -> anyhow::Result<Scored> {
-    let n = options.rollouts;
-    let mut metrics = BTreeMap::new();
-    let mut rollout_metrics = BTreeMap::new();
-    let score = |r: &Rollouts| scbg_metrics::wosac::scenario_metrics(&s.scene, r, options.wosac);
-    for &q in &options.wosac_quantiles {
-        let r = scbg_rollouts(model, s, q, options.spread, options)?;
-        metrics.insert(format!("q={q:.1}"), score(&r)?);
-    }
-    if options.wosac_prior {
-        let r = scbg_rollouts(model, s, 0.5, 1.0, options)?;
-        metrics.insert(PRIOR.to_string(), score(&r)?);
-    }
-    let idm_scene = idm_only(s)?;
-    let idm = wosac_rollouts(&s.scene, &vec![idm_scene; n]);
-    for (name, r) in [
-        (
-            "log_replay",
-            scbg_metrics::wosac::log_replay_rollouts(&s.scene, n)?,
-        ),
-        (
-            "constant_velocity",
-            scbg_metrics::wosac::constant_velocity_rollouts(&s.scene, n)?,
-        ),
-        ("idm_only", idm),
-    ] {
-        metrics.insert(name.to_string(), score(&r)?);
-        let scene = scene_of_rollout(&s.scene, &r, 0);
-        let rep = report(&scene, s.ego, &[s.controlled])?;
-        rollout_metrics.insert(name.to_string(), (rep.ego, rep.controlled[0]));
-    }
-    Ok((rollout_metrics, metrics))
+    config: SimConfig,
+) -> anyhow::Result<(AgentRolloutMetrics, AgentRolloutMetrics)> {
+    let out = rollout_at(model, s, q, config)?;
+    let r = report(&out, s.ego, &[s.controlled])?;
+    Ok((r.ego, r.controlled[0]))
 }
 
 /// The courtesy knob's curve over scenes: the numbers per quantile and the correlations.
@@ -639,74 +447,14 @@ pub fn evaluate_sim(
     let mut curve = KnobCurve::of(&done, &quantiles);
     // WOSAC realism on the first scenes.
     let wosac_scenes = &scenes[..scenes.len().min(options.wosac_scenes)];
-    let scored: Vec<Scored> = wosac_scenes
+    let scored: Vec<realism::Scored> = wosac_scenes
         .par_iter()
-        .filter_map(|s| wosac_scene(model, s, options).ok())
+        .filter_map(|s| realism::wosac_scene(model, s, options).ok())
         .collect();
-    let aggregate = |name: &str| {
-        let m: Vec<ScenarioMetrics> = scored
-            .iter()
-            .filter_map(|s| s.1.get(name).cloned())
-            .collect();
-        scbg_metrics::wosac::aggregate(&m, options.wosac)
-    };
+    let realism = realism::Realism::of(&scored, options.wosac);
     for row in &mut curve.per_quantile {
-        row.wosac = aggregate(&format!("q={:.1}", row.quantile)).map(|m| WosacSummary::of(&m));
+        row.wosac = realism.at_quantile(row.quantile);
     }
-    let all_scbg: Vec<ScenarioMetrics> = scored
-        .iter()
-        .flat_map(|s| {
-            s.1.iter()
-                .filter(|(k, _)| k.starts_with("q="))
-                .map(|(_, v)| v.clone())
-        })
-        .collect();
-    let wosac_scbg =
-        scbg_metrics::wosac::aggregate(&all_scbg, options.wosac).map(|m| WosacSummary::of(&m));
-    let mut baselines = BTreeMap::new();
-    for name in ["log_replay", "constant_velocity", "idm_only"] {
-        let rm: Vec<&(AgentRolloutMetrics, AgentRolloutMetrics)> =
-            scored.iter().filter_map(|s| s.0.get(name)).collect();
-        baselines.insert(
-            name.to_string(),
-            BaselineSim {
-                a_avg_speed_mps: mean_std(
-                    &rm.iter().map(|m| m.0.avg_speed_mps).collect::<Vec<_>>(),
-                )
-                .0,
-                b_collision_rate: rate(rm.iter().map(|m| m.1.collision)),
-                b_offroad_rate: rate(rm.iter().map(|m| m.1.offroad.unwrap_or(false))),
-                wosac: aggregate(name).map(|m| WosacSummary::of(&m)),
-            },
-        );
-    }
-    let above_baselines = |w: &Option<WosacSummary>| {
-        let w = w.as_ref()?;
-        let cv = baselines["constant_velocity"].wosac.as_ref()?.metametric;
-        let idm = baselines["idm_only"].wosac.as_ref()?.metametric;
-        Some(w.metametric > cv && w.metametric > idm)
-    };
-    let wosac_above_baselines = above_baselines(&wosac_scbg);
-    let wosac_scbg_prior = aggregate(PRIOR).map(|m| WosacSummary::of(&m));
-    let wosac_prior_above_baselines = above_baselines(&wosac_scbg_prior);
-    // Per scene: the mean meta-metric of the chosen scbg runs minus IDM-only's.
-    let minus_idm = |pick: &dyn Fn(&str) -> bool| {
-        let diffs: Vec<f64> = scored
-            .iter()
-            .filter_map(|(_, m)| {
-                let idm = f64::from(m.get("idm_only")?.metametric);
-                let ours: Vec<f64> = m
-                    .iter()
-                    .filter(|(k, _)| pick(k))
-                    .map(|(_, v)| f64::from(v.metametric))
-                    .collect();
-                (!ours.is_empty()).then(|| ours.iter().sum::<f64>() / ours.len() as f64 - idm)
-            })
-            .collect();
-        PairedDifference::of(&diffs)
-    };
-    let wosac_scbg_minus_idm = minus_idm(&|k| k.starts_with("q="));
-    let wosac_prior_minus_idm = minus_idm(&|k| k == PRIOR);
     // The world's own knob on the same scenes (synthetic scenes only).
     let world = kept_counting_skips(
         scenes
@@ -723,110 +471,16 @@ pub fn evaluate_sim(
         skipped,
         replan_every: options.config.replan_every,
         world_knob,
-        wosac_scbg,
-        baselines,
-        wosac_above_baselines,
-        wosac_scbg_minus_idm,
-        wosac_scbg_prior,
-        wosac_prior_minus_idm,
-        wosac_prior_above_baselines,
+        wosac_scbg: realism.wosac_scbg,
+        baselines: realism.baselines,
+        wosac_above_baselines: realism.wosac_above_baselines,
+        wosac_scbg_minus_idm: realism.wosac_scbg_minus_idm,
+        wosac_scbg_prior: realism.wosac_scbg_prior,
+        wosac_prior_minus_idm: realism.wosac_prior_minus_idm,
+        wosac_prior_above_baselines: realism.wosac_prior_above_baselines,
         rollout_ms: 1e3 * curve_seconds / rollouts_done.max(1) as f64,
         seconds: started.elapsed().as_secs_f64(),
     })
-}
-
-/// The figures: A's realised speed and realised courtesy against the quantile
-/// (`sim_courtesy.png`), WOSAC meta-metric against the quantile with the baselines
-/// (`sim_realism.png`).
-pub fn write_figures(eval: &SimEval, dir: &Path) -> anyhow::Result<()> {
-    use scbg_plot::Series;
-    std::fs::create_dir_all(dir)?;
-    let q = |f: &dyn Fn(&QuantileSim) -> f64| -> Vec<(f64, f64)> {
-        eval.curve
-            .per_quantile
-            .iter()
-            .map(|r| (f64::from(r.quantile), f(r)))
-            .collect()
-    };
-    let mut courtesy_series = vec![
-        Series {
-            label: "A's realised avg speed − at q=0.5 (m/s)".into(),
-            points: q(&|r| r.realised_courtesy_mps),
-            band: Some(
-                eval.curve
-                    .per_quantile
-                    .iter()
-                    .map(|r| r.realised_courtesy_std_mps)
-                    .collect(),
-            ),
-        },
-        Series {
-            label: "B collision rate".into(),
-            points: q(&|r| r.b_collision_rate),
-            band: None,
-        },
-    ];
-    if let Some(world) = &eval.world_knob {
-        courtesy_series.push(Series {
-            label: "same, the world's own B at courtesy c = q (m/s)".into(),
-            points: world
-                .per_quantile
-                .iter()
-                .map(|r| (f64::from(r.quantile), r.realised_courtesy_mps))
-                .collect(),
-            band: None,
-        });
-    }
-    scbg_plot::line_chart(
-        &courtesy_series,
-        "courtesy quantile of B",
-        "m/s  |  rate",
-        "closed loop: realised courtesy toward A",
-        &dir.join("sim_courtesy.png"),
-    )?;
-    let mut series = vec![Series {
-        label: "scbg (32 rollouts around q)".into(),
-        points: eval
-            .curve
-            .per_quantile
-            .iter()
-            .filter_map(|r| {
-                r.wosac
-                    .as_ref()
-                    .map(|w| (f64::from(r.quantile), f64::from(w.metametric)))
-            })
-            .collect(),
-        band: None,
-    }];
-    let prior = eval
-        .wosac_scbg_prior
-        .as_ref()
-        .map(|w| ("scbg, knob drawn from its prior".to_string(), w));
-    let baselines = eval
-        .baselines
-        .iter()
-        .filter_map(|(name, b)| Some((name.clone(), b.wosac.as_ref()?)));
-    for (name, w) in prior.into_iter().chain(baselines) {
-        series.push(Series {
-            label: name,
-            points: vec![
-                (0.1, f64::from(w.metametric)),
-                (0.9, f64::from(w.metametric)),
-            ],
-            band: None,
-        });
-    }
-    if series[0].points.is_empty() {
-        return Ok(());
-    }
-    scbg_plot::line_chart(
-        &series,
-        "courtesy quantile of B",
-        "WOSAC meta-metric",
-        "closed loop: realism against the courtesy knob",
-        &dir.join("sim_realism.png"),
-    )?;
-    Ok(())
 }
 
 /// The scenes of WOMD files for `eval sim`: each scene with its A (SDC) and B (first other
@@ -905,20 +559,4 @@ pub fn eval_sim_files(
     crate::write_json(out.join("eval_sim.json"), &eval)?;
     write_figures(&eval, out)?;
     Ok(eval)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::PairedDifference;
-
-    #[test]
-    fn paired_difference_is_mean_and_standard_error() {
-        assert_eq!(PairedDifference::of(&[]), None);
-        let one = PairedDifference::of(&[0.25]).unwrap();
-        assert_eq!((one.scenes, one.mean, one.std_error), (1, 0.25, 0.0));
-        // 1, 2, 3, 6: mean 3, sample variance (4 + 1 + 0 + 9) / 3 = 14/3.
-        let d = PairedDifference::of(&[1.0, 2.0, 3.0, 6.0]).unwrap();
-        assert_eq!((d.scenes, d.mean), (4, 3.0));
-        assert!((d.std_error - (14.0f64 / 3.0 / 4.0).sqrt()).abs() < 1e-12);
-    }
 }
