@@ -78,6 +78,9 @@ pub struct DemoArgs {
     /// Weight β of the courtesy loss (in units of the labels' ψ spread) for the full variant.
     #[arg(long, default_value_t = 1.0)]
     pub beta: f32,
+    /// How the generators form B's future.
+    #[arg(long, value_enum, default_value_t = Head::Modes)]
+    pub head: Head,
     /// Held-out scenes of the closed-loop stage (0 skips it).
     #[arg(long, default_value_t = 60)]
     pub closed_loop_scenes: usize,
@@ -215,6 +218,19 @@ pub struct TrainGeneratorArgs {
         requires = "oracle_labels"
     )]
     pub world_futures: usize,
+    #[arg(long, value_enum, default_value_t = Head::Modes)]
+    pub head: Head,
+}
+
+/// How the generator forms B's future (`--head`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Head {
+    /// A ψ-dependent choice among the frozen predictor's marginal modes of B plus a regressed
+    /// displacement (the default since it follows the knob better in truth; BENCHMARKS.md,
+    /// *A generator that chooses among B's modes*).
+    Modes,
+    /// One regressed trajectory (generators before the option).
+    Regression,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -178,3 +178,29 @@ pub fn marginal_embedding(
         .try_to_vec::<f32>()
         .expect("f32 tensor")
 }
+
+/// B's marginal modes decoded by the frozen predictor from B's embeddings (`[n, e]`, the
+/// predictor's own embedding width, without A's context), for a mode-selecting generator.
+pub fn b_modes_of(predictor: &Multipath, b_embedding: burn::tensor::Tensor<2>) -> crate::BModes {
+    let out = predictor.decode(b_embedding);
+    crate::BModes {
+        xy: out.xy.detach(),
+        log_prob: burn::tensor::activation::log_softmax(out.logits, 1).detach(),
+    }
+}
+
+/// [`b_modes_of`] the examples' stored B embeddings.
+pub fn b_modes(predictor: &Multipath, examples: &[&Example], device: &Device) -> crate::BModes {
+    let e = examples.first().map_or(0, |x| x.b_embedding.len());
+    let rows: Vec<f32> = examples
+        .iter()
+        .flat_map(|x| x.b_embedding.iter().copied())
+        .collect();
+    b_modes_of(
+        predictor,
+        burn::tensor::Tensor::from_data(
+            burn::tensor::TensorData::new(rows, [examples.len(), e]),
+            device,
+        ),
+    )
+}

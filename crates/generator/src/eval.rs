@@ -70,9 +70,13 @@ pub fn generate_and_measure(
             .flat_map(|j| (0..n).map(move |i| psi[c * chunk + i][j]))
             .collect();
         let embedding = repeat_rows(stored_embeddings(exs, device), k);
+        let modes = generator
+            .selects_modes()
+            .then(|| crate::b_modes(predictor, exs, device).repeat_rows(k));
         let pred = generator.forward(
             embedding,
             Tensor::from_data(TensorData::new(psi_rows, [rows]), device),
+            modes,
         );
         let [_, t, _] = pred.dims();
         // E[r(Y_A) | x] as the labels estimated it.

@@ -290,6 +290,16 @@ impl Scbg {
             .map_err(|error| GenerateError::Sample { id: b_id, error })?;
         self.stats.normalize(&mut b);
         let mut embedding = marginal_embedding(&self.predictor, &b, device);
+        let modes = self.generator.selects_modes().then(|| {
+            let e = embedding.len();
+            crate::b_modes_of(
+                &self.predictor,
+                burn::tensor::Tensor::from_data(
+                    burn::tensor::TensorData::new(embedding.clone(), [1, e]),
+                    device,
+                ),
+            )
+        });
         if self.generator.a_context_width > 0 {
             // A's pose and velocity at the current step, from its track (no sample needed).
             let t = &scene.tracks[ia];
@@ -319,6 +329,7 @@ impl Scbg {
         let future = self.generator.forward(
             embedding,
             burn::tensor::Tensor::from_data(burn::tensor::TensorData::new(vec![psi], [1]), device),
+            modes,
         );
         let xy = crate::eval::to_vec(future);
         let pose = b.world_from_agent;

@@ -22,10 +22,11 @@ mod range;
 mod train;
 
 pub use data::{
-    A_CONTEXT_WIDTH, Example, a_context, a_context_of, a_from_b, build_examples, marginal_embedding,
+    A_CONTEXT_WIDTH, Example, a_context, a_context_of, a_from_b, b_modes, b_modes_of,
+    build_examples, marginal_embedding,
 };
 pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Scbg};
-pub use model::{Generator, GeneratorConfig};
+pub use model::{BModes, Generator, GeneratorConfig};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,
     stored_embeddings,

@@ -30,6 +30,13 @@ pub struct GeneratorConfig {
     /// [`crate::data::A_CONTEXT_WIDTH`].
     #[serde(default)]
     pub a_context_width: usize,
+    /// B's predicted marginal modes the generator chooses among (0: a plain regression, the
+    /// default and every generator trained before the option). With `K > 0` the future is
+    /// `Σ_k w_k(x, ψ) · μ_k + Δ(x, ψ)`: the frozen predictor's `K` mode means of B, weighted
+    /// by a softmax of learned logits plus the modes' log-probabilities, and the regressed
+    /// displacement `Δ` on top ([`Generator::forward`]). `K` must be the predictor's mode count.
+    #[serde(default)]
+    pub modes: usize,
 }
 
 fn one() -> f32 {
@@ -52,6 +59,7 @@ impl GeneratorConfig {
             psi_scale: 1.0,
             knot_stride: 5,
             a_context_width: 0,
+            modes: 0,
         }
     }
 
@@ -69,6 +77,12 @@ impl GeneratorConfig {
     pub fn init(&self, device: &Device) -> Generator {
         let mut dims = vec![self.embedding_width + self.psi_width];
         dims.extend(&self.hidden);
+        let selector = (self.modes > 0).then(|| {
+            let mut sel = vec![dims[0]];
+            sel.extend(self.hidden.first());
+            sel.push(self.modes);
+            Mlp::init(&sel, device)
+        });
         let stride = self.knot_stride.max(1);
         let knots = self.future_steps.div_ceil(stride);
         dims.push(2 * knots);
@@ -87,12 +101,14 @@ impl GeneratorConfig {
         Generator {
             psi_mlp: Mlp::init(&[1, self.psi_width, self.psi_width], device),
             decoder: Mlp::init(&dims, device),
+            selector,
             interpolation: burn::module::Param::from_tensor(Tensor::from_data(
                 burn::tensor::TensorData::new(weights, [self.future_steps, knots]),
                 device,
             ))
             .set_require_grad(false),
             future_steps: self.future_steps,
+            knot_stride: stride,
             psi_scale: self.psi_scale,
             a_context_width: self.a_context_width,
         }
@@ -106,31 +122,99 @@ pub struct Generator {
     pub psi_mlp: Mlp,
     /// MLP of `[embedding ‖ ψ embedding]` → `2 · knots` per-knot displacements (dx, dy).
     pub decoder: Mlp,
+    /// MLP of `[embedding ‖ ψ embedding]` → `K` mode logits (see [`GeneratorConfig::modes`]).
+    pub selector: Option<Mlp>,
     /// `[T, knots]` fixed linear interpolation from knots to steps (not trained).
     pub interpolation: burn::module::Param<Tensor<2>>,
     /// Generated future steps `T`.
     pub future_steps: usize,
+    /// Steps between knots (see [`GeneratorConfig::knot_stride`]).
+    pub knot_stride: usize,
     /// ψ is divided by this before [`Self::psi_mlp`] (see [`GeneratorConfig::psi_scale`]).
     pub psi_scale: f32,
     /// See [`GeneratorConfig::a_context_width`].
     pub a_context_width: usize,
 }
 
+/// B's predicted marginal modes, the choices of a mode-selecting generator
+/// ([`GeneratorConfig::modes`]); see [`crate::b_modes`].
+#[derive(Debug, Clone)]
+pub struct BModes {
+    /// `[batch, K, T, 2]` mode means in B's frame (metres).
+    pub xy: Tensor<4>,
+    /// `[batch, K]` log-probabilities of the modes.
+    pub log_prob: Tensor<2>,
+}
+
+impl BModes {
+    /// The rows repeated `times` times (row `r` of repetition `j` is row `j·batch + r`).
+    pub fn repeat_rows(self, times: usize) -> Self {
+        if times == 1 {
+            return self;
+        }
+        Self {
+            xy: Tensor::cat(vec![self.xy; times], 0),
+            log_prob: Tensor::cat(vec![self.log_prob; times], 0),
+        }
+    }
+}
+
 impl Generator {
+    /// Whether [`Self::forward`] needs B's modes.
+    pub fn selects_modes(&self) -> bool {
+        self.selector.is_some()
+    }
+
     /// `y_B = g(x, ψ)` (paper eq. 1): B's future for the requested courtesy ψ. The knot
-    /// displacements are summed into knot positions and interpolated to every step.
+    /// displacements are summed into knot positions and interpolated to every step; a
+    /// mode-selecting generator adds the knot positions to its softmax-weighted mixture of B's
+    /// modes taken at the knots' steps, before the interpolation.
     ///
     /// # Shapes
-    /// `embedding: [batch, e]` (B's frozen scene embedding), `psi: [batch]`
+    /// `embedding: [batch, e]` (B's frozen scene embedding), `psi: [batch]`,
+    /// `modes`: see [`BModes`] (required when [`Self::selects_modes`], ignored otherwise)
     /// `-> [batch, T, 2]` positions in B's frame (metres)
-    pub fn forward(&self, embedding: Tensor<2>, psi: Tensor<1>) -> Tensor<3> {
+    ///
+    /// # Panics
+    /// When the generator selects modes and `modes` is `None`.
+    pub fn forward(
+        &self,
+        embedding: Tensor<2>,
+        psi: Tensor<1>,
+        modes: Option<BModes>,
+    ) -> Tensor<3> {
         let [b, _] = embedding.dims();
         let psi = self
             .psi_mlp
             .forward(psi.reshape([b, 1]) / self.psi_scale.max(1e-12));
-        let out = self.decoder.forward(Tensor::cat(vec![embedding, psi], 1));
+        let input = Tensor::cat(vec![embedding, psi], 1);
+        let out = self.decoder.forward(input.clone());
         let [t, knots] = self.interpolation.dims();
-        let knot_xy = out.reshape([b, knots, 2]).cumsum(1);
+        let mut knot_xy = out.reshape([b, knots, 2]).cumsum(1);
+        if let Some(selector) = &self.selector {
+            let modes = modes.expect("a mode-selecting generator needs B's modes");
+            let [_, k, tm, _] = modes.xy.dims();
+            // The modes at the knots' steps, so that the mixture is interpolated like the
+            // displacement: smooth by construction (the predictor's per-step means are not).
+            let stride = self.knot_stride.max(1);
+            let idx: Vec<i64> = (0..knots)
+                .map(|j| ((j + 1) * stride).min(tm).saturating_sub(1) as i64)
+                .collect();
+            let at_knots = modes.xy.select(
+                2,
+                Tensor::<1, burn::tensor::Int>::from_data(
+                    burn::tensor::TensorData::new(idx, [knots]),
+                    &knot_xy.device(),
+                ),
+            );
+            let weights =
+                burn::tensor::activation::softmax(selector.forward(input) + modes.log_prob, 1);
+            let mixed = weights
+                .reshape([b, 1, k])
+                .matmul(at_knots.reshape([b, k, knots * 2]))
+                .reshape([b, knots, 2]);
+            knot_xy = knot_xy + mixed;
+        }
         self.interpolation
             .val()
             .reshape([1, t, knots])

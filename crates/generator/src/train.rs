@@ -266,7 +266,10 @@ pub fn step_loss(
         ),
         device,
     );
-    let pred = generator.forward(embedding, psi.clone());
+    let modes = generator
+        .selects_modes()
+        .then(|| crate::b_modes(predictor, examples, device).repeat_rows(m_count));
+    let pred = generator.forward(embedding, psi.clone(), modes);
     let mut traj = huber_trajectory(
         pred.clone().narrow(0, 0, n),
         target.clone().narrow(0, 0, n),

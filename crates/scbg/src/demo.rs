@@ -54,6 +54,9 @@ pub struct DemoOptions {
     pub generator_seeds: usize,
     /// Weight β of the courtesy loss of the full variant.
     pub beta: f32,
+    /// Generators that choose among B's predicted modes
+    /// ([`crate::generator::VariantSettings::select_modes`]).
+    pub select_modes: bool,
     /// How courtesy is labelled (8 sampled futures per pair role by default).
     pub labels: LabelOptions,
     /// Held-out scenes of the closed-loop stage (0 skips it); WOSAC realism is scored on up
@@ -365,6 +368,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                                         beta: options.beta,
                                         threshold: Threshold::Quantile(0.8),
                                         seed,
+                                        select_modes: options.select_modes,
                                         ..VariantSettings::new(variant, options.labels)
                                     },
                                     &dir,

@@ -270,6 +270,9 @@ pub struct VariantSettings {
     /// With `oracle_labels`: B's sampled futures replaced by this many of the synthetic
     /// world's own futures of B ([`crate::labels::oracle_labelled`]; 0: none).
     pub world_futures: usize,
+    /// Train a mode-selecting generator ([`GeneratorConfig::modes`] = the predictor's modes;
+    /// the default), else a plain regression.
+    pub select_modes: bool,
 }
 
 impl VariantSettings {
@@ -288,6 +291,7 @@ impl VariantSettings {
             labels,
             oracle_labels: false,
             world_futures: 0,
+            select_modes: true,
         }
     }
 }
@@ -322,6 +326,9 @@ pub fn train_variant(
         GeneratorConfig::with_a_context(width)
     };
     gen_config.psi_scale = psi_spread(examples);
+    if s.select_modes {
+        gen_config.modes = p.ckpt.model_config.num_modes;
+    }
     let range_hidden = 64;
     // The backend's random stream is the device's, shared by every thread: seed and draw the
     // initial weights of both models under one lock, so that variants trained side by side
@@ -542,6 +549,14 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
         predictor.map_or_else(|| PathBuf::from(&checkpoint.predictor), Path::to_path_buf);
     let ckpt = Checkpoint::read(&predictor_dir)
         .with_context(|| format!("predictor of {} (override with --predictor)", dir.display()))?;
+    let modes = checkpoint.generator.modes;
+    ensure_request!(
+        modes == 0 || modes == ckpt.model_config.num_modes,
+        "{}: the generator chooses among {modes} modes of B, but the predictor {} predicts {}",
+        dir.display(),
+        predictor_dir.display(),
+        ckpt.model_config.num_modes
+    );
     let device = scbg_model::device::device(&ckpt.train_config.backend)?;
     let model = ckpt.load_model(&predictor_dir, &device)?;
     let load = |name: &str| dir.join(name);
