@@ -222,3 +222,170 @@ impl Generator {
             .matmul(knot_xy)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use burn::optim::AdamConfig;
+
+    use super::*;
+
+    #[test]
+    fn knots_are_interpolated_linearly() {
+        let _guard = crate::tests::SEED_LOCK
+            .lock()
+            .unwrap_or_else(|e| e.into_inner());
+        let device = Device::flex();
+        let g = GeneratorConfig::new(24).init(&device);
+        let w: Vec<f32> = g.interpolation.val().into_data().try_to_vec().unwrap();
+        let knots = 16;
+        let row = |s: usize| &w[s * knots..(s + 1) * knots];
+        // Step 1 (index 0) is a fifth of the way from the origin to knot 0.
+        assert!((row(0)[0] - 0.2).abs() < 1e-6 && row(0)[1..].iter().all(|v| *v == 0.0));
+        // Step 5 is knot 0; step 8 is 40 % knot 0 + 60 % knot 1; step 80 is the last knot.
+        assert!((row(4)[0] - 1.0).abs() < 1e-6);
+        assert!((row(7)[0] - 0.4).abs() < 1e-6 && (row(7)[1] - 0.6).abs() < 1e-6);
+        assert!((row(79)[15] - 1.0).abs() < 1e-6);
+        // Every row's weights sum to at most 1 (the origin takes the rest).
+        assert!((0..80).all(|s| row(s).iter().sum::<f32>() <= 1.0 + 1e-6));
+    }
+
+    #[test]
+    fn forward_shape() {
+        let device = Device::flex();
+        let g = GeneratorConfig::new(24).init(&device);
+        let out = g.forward(
+            Tensor::zeros([3, 24], &device),
+            Tensor::zeros([3], &device),
+            None,
+        );
+        assert_eq!(out.dims(), [3, 80, 2]);
+    }
+
+    /// Two modes of B in a row: a straight one along x and one turning to +y (`[2, 80, 2]`).
+    fn two_modes(device: &Device) -> Tensor<3> {
+        let xy: Vec<f32> = (0..2)
+            .flat_map(|k| {
+                (1..=80).flat_map(move |s| [s as f32, if k == 1 { 0.1 * s as f32 } else { 0.0 }])
+            })
+            .collect();
+        Tensor::from_data(burn::tensor::TensorData::new(xy, [2, 80, 2]), device)
+    }
+
+    /// The mode-selecting generator's future is the softmax-weighted modes plus the regressed
+    /// displacement: with the displacement's last layer zeroed and a mode log-probability far
+    /// below the other, it is the likelier mode, whatever ψ and the learned logits say.
+    #[test]
+    fn mode_selection_weights_the_modes() {
+        let device = Device::flex();
+        let mut config = GeneratorConfig::new(24);
+        config.modes = 2;
+        let mut g = config.init(&device);
+        assert!(g.selects_modes());
+        let last = g.decoder.layers.last_mut().unwrap();
+        last.weight = last.weight.clone().map(|w| w.zeros_like());
+        if let Some(bias) = &mut last.bias {
+            *bias = bias.clone().map(|b| b.zeros_like());
+        }
+        let modes = |favoured: usize| BModes {
+            xy: two_modes(&device).reshape([1, 2, 80, 2]),
+            log_prob: Tensor::from_data(
+                [[
+                    if favoured == 0 { 0.0f32 } else { -60.0 },
+                    if favoured == 1 { 0.0 } else { -60.0 },
+                ]],
+                &device,
+            ),
+        };
+        let want: Vec<f32> = two_modes(&device).into_data().try_to_vec().unwrap();
+        for favoured in [0, 1] {
+            for psi in [-3.0f32, 0.0, 3.0] {
+                let out: Vec<f32> = g
+                    .forward(
+                        Tensor::ones([1, 24], &device),
+                        Tensor::from_data([psi], &device),
+                        Some(modes(favoured)),
+                    )
+                    .into_data()
+                    .try_to_vec()
+                    .unwrap();
+                let want = &want[favoured * 160..(favoured + 1) * 160];
+                assert!(
+                    out.iter().zip(want).all(|(a, b)| (a - b).abs() < 1e-4),
+                    "mode {favoured}, psi {psi}: {:?} vs {:?}",
+                    &out[150..],
+                    &want[150..]
+                );
+            }
+        }
+    }
+
+    /// Trained on "ψ −1 → the straight mode, ψ +1 → the turning mode" from equally likely modes,
+    /// the selector learns to pick by ψ (the end points differ by 8 m; a regression without the
+    /// modes would have to learn both shapes).
+    #[test]
+    fn mode_selection_learns_to_pick_by_psi() {
+        use burn::optim::GradientsParams;
+        let device = scbg_model::device::training_device("flex").unwrap();
+        let _lock = crate::tests::SEED_LOCK
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        device.seed(5);
+        let mut config = GeneratorConfig::new(8);
+        config.modes = 2;
+        config.hidden = vec![32, 32];
+        let mut g = config.init(&device);
+        let mut optim = AdamConfig::new().init();
+        let n = 16;
+        let psi: Vec<f32> = (0..n)
+            .map(|i| if i % 2 == 0 { -1.0 } else { 1.0 })
+            .collect();
+        let modes = || BModes {
+            xy: two_modes(&device).reshape([1, 2, 80, 2]).repeat_dim(0, n),
+            log_prob: Tensor::from_data([[0.0f32, 0.0]], &device).repeat_dim(0, n),
+        };
+        let all = two_modes(&device);
+        let target = Tensor::cat((0..n).map(|i| all.clone().narrow(0, i % 2, 1)).collect(), 0);
+        let embedding = Tensor::<2>::ones([n, 8], &device);
+        let error = |g: &Generator| -> f32 {
+            let out = g.forward(
+                embedding.clone(),
+                Tensor::from_data(psi.as_slice(), &device),
+                Some(modes()),
+            );
+            (out - target.clone()).abs().max().into_scalar()
+        };
+        let before = error(&g);
+        for _ in 0..150 {
+            let out = g.forward(
+                embedding.clone(),
+                Tensor::from_data(psi.as_slice(), &device),
+                Some(modes()),
+            );
+            let loss = (out - target.clone()).powi_scalar(2).mean();
+            let grads = GradientsParams::from_grads(loss.backward(), &g);
+            g = optim.step(1e-2, g, grads);
+        }
+        let after = error(&g);
+        assert!(
+            after < 0.5 && after < 0.1 * before,
+            "max error {before} m → {after} m"
+        );
+    }
+
+    #[test]
+    fn generators_saved_before_the_a_context_are_not_told_who_a_is() {
+        let mut json = serde_json::to_value(GeneratorConfig::new(24)).unwrap();
+        json.as_object_mut().unwrap().remove("a_context_width");
+        json.as_object_mut().unwrap().remove("modes");
+        let old: GeneratorConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(old.a_context_width, 0);
+        // Nor do they select among B's modes.
+        assert_eq!(old.modes, 0);
+        assert!(!old.init(&Device::flex()).selects_modes());
+        let new = GeneratorConfig::with_a_context(24);
+        assert_eq!(
+            (new.embedding_width, new.a_context_width),
+            (24 + crate::A_CONTEXT_WIDTH, crate::A_CONTEXT_WIDTH)
+        );
+    }
+}
