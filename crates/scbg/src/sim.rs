@@ -27,8 +27,8 @@ use crate::{InvalidRequest, ensure_request};
 
 pub use scbg_sim::rollout::DEFAULT_LANE_KEEPING_M;
 pub use scbg_sim::{
-    AgentRolloutMetrics, AgentSnapshot, EgoMode, HORIZON_STEPS, OthersMode, SimConfig, Simulation,
-    VehicleLimits,
+    AgentRolloutMetrics, AgentSnapshot, Contact, EgoMode, HORIZON_STEPS, OthersMode, SimConfig,
+    Simulation, VehicleLimits,
 };
 
 /// An agent the generator drives, and the courtesy asked of it toward the ego.

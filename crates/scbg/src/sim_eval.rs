@@ -24,7 +24,7 @@ use scbg_synth::GroundTruth;
 use serde::Serialize;
 
 use crate::generator::LoadedScbg;
-use crate::sim::{AgentRolloutMetrics, ControlledAgent, OthersMode, report, rollout};
+use crate::sim::{AgentRolloutMetrics, Contact, ControlledAgent, OthersMode, report, rollout};
 
 /// What `eval sim` runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -180,6 +180,7 @@ impl SimScene {
 }
 
 struct SceneResult {
+    scenario_id: String,
     family: String,
     /// `[quantile]` (ego, B) metrics.
     curve: Vec<(AgentRolloutMetrics, AgentRolloutMetrics)>,
@@ -194,6 +195,7 @@ impl SceneResult {
         base: usize,
     ) -> Self {
         Self {
+            scenario_id: s.scene.scenario_id.clone(),
             family: s.family(),
             base_a_speed: curve[base].0.avg_speed_mps,
             curve,
@@ -268,6 +270,22 @@ pub struct KnobCurve {
     pub a_speed_curve_rises: bool,
     /// The largest B collision rate over the quantiles.
     pub max_b_collision_rate: f64,
+    /// Every rollout in which B collides: the scene, the quantile and B's first contact
+    /// (with whom, at which step, both speeds, the geometry) — what a diagnosis needs.
+    pub b_collisions: Vec<BCollision>,
+}
+
+/// One rollout of the curve in which B collided.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BCollision {
+    /// The scene.
+    pub scenario_id: String,
+    /// Its family (synthetic) or `womd`.
+    pub family: String,
+    /// The quantile asked of B.
+    pub quantile: f32,
+    /// B's first box overlap.
+    pub contact: Contact,
 }
 
 impl KnobCurve {
@@ -305,8 +323,23 @@ impl KnobCurve {
                 wosac: None,
             });
         }
+        let b_collisions = quantiles
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &q)| {
+                done.iter().filter_map(move |r| {
+                    r.curve[k].1.first_contact.map(|contact| BCollision {
+                        scenario_id: r.scenario_id.clone(),
+                        family: r.family.clone(),
+                        quantile: q,
+                        contact,
+                    })
+                })
+            })
+            .collect();
         Self {
             scenes: done.len(),
+            b_collisions,
             a_speed_curve_rises: per_quantile
                 .windows(2)
                 .all(|w| w[1].a_avg_speed_mps >= w[0].a_avg_speed_mps),

@@ -416,6 +416,19 @@ fn closed_loop_through_the_library(
         assert!((diff.mean - f64::from(summary.metametric - idm)).abs() < 1e-6);
     }
     assert!(eval.realism_line().contains("knob drawn from its prior"));
+    // Every collision of B is listed, with its quantile: as many as the rates say.
+    let listed = |curve: &scbg::sim_eval::KnobCurve| {
+        for row in &curve.per_quantile {
+            let n = curve
+                .b_collisions
+                .iter()
+                .filter(|c| c.quantile == row.quantile && c.contact.step >= 1)
+                .count();
+            assert_eq!(n as f64, row.b_collision_rate * curve.scenes as f64);
+        }
+    };
+    listed(&eval.curve);
+    listed(eval.world_knob.as_ref().unwrap());
     // The world's own knob on the same scene: B at courtesy c = q by the world's rule, A's
     // realised speed what the oracle says for that future of B.
     let world = eval

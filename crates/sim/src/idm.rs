@@ -125,8 +125,11 @@ const CONFLICT_WINDOW_S: f64 = 2.0;
 /// A crossing conflict ahead of an agent at `s_m` on `path` that follows `arrival` (the time,
 /// s from now, at which it reaches each arclength, increasing): another agent whose position
 /// extrapolated at constant velocity 0.5, 1, …, 5 s ahead lies in the corridor ahead at an
-/// arclength the agent reaches within 2 s of the same time. The conflict point is returned as
-/// a standing leader `(bumper gap m, 0)`; the nearest one counts.
+/// arclength the agent reaches within 2 s of the same time. A follower — behind the agent and
+/// heading its way (velocity within 60° of its heading) — counts only while it is faster: one
+/// that does not catch up is left to yield, as braking in front of it would only bring it
+/// closer. The conflict point is returned as a standing leader `(bumper gap m, 0)`; the
+/// nearest one counts.
 pub(crate) fn crossing_conflict(
     path: &RefPath,
     s_m: f64,
@@ -135,9 +138,20 @@ pub(crate) fn crossing_conflict(
     arrival: impl Fn(f64) -> Option<f64>,
 ) -> Option<(f64, f64)> {
     let mut best: Option<(f64, f64)> = None;
+    let (sn, cs) = f64::from(me.heading_rad).sin_cos();
     for o in others {
         let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
-        if vx.hypot(vy) < 0.5 || (o.x_m - me.x_m).hypot(o.y_m - me.y_m) > LOOKAHEAD_M + 40.0 {
+        let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
+        if vx.hypot(vy) < 0.5 || dx.hypot(dy) > LOOKAHEAD_M + 40.0 {
+            continue;
+        }
+        // A follower (behind, heading the same way) that is not catching up is no conflict
+        // to brake for: braking in front of it only brings it closer.
+        let along = vx * cs + vy * sn;
+        if along > 0.5 * vx.hypot(vy)
+            && dx * cs + dy * sn < 0.0
+            && along <= f64::from(me.speed_mps())
+        {
             continue;
         }
         let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
@@ -316,6 +330,41 @@ mod tests {
         }
         assert_eq!(conflict(6.0), None);
         assert_eq!(conflict(0.0), None, "it is through before I get there");
+    }
+
+    #[test]
+    fn a_follower_is_a_conflict_only_while_it_catches_up() {
+        // Me at the origin heading +x at 10 m/s; the other 5 m behind in the next lane over
+        // (2 m to the left, inside the corridor: half the widths plus 0.5 m), heading +x.
+        let me = AgentState {
+            length_m: 4.5,
+            width_m: 1.9,
+            velocity_x_mps: 10.0,
+            valid: true,
+            ..Default::default()
+        };
+        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let arrival = |s: f64| Some(s / 10.0);
+        let follower = |speed_mps: f32| AgentState {
+            x_m: -5.0,
+            y_m: 2.0,
+            velocity_x_mps: speed_mps,
+            ..me
+        };
+        let conflict = |v: f32| crossing_conflict(&path, 0.0, &me, &[&follower(v)], arrival);
+        // Slower or as fast: braking would only bring it closer, so no conflict.
+        assert_eq!(conflict(8.0), None);
+        assert_eq!(conflict(10.0), None);
+        // Faster: it will be alongside ahead of me, so I hold back (a standing obstacle).
+        let (gap, v) = conflict(14.0).expect("a faster follower is a conflict");
+        assert!(gap < 10.0, "gap {gap}");
+        assert_eq!(v, 0.0);
+        // The same agent ahead of me and slower still is one (the crossing rule).
+        let ahead = AgentState {
+            x_m: 8.0,
+            ..follower(8.0)
+        };
+        assert!(crossing_conflict(&path, 0.0, &me, &[&ahead], arrival).is_some());
     }
 
     #[test]

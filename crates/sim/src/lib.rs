@@ -22,7 +22,7 @@ pub mod metrics;
 pub mod rollout;
 
 pub use kinematics::{Bicycle, VehicleLimits};
-pub use metrics::{AgentRolloutMetrics, agent_metrics};
+pub use metrics::{AgentRolloutMetrics, Contact, agent_metrics};
 pub use rollout::{
     AgentSnapshot, EgoMode, HISTORY_STEPS, HORIZON_STEPS, OthersMode, PlanError, Planner,
     SimConfig, SimError, Simulation,

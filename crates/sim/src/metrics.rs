@@ -3,7 +3,7 @@
 //! speed — over the simulated steps of a rollout.
 
 use scbg_metrics::wosac::RoadEdges;
-use scbg_scene::Scene;
+use scbg_scene::{AgentState, Scene};
 use serde::Serialize;
 
 use crate::kinematics::STEP_SECS;
@@ -15,6 +15,8 @@ pub struct AgentRolloutMetrics {
     pub id: i64,
     /// Whether its box overlaps another valid agent's at a simulated step.
     pub collision: bool,
+    /// The first such overlap (`None` without a collision): when, with whom and how.
+    pub first_contact: Option<Contact>,
     /// Whether it is off the road (signed road-edge distance > 0) at a simulated step;
     /// `None` when the map has no road edge.
     pub offroad: Option<bool>,
@@ -30,6 +32,42 @@ pub struct AgentRolloutMetrics {
     pub valid_steps: usize,
 }
 
+/// The first box overlap of an agent in a rollout: what a collision diagnosis needs.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Contact {
+    /// Simulated step of the overlap (1 = the first step after the current one).
+    pub step: usize,
+    /// Track id of the other agent.
+    pub other_id: i64,
+    /// The agent's speed at the overlap, m/s.
+    pub speed_mps: f64,
+    /// The other agent's speed, m/s.
+    pub other_speed_mps: f64,
+    /// The other's heading minus the agent's, wrapped to (−180, 180], degrees.
+    pub relative_heading_deg: f64,
+    /// The other's centre along the agent's heading from the agent's centre, m (> 0: ahead).
+    pub other_ahead_m: f64,
+    /// The other's centre to the left of the agent's heading, m.
+    pub other_left_m: f64,
+}
+
+impl Contact {
+    fn between(step: usize, me: &AgentState, id: i64, other: &AgentState) -> Self {
+        let (sn, cs) = f64::from(me.heading_rad).sin_cos();
+        let (dx, dy) = (other.x_m - me.x_m, other.y_m - me.y_m);
+        let rel = f64::from(other.heading_rad - me.heading_rad).to_degrees();
+        Self {
+            step,
+            other_id: id,
+            speed_mps: f64::from(me.speed_mps()),
+            other_speed_mps: f64::from(other.speed_mps()),
+            relative_heading_deg: 180.0 - (180.0 - rel).rem_euclid(360.0),
+            other_ahead_m: dx * cs + dy * sn,
+            other_left_m: -dx * sn + dy * cs,
+        }
+    }
+}
+
 /// Metrics of track `track` of a simulated scene (`scene.current_step` is where the
 /// simulation started; every later step is simulated). `road_edges`: the map's, built once.
 pub fn agent_metrics(
@@ -40,7 +78,7 @@ pub fn agent_metrics(
     let start = scene.current_step;
     let me = &scene.tracks[track];
     let steps = start + 1..scene.num_steps();
-    let mut collision = false;
+    let mut first_contact = None;
     let mut offroad = road_edges.map(|_| false);
     let mut scratch = Vec::new();
     let (mut progress, mut speed_sum, mut valid_steps) = (0.0, 0.0, 0usize);
@@ -57,10 +95,16 @@ pub fn agent_metrics(
         }
         speed_sum += f64::from(s.speed_mps());
         speeds.push(f64::from(s.speed_mps()));
-        collision = collision
-            || scene.tracks.iter().enumerate().any(|(j, o)| {
-                j != track && o.states[t].valid && scbg_synth::boxes_overlap(s, &o.states[t])
-            });
+        if first_contact.is_none() {
+            first_contact = scene
+                .tracks
+                .iter()
+                .enumerate()
+                .find(|&(j, o)| {
+                    j != track && o.states[t].valid && scbg_synth::boxes_overlap(s, &o.states[t])
+                })
+                .map(|(_, o)| Contact::between(t - start, s, o.id, &o.states[t]));
+        }
         if let (Some(edges), Some(off)) = (road_edges, offroad.as_mut()) {
             *off = *off
                 || edges.signed_distance([s.x_m as f32, s.y_m as f32, s.z_m as f32], &mut scratch)
@@ -77,7 +121,8 @@ pub fn agent_metrics(
         .collect();
     AgentRolloutMetrics {
         id: me.id,
-        collision,
+        collision: first_contact.is_some(),
+        first_contact,
         offroad,
         progress_m: progress,
         avg_speed_mps: if valid_steps > 0 {
@@ -92,5 +137,76 @@ pub fn agent_metrics(
             jerk.iter().sum::<f64>() / jerk.len() as f64
         },
         valid_steps,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scbg_scene::{ObjectType, Track};
+
+    const STEPS: usize = 31;
+
+    /// A car at `(x_m, y_m)` at the current step 10, driving straight at `speed` m/s along
+    /// `heading_rad`.
+    fn car(id: i64, x_m: f64, y_m: f64, heading_rad: f32, speed: f32) -> Track {
+        let (sn, cs) = heading_rad.sin_cos();
+        Track {
+            id,
+            object_type: ObjectType::Vehicle,
+            states: (0..STEPS)
+                .map(|t| {
+                    let dt = (t as f64 - 10.0) * STEP_SECS;
+                    AgentState {
+                        x_m: x_m + f64::from(speed * cs) * dt,
+                        y_m: y_m + f64::from(speed * sn) * dt,
+                        heading_rad,
+                        length_m: 4.5,
+                        width_m: 2.0,
+                        height_m: 1.6,
+                        velocity_x_mps: speed * cs,
+                        velocity_y_mps: speed * sn,
+                        valid: true,
+                        ..Default::default()
+                    }
+                })
+                .collect(),
+        }
+    }
+
+    #[test]
+    fn the_first_contact_says_when_with_whom_and_where() {
+        // Me at 10 m/s catching up with a car 10 m ahead at 5 m/s, turned 10° to the left
+        // (closing at about 5.1 m/s); a third car far to the side. The boxes (4.5 m long)
+        // first touch about 1 s later, with the slow car about 4.5 m ahead and drifting left.
+        let mut scene = Scene {
+            scenario_id: "contact".into(),
+            timestamps_secs: (0..STEPS).map(|t| t as f64 * STEP_SECS).collect(),
+            current_step: 10,
+            tracks: vec![
+                car(1, 0.0, 0.0, 0.0, 10.0),
+                car(7, 0.0, 30.0, 0.0, 10.0),
+                car(2, 10.0, 0.0, 10f32.to_radians(), 5.0),
+            ],
+            ..Default::default()
+        };
+        let m = agent_metrics(&scene, 0, None);
+        assert!(m.collision);
+        let c = m.first_contact.expect("a contact");
+        assert_eq!(c.other_id, 2);
+        assert!((8..=12).contains(&c.step), "{c:?}");
+        assert!((c.speed_mps - 10.0).abs() < 1e-3 && (c.other_speed_mps - 5.0).abs() < 1e-3);
+        assert!((c.relative_heading_deg - 10.0).abs() < 0.01, "{c:?}");
+        assert!(c.other_ahead_m > 3.5 && c.other_ahead_m < 5.0, "{c:?}");
+        assert!(c.other_left_m > 0.5 && c.other_left_m < 1.5, "{c:?}");
+        // The other side of the same contact: me behind, turned −10°.
+        let theirs = agent_metrics(&scene, 2, None).first_contact.unwrap();
+        assert_eq!((theirs.other_id, theirs.step), (1, c.step));
+        assert!((theirs.relative_heading_deg + 10.0).abs() < 0.01);
+        assert!(theirs.other_ahead_m < -3.5);
+        // Without the slow car nothing touches.
+        scene.tracks.pop();
+        let m = agent_metrics(&scene, 0, None);
+        assert!(!m.collision && m.first_contact.is_none());
     }
 }

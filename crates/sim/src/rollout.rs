@@ -102,7 +102,7 @@ pub struct SimConfig {
     /// agent ahead along the current plan (the leader rule of [`crate::idm`]) and toward the
     /// nearest crossing conflict (another agent that, at constant velocity, will be in the
     /// plan's corridor within 2 s of when the plan gets there, up to 5 s ahead, taken as a
-    /// standing obstacle at that point), so a plan that runs into another agent is followed
+    /// standing obstacle at that point; a follower behind counts only while it is faster), so a plan that runs into another agent is followed
     /// at a safe distance instead. On by default.
     pub safety_guard: bool,
     /// Lane keeping of the controlled agents' plans ([`crate::lanes`]): every plan point is
