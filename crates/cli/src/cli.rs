@@ -276,7 +276,7 @@ pub struct LoopArgs {
     #[arg(long, value_enum)]
     pub others: Option<scbg::sim::OthersMode>,
     /// Follow the plans without the safety guard (no cap by IDM toward agents ahead or
-    /// crossing conflicts).
+    /// crossing conflicts, no steering bound beside another agent).
     #[arg(long)]
     pub no_safety_guard: bool,
     /// Pull every plan point to within this many metres of the nearest car-lane centre line

@@ -173,6 +173,58 @@ pub(crate) fn crossing_conflict(
     best
 }
 
+/// Lateral clearance below which an agent alongside bounds the steering, m.
+const SIDE_CLEARANCE_M: f64 = 0.8;
+/// Time in which the bounded steering turns the agent parallel to the one alongside, s.
+const SIDE_ALIGN_S: f64 = 0.5;
+
+/// Steering bounds `(min, max)` (rad, positive left) that keep an agent from turning toward
+/// another one alongside it: an agent heading within 30° of its heading whose centre is within
+/// half the two lengths plus 1 m along it and whose box is less than 0.8 m away to one side.
+/// Toward such an agent the steering may at most turn the agent parallel to it within 0.5 s
+/// (the bicycle's yaw rate `v·tan δ / wheelbase`). `None` when nobody is alongside.
+pub(crate) fn side_steer_bounds(
+    me: &AgentState,
+    speed_mps: f64,
+    wheelbase_m: f64,
+    others: &[&AgentState],
+) -> Option<(f64, f64)> {
+    let (sn, cs) = f64::from(me.heading_rad).sin_cos();
+    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+    for o in others {
+        let rel = scbg_scene::wrap_angle_rad(f64::from(o.heading_rad - me.heading_rad));
+        if rel.abs() > 30f64.to_radians() {
+            continue;
+        }
+        let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
+        let along = dx * cs + dy * sn;
+        let left = -dx * sn + dy * cs;
+        let clearance = left.abs() - 0.5 * f64::from(me.width_m + o.width_m);
+        if along.abs() > 0.5 * f64::from(me.length_m + o.length_m) + 1.0
+            || clearance > SIDE_CLEARANCE_M
+        {
+            continue;
+        }
+        // The steering that turns me parallel to it within SIDE_ALIGN_S.
+        let yaw_rate = rel / SIDE_ALIGN_S;
+        let align = (yaw_rate * wheelbase_m / speed_mps.max(1.0)).atan();
+        if left > 0.0 {
+            hi = hi.min(align);
+        } else {
+            lo = lo.max(align);
+        }
+    }
+    if lo == f64::NEG_INFINITY && hi == f64::INFINITY {
+        return None;
+    }
+    if lo > hi {
+        // Hemmed in on both sides: steer halfway.
+        let mid = 0.5 * (lo + hi);
+        return Some((mid, mid));
+    }
+    Some((lo, hi))
+}
+
 impl IdmAgent {
     /// The agent of `track` at step `current` (`None` when it is not valid there).
     pub fn new(track: &Track, current: usize) -> Option<Self> {
@@ -365,6 +417,40 @@ mod tests {
             ..follower(8.0)
         };
         assert!(crossing_conflict(&path, 0.0, &me, &[&ahead], arrival).is_some());
+    }
+
+    #[test]
+    fn an_agent_alongside_bounds_the_steering_toward_it() {
+        let me = AgentState {
+            length_m: 4.5,
+            width_m: 1.9,
+            velocity_x_mps: 10.0,
+            valid: true,
+            ..Default::default()
+        };
+        let at = |x_m: f64, y_m: f64, heading_deg: f32| AgentState {
+            x_m,
+            y_m,
+            heading_rad: heading_deg.to_radians(),
+            ..me
+        };
+        let bounds = |others: &[&AgentState]| side_steer_bounds(&me, 10.0, 2.7, others);
+        // Parallel, 2.5 m to the left (0.6 m between the boxes): no steering to the left.
+        let left = at(1.0, 2.5, 0.0);
+        assert_eq!(bounds(&[&left]), Some((f64::NEG_INFINITY, 0.0)));
+        // Turned 10° away from me: I may follow it parallel, within 0.5 s.
+        let (lo, hi) = bounds(&[&at(1.0, 2.5, 10.0)]).unwrap();
+        let expected = ((10f64.to_radians() / 0.5) * 2.7 / 10.0).atan();
+        assert_eq!(lo, f64::NEG_INFINITY);
+        assert!((hi - expected).abs() < 1e-6);
+        // On the right it bounds from below; on both sides both ways.
+        let right = at(-2.0, -2.6, 0.0);
+        assert_eq!(bounds(&[&right]), Some((0.0, f64::INFINITY)));
+        assert_eq!(bounds(&[&left, &right]), Some((0.0, 0.0)));
+        // Far enough ahead, far enough to the side or crossing: nobody alongside.
+        assert_eq!(bounds(&[&at(8.0, 2.5, 0.0)]), None);
+        assert_eq!(bounds(&[&at(0.0, 3.0, 0.0)]), None);
+        assert_eq!(bounds(&[&at(0.0, 2.5, 90.0)]), None);
     }
 
     #[test]

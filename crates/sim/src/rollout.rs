@@ -14,7 +14,7 @@ use scbg_scene::{AgentState, Scene};
 use scbg_synth::ClosedLoop;
 use serde::{Deserialize, Serialize};
 
-use crate::idm::{IdmAgent, crossing_conflict, leader_on_path, polyline_path};
+use crate::idm::{IdmAgent, crossing_conflict, leader_on_path, polyline_path, side_steer_bounds};
 
 /// The safety guard's IDM (a free road never limits: the desired speed is out of reach).
 const GUARD: scbg_synth::Idm = scbg_synth::Idm {
@@ -102,7 +102,9 @@ pub struct SimConfig {
     /// agent ahead along the current plan (the leader rule of [`crate::idm`]) and toward the
     /// nearest crossing conflict (another agent that, at constant velocity, will be in the
     /// plan's corridor within 2 s of when the plan gets there, up to 5 s ahead, taken as a
-    /// standing obstacle at that point; a follower behind counts only while it is faster), so a plan that runs into another agent is followed
+    /// standing obstacle at that point; a follower behind counts only while it is faster),
+    /// and the steering is bounded so as not to turn toward an agent alongside
+    /// ([`crate::idm`]'s `side_steer_bounds`), so a plan that runs into another agent is followed
     /// at a safe distance instead. On by default.
     pub safety_guard: bool,
     /// Lane keeping of the controlled agents' plans ([`crate::lanes`]): every plan point is
@@ -576,7 +578,7 @@ impl Simulation {
                 c.plan = plan;
                 c.plan_step = t;
             }
-            let (mut a, d) = c.bicycle.track(c.plan_start_xy, &c.plan, t - c.plan_step);
+            let (mut a, mut d) = c.bicycle.track(c.plan_start_xy, &c.plan, t - c.plan_step);
             if let Some(path) = c.path.as_ref().filter(|_| self.config.safety_guard) {
                 let (s, _) = path.project(c.bicycle.x_m, c.bicycle.y_m, None);
                 let me = current[c.track];
@@ -595,6 +597,11 @@ impl Simulation {
                 );
                 if leader.is_some() {
                     a = a.min(GUARD.accel(c.bicycle.speed_mps, leader));
+                }
+                if let Some((lo, hi)) =
+                    side_steer_bounds(me, c.bicycle.speed_mps, c.bicycle.wheelbase_m, &others)
+                {
+                    d = d.clamp(lo, hi);
                 }
             }
             c.bicycle.step(a, d, &self.config.limits);
