@@ -347,20 +347,30 @@ mod tests {
         assert!(me.y_m.abs() < 1e-6);
     }
 
-    #[test]
-    fn crossing_conflicts_within_two_seconds_up_to_five_ahead() {
-        // Me at the origin heading +x at 10 m/s, my path straight along x (arrival at
-        // arclength s after s / 10 s). The other drives +y at 10 m/s and crosses my path at
-        // x = 30 m (I get there after 3 s) when `t_cross` s from now.
-        let me = AgentState {
+    /// A car at the origin heading +x at 10 m/s.
+    fn me_along_x() -> AgentState {
+        AgentState {
             length_m: 4.5,
             width_m: 1.9,
             velocity_x_mps: 10.0,
             valid: true,
             ..Default::default()
-        };
+        }
+    }
+
+    /// When [`me_along_x`] reaches arclength `s_m` of a straight path along x.
+    fn arrival_at_10_mps(s_m: f64) -> Option<f64> {
+        Some(s_m / 10.0)
+    }
+
+    #[test]
+    fn crossing_conflicts_within_two_seconds_up_to_five_ahead() {
+        // Me at the origin heading +x at 10 m/s, my path straight along x (arrival at
+        // arclength s after s / 10 s). The other drives +y at 10 m/s and crosses my path at
+        // x = 30 m (I get there after 3 s) when `t_cross` s from now.
+        let me = me_along_x();
         let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
-        let arrival = |s: f64| Some(s / 10.0);
+        let arrival = arrival_at_10_mps;
         let crossing_at = |t_cross: f64| AgentState {
             x_m: 30.0,
             y_m: -10.0 * t_cross,
@@ -388,15 +398,9 @@ mod tests {
     fn a_follower_is_a_conflict_only_while_it_catches_up() {
         // Me at the origin heading +x at 10 m/s; the other 5 m behind in the next lane over
         // (2 m to the left, inside the corridor: half the widths plus 0.5 m), heading +x.
-        let me = AgentState {
-            length_m: 4.5,
-            width_m: 1.9,
-            velocity_x_mps: 10.0,
-            valid: true,
-            ..Default::default()
-        };
+        let me = me_along_x();
         let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
-        let arrival = |s: f64| Some(s / 10.0);
+        let arrival = arrival_at_10_mps;
         let follower = |speed_mps: f32| AgentState {
             x_m: -5.0,
             y_m: 2.0,
@@ -421,13 +425,7 @@ mod tests {
 
     #[test]
     fn an_agent_alongside_bounds_the_steering_toward_it() {
-        let me = AgentState {
-            length_m: 4.5,
-            width_m: 1.9,
-            velocity_x_mps: 10.0,
-            valid: true,
-            ..Default::default()
-        };
+        let me = me_along_x();
         let at = |x_m: f64, y_m: f64, heading_deg: f32| AgentState {
             x_m,
             y_m,
