@@ -189,18 +189,11 @@ pub fn b_modes_of(predictor: &Multipath, b_embedding: burn::tensor::Tensor<2>) -
     }
 }
 
-/// [`b_modes_of`] the examples' stored B embeddings.
+/// [`b_modes_of`] the examples' stored B embeddings (their A context, if any, left out).
 pub fn b_modes(predictor: &Multipath, examples: &[&Example], device: &Device) -> crate::BModes {
-    let e = examples.first().map_or(0, |x| x.b_embedding.len());
-    let rows: Vec<f32> = examples
-        .iter()
-        .flat_map(|x| x.b_embedding.iter().copied())
-        .collect();
+    let b_width = examples.first().map_or(0, |x| x.b_embedding.len());
     b_modes_of(
         predictor,
-        burn::tensor::Tensor::from_data(
-            burn::tensor::TensorData::new(rows, [examples.len(), e]),
-            device,
-        ),
+        crate::stored_embeddings(examples, device).narrow(1, 0, b_width),
     )
 }

@@ -290,16 +290,7 @@ impl Scbg {
             .map_err(|error| GenerateError::Sample { id: b_id, error })?;
         self.stats.normalize(&mut b);
         let mut embedding = marginal_embedding(&self.predictor, &b, device);
-        let modes = self.generator.selects_modes().then(|| {
-            let e = embedding.len();
-            crate::b_modes_of(
-                &self.predictor,
-                burn::tensor::Tensor::from_data(
-                    burn::tensor::TensorData::new(embedding.clone(), [1, e]),
-                    device,
-                ),
-            )
-        });
+        let b_width = embedding.len();
         if self.generator.a_context_width > 0 {
             // A's pose and velocity at the current step, from its track (no sample needed).
             let t = &scene.tracks[ia];
@@ -317,6 +308,10 @@ impl Scbg {
             burn::tensor::TensorData::new(embedding, [1, e]),
             device,
         );
+        let modes = self
+            .generator
+            .selects_modes()
+            .then(|| crate::b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width)));
         let psi = match courtesy {
             Courtesy::Psi(p) => p,
             Courtesy::Quantile(q) => {
