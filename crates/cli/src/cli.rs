@@ -66,6 +66,10 @@ pub struct DemoArgs {
     /// embedding); off by default (BENCHMARKS.md, issue 12).
     #[arg(long)]
     pub condition_on_a: bool,
+    /// Train the predictor with B's future also in A's lane frame (arc length along and
+    /// offset from A's lane); off by default (BENCHMARKS.md, issue 11).
+    #[arg(long)]
+    pub lane_frame: bool,
     /// Predictor training epochs.
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,

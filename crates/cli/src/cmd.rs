@@ -26,6 +26,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     scenarios: a.scenarios,
                     counterfactuals: a.counterfactuals,
                     condition_on_a: a.condition_on_a,
+                    lane_frame: a.lane_frame,
                     epochs: a.epochs,
                     generator_epochs: a.generator_epochs,
                     generator_seeds: a.generator_seeds,

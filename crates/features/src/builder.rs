@@ -3,6 +3,7 @@
 
 use scbg_scene::Pose2;
 
+use crate::lane_path::{LANE_PATH_POINTS, LaneNetwork};
 use crate::prepared::PreparedScene;
 use crate::road_index::{Scratch, SegmentIndex, total_order_bits};
 use crate::sample::{
@@ -26,6 +27,10 @@ pub struct SampleBuilder<'a> {
     config: &'a FeatureConfig,
     /// The road segments (flattened once per scene) with a grid over them.
     segments: SegmentIndex,
+    /// The scene's vehicle lanes (for each target's lane path), made on first use.
+    lanes: Option<LaneNetwork>,
+    /// The lane grid's query state (its own: a scratch sized for another grid is reset).
+    lane_scratch: Scratch,
     /// Scratch: the selected segments with their squared distances, and the search's state.
     candidates: Vec<(u32, f32)>,
     scratch: Scratch,
@@ -69,6 +74,8 @@ impl<'a> SampleBuilder<'a> {
             scene,
             config,
             segments: SegmentIndex::from_road(&scene.road),
+            lanes: None,
+            lane_scratch: Scratch::default(),
             candidates: Vec::new(),
             scratch: Scratch::default(),
             window: None,
@@ -243,6 +250,28 @@ impl<'a> SampleBuilder<'a> {
             (frame.cos * vx + frame.sin * vy) as f32,
             (-frame.sin * vx + frame.cos * vy) as f32,
         ];
+        let (mut lane_path_xy_m, mut lane_path_valid) = (
+            vec![0.0; 2 * LANE_PATH_POINTS],
+            vec![false; LANE_PATH_POINTS],
+        );
+        let lanes = self
+            .lanes
+            .get_or_insert_with(|| LaneNetwork::new(&scene.road));
+        if let Some((points, valid)) = lanes.path(
+            [track.x_m[now], track.y_m[now]],
+            track.heading_rad[now],
+            &mut self.lane_scratch,
+            &mut self.candidates,
+        ) {
+            for (k, (p, v)) in points.iter().zip(valid).enumerate() {
+                if v {
+                    let (x, y) = frame.point(p[0], p[1]);
+                    lane_path_xy_m[2 * k] = x;
+                    lane_path_xy_m[2 * k + 1] = y;
+                    lane_path_valid[k] = true;
+                }
+            }
+        }
         let sample = AgentSample {
             scenario_id: scene.scenario_id.clone(),
             window: *window,
@@ -262,6 +291,8 @@ impl<'a> SampleBuilder<'a> {
             future_heading_rad,
             future_valid,
             current_velocity_mps,
+            lane_path_xy_m,
+            lane_path_valid,
         };
         Marginal {
             target,

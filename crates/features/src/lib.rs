@@ -19,6 +19,7 @@ mod build;
 mod builder;
 pub mod cache;
 mod codec;
+mod lane_path;
 mod pairs;
 mod prepared;
 mod road_index;
@@ -29,6 +30,9 @@ mod window;
 pub use build::PrepareError;
 pub use builder::SampleBuilder;
 pub use codec::DecodeError;
+pub use lane_path::{
+    LANE_PATH_BEHIND_M, LANE_PATH_POINTS, LANE_PATH_SPACING_M, lane_path, lane_path_arc_m,
+};
 pub use pairs::{PairConfig, select_pairs};
 pub use prepared::{
     InteractingPair, PairSource, PreparedScene, PreparedTrack, RoadKind, RoadPolyline,

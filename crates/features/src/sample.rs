@@ -86,6 +86,12 @@ pub struct AgentSample {
     pub future_valid: Vec<bool>,
     /// Target velocity at the current step, in the target frame.
     pub current_velocity_mps: [f32; 2],
+    /// `[LANE_PATH_POINTS, 2]`: the target's lane path in its frame, at arc lengths
+    /// [`lane_path_arc_m`](crate::lane_path_arc_m) (zeros where invalid).
+    pub lane_path_xy_m: Vec<f32>,
+    /// `[LANE_PATH_POINTS]`: whether each point lies on a known lane; all false when the
+    /// target is on no lane.
+    pub lane_path_valid: Vec<bool>,
 }
 
 impl AgentSample {
@@ -138,7 +144,7 @@ impl AgentFrame {
         }
     }
 
-    fn point(&self, x: f32, y: f32) -> (f32, f32) {
+    pub(crate) fn point(&self, x: f32, y: f32) -> (f32, f32) {
         let (dx, dy) = (f64::from(x) - self.x_m, f64::from(y) - self.y_m);
         (
             (self.cos * dx + self.sin * dy) as f32,

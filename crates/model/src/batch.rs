@@ -29,6 +29,10 @@ pub struct Batch {
     pub future_xy: Tensor<3>,
     /// `[batch, future_steps]`
     pub future_valid: Tensor<2>,
+    /// `[batch, lane points, 4]`: the target's lane path (x, y, unit tangent) in its frame.
+    pub lane_path: Tensor<3>,
+    /// `[batch, lane points]`, 1 for a point on a known lane.
+    pub lane_mask: Tensor<2>,
 }
 
 /// Inference mode of the predictor: the one way to ask for either distribution.
@@ -53,6 +57,38 @@ pub struct BatchAugment {
 
 fn bools(v: &[bool]) -> impl Iterator<Item = f32> + '_ {
     v.iter().map(|&b| f32::from(u8::from(b)))
+}
+
+/// Appends `s`'s lane path as `[points, 4]` rows: x, y and the unit tangent toward the next
+/// valid point (from the previous one at the end; zero for an isolated or invalid point).
+fn push_lane_path(s: &AgentSample, out: &mut Vec<f32>) {
+    let (xy, valid) = (&s.lane_path_xy_m, &s.lane_path_valid);
+    let n = valid.len();
+    let p = |k: usize| [xy[2 * k], xy[2 * k + 1]];
+    for k in 0..n {
+        let [x, y] = p(k);
+        let dir = if !valid[k] {
+            None
+        } else if k + 1 < n && valid[k + 1] {
+            Some((p(k), p(k + 1)))
+        } else if k > 0 && valid[k - 1] {
+            Some((p(k - 1), p(k)))
+        } else {
+            None
+        };
+        let t = dir
+            .map(|(a, b)| [b[0] - a[0], b[1] - a[1]])
+            .map(|d| {
+                let len = (d[0] * d[0] + d[1] * d[1]).sqrt();
+                if len > 1e-6 {
+                    [d[0] / len, d[1] / len]
+                } else {
+                    [0.0, 0.0]
+                }
+            })
+            .unwrap_or([0.0, 0.0]);
+        out.extend([x, y, t[0], t[1]]);
+    }
 }
 
 impl Batch {
@@ -81,7 +117,14 @@ impl Batch {
             Vec::with_capacity(b * future * 2),
             Vec::with_capacity(b * future),
         );
+        let lane_points = s0.lane_path_valid.len();
+        let (mut lane, mut lm) = (
+            Vec::with_capacity(b * lane_points * 4),
+            Vec::with_capacity(b * lane_points),
+        );
         for s in samples {
+            push_lane_path(s, &mut lane);
+            lm.extend(bools(&s.lane_path_valid));
             let mut hist = s.target_history.clone();
             let mut diffs = s.target_diffs.clone();
             if augment.history_mask_prob > 0.0 {
@@ -137,6 +180,8 @@ impl Batch {
             condition_flag: t2(flag, [b, 1]),
             future_xy: t3(fxy, [b, future, 2]),
             future_valid: t2(fv, [b, future]),
+            lane_path: t3(lane, [b, lane_points, 4]),
+            lane_mask: t2(lm, [b, lane_points]),
         }
     }
 
@@ -193,6 +238,8 @@ impl Batch {
             condition_flag: rep(&self.condition_flag, times),
             future_xy: rep(&self.future_xy, times),
             future_valid: rep(&self.future_valid, times),
+            lane_path: rep(&self.lane_path, times),
+            lane_mask: rep(&self.lane_mask, times),
         }
     }
 }

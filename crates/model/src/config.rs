@@ -78,6 +78,13 @@ pub struct MultipathConfig {
     pub mcg_blocks: usize,
     /// Hidden width of the conditional future encoder.
     pub future_hidden: usize,
+    /// Whether the future encoder also sees each conditioning point in the target's lane frame
+    /// (arc length along and offset from its lane path; see `FutureEncoder`). Off in the
+    /// presets (BENCHMARKS.md, *B's future in A's lane frame*: it lifts the labels' fidelity
+    /// on sampled futures but made one of three predictor trainings ignore B in two families);
+    /// a checkpoint written before it existed reads as off.
+    #[serde(default)]
+    pub lane_frame_condition: bool,
 }
 
 impl MultipathConfig {
@@ -97,6 +104,7 @@ impl MultipathConfig {
             num_modes: 6,
             mcg_blocks: 5,
             future_hidden: 256,
+            lane_frame_condition: false,
         }
     }
 
@@ -117,6 +125,7 @@ impl MultipathConfig {
             num_modes: 6,
             mcg_blocks: 2,
             future_hidden: 64,
+            lane_frame_condition: false,
         }
     }
 
@@ -150,5 +159,36 @@ impl MultipathConfig {
     /// Per-mode decoder output: x, y and (a, b, c) per future step, plus one logit.
     pub fn mode_outputs(&self) -> usize {
         self.future_steps * 5 + 1
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The lane frame is an option: off in the presets and in a configuration written before
+    /// the key existed (an older checkpoint, whose weights must still load), 3 more features
+    /// per conditioning point when on.
+    #[test]
+    fn the_lane_frame_is_an_option_off_in_presets_and_older_configs() {
+        assert!(!MultipathConfig::paper().lane_frame_condition);
+        assert!(!MultipathConfig::cpu_small().lane_frame_condition);
+        let on = MultipathConfig {
+            lane_frame_condition: true,
+            ..MultipathConfig::cpu_small()
+        };
+        let mut json = serde_json::to_value(&on).unwrap();
+        json.as_object_mut().unwrap().remove("lane_frame_condition");
+        let old: MultipathConfig = serde_json::from_value(json).unwrap();
+        assert!(!old.lane_frame_condition);
+        let device = crate::device::parameter_count_device();
+        let (new, old) = (on.init(&device), old.init(&device));
+        assert_eq!(
+            (
+                new.future_encoder.point_features,
+                old.future_encoder.point_features
+            ),
+            (8, 5)
+        );
     }
 }

@@ -48,6 +48,11 @@ pub fn straight_sample(cfg: &FeatureConfig, with_condition: bool) -> AgentSample
         future_heading_rad: vec![0.0; f],
         future_valid: vec![true; f],
         current_velocity_mps: [10.0, 0.0],
+        // The lane straight ahead along x.
+        lane_path_xy_m: (0..scbg_features::LANE_PATH_POINTS)
+            .flat_map(|k| [scbg_features::lane_path_arc_m(k), 0.0])
+            .collect(),
+        lane_path_valid: vec![true; scbg_features::LANE_PATH_POINTS],
     }
 }
 

@@ -19,6 +19,14 @@ pub const CONDITION_SCALE_MPS: f32 = 10.0;
 const CONDITION_STEP_SECS: f32 = 0.1;
 /// Per point: x, y, valid, vx, vy.
 const CONDITION_POINT_FEATURES: usize = 5;
+/// Per point in the target's lane frame: arc length along the lane path, offset from it, and
+/// whether the point has a lane (see [`FutureEncoder`]).
+const LANE_POINT_FEATURES: usize = 3;
+/// Scale (metres) dividing the conditioning future's offset from the target's lane path
+/// (a lane width is about 3.5 m).
+pub const LANE_OFFSET_SCALE_M: f32 = 5.0;
+/// The scaled lane offset is clamped to ±this (far from the lane, the offset no longer matters).
+const LANE_OFFSET_CLAMP: f32 = 4.0;
 
 /// Encodes agent histories: LSTM over step features ‖ LSTM over step differences ‖ MCG over
 /// per-step MLP embeddings (features + one-hot time step).
@@ -88,6 +96,16 @@ pub const CONDITION_STRIDE: usize = 5;
 /// target embedding through an MLP, so the encoding is about the future *relative to this
 /// target*.
 ///
+/// With `lane_frame_condition` (an option, off in the presets; checkpoints from before it load
+/// without), each point also carries its place in the target's *lane frame*: its arc length along the
+/// target's lane path (`scbg_features::lane_path`) and its signed offset from it, from the
+/// nearest path point and its tangent. On a curved road the target frame cannot tell whether the other agent
+/// 150 m ahead drives in the target's lane or the next (a 1/1000 m curvature moves the lane
+/// by 11 m there, three lane widths); the lane frame can, and that is what decides whether
+/// the target is held up. The nearest point is chosen without gradient; the arc length and
+/// offset are linear in the point, so gradients reach the conditioning future (the courtesy
+/// loss goes through them).
+///
 /// Design note: an earlier version treated the points as a set (per-point MLP → MCG →
 /// max-pool, like the road encoder). Its output barely depended on the points (0.2 % at
 /// initialisation) and training never made the mixture depend on them — the oracle test below
@@ -96,8 +114,10 @@ pub const CONDITION_STRIDE: usize = 5;
 #[derive(Module, Debug)]
 pub struct FutureEncoder {
     /// MLP of `[flattened points ‖ target embedding]` (`16·5 + target_width → future_hidden`
-    /// for 80 future steps).
+    /// for 80 future steps; `16·8 + …` in the lane frame).
     pub mlp: Mlp,
+    /// Features per point: 5, or 8 with the lane frame.
+    pub point_features: usize,
 }
 
 impl FutureEncoder {
@@ -105,14 +125,16 @@ impl FutureEncoder {
     pub fn init(config: &MultipathConfig, device: &Device) -> Self {
         let h = config.future_hidden;
         let points = config.future_steps / CONDITION_STRIDE;
+        let point_features = CONDITION_POINT_FEATURES
+            + if config.lane_frame_condition {
+                LANE_POINT_FEATURES
+            } else {
+                0
+            };
         Self {
+            point_features,
             mlp: Mlp::init(
-                &[
-                    points * CONDITION_POINT_FEATURES + config.target_width,
-                    h,
-                    h,
-                    h,
-                ],
+                &[points * point_features + config.target_width, h, h, h],
                 device,
             ),
         }
@@ -123,9 +145,16 @@ impl FutureEncoder {
     /// zeros with their validity flag; velocities are zero unless both points are valid.
     ///
     /// # Shapes
-    /// `condition: [batch, T, 3]` (x m, y m, valid), `target: [batch, target_width]`
+    /// `condition: [batch, T, 3]` (x m, y m, valid), `lane_path: [batch, L, 4]` (x m, y m,
+    /// unit tangent), `lane_mask: [batch, L]`, `target: [batch, target_width]`
     /// `-> [batch, future_hidden]`
-    pub fn forward(&self, condition: &Tensor<3>, target: Tensor<2>, b: usize) -> Tensor<2> {
+    pub fn forward(
+        &self,
+        condition: &Tensor<3>,
+        (lane_path, lane_mask): (&Tensor<3>, &Tensor<2>),
+        target: Tensor<2>,
+        b: usize,
+    ) -> Tensor<2> {
         let device = condition.device();
         let [_, t, _] = condition.dims();
         let n = t / CONDITION_STRIDE;
@@ -145,11 +174,67 @@ impl FutureEncoder {
         let both = valid.clone() * prev.clone().narrow(2, 2, 1);
         let velocity = (pts.clone().narrow(2, 0, 2) - prev.narrow(2, 0, 2))
             * (both / (CONDITION_STEP_SECS * CONDITION_SCALE_MPS));
-        let position = pts.narrow(2, 0, 2) / CONDITION_SCALE_M;
-        let feats = Tensor::cat(vec![position, valid, velocity], 2)
-            .reshape([b, n * CONDITION_POINT_FEATURES]);
+        let xy = pts.narrow(2, 0, 2);
+        let mut parts = vec![xy.clone() / CONDITION_SCALE_M, valid.clone(), velocity];
+        if self.point_features > CONDITION_POINT_FEATURES {
+            parts.push(lane_frame(xy, valid, lane_path, lane_mask));
+        }
+        let feats = Tensor::cat(parts, 2).reshape([b, n * self.point_features]);
         self.mlp.forward(Tensor::cat(vec![feats, target], 1))
     }
+}
+
+/// Each point's place in the target's lane frame: `[s / 50 m, offset / 5 m (clamped), has
+/// lane]`, from the nearest valid lane-path point (chosen without gradient) and its tangent.
+/// Zero where the point is invalid or the target has no lane path.
+///
+/// # Shapes
+/// `xy: [b, n, 2]`, `valid: [b, n, 1]`, `lane_path: [b, L, 4]`, `lane_mask: [b, L]`
+/// `-> [b, n, 3]`
+fn lane_frame(
+    xy: Tensor<3>,
+    valid: Tensor<3>,
+    lane_path: &Tensor<3>,
+    lane_mask: &Tensor<2>,
+) -> Tensor<3> {
+    let [b, n, _] = xy.dims();
+    let [_, l, _] = lane_path.dims();
+    // Squared distances [b, n, L] as |c|² − 2 p·c (|p|² does not change the argmin), on
+    // detached values: the choice of the nearest point carries no gradient, and the generator's
+    // courtesy loss would otherwise record a [b, n, L] graph on every step. Invalid path points
+    // are pushed out of reach.
+    let centres = lane_path.clone().narrow(2, 0, 2).detach(); // [b, L, 2]
+    let c2 = (centres.clone() * centres.clone())
+        .sum_dim(2)
+        .reshape([b, 1, l]);
+    let pc = xy.clone().detach().matmul(centres.swap_dims(1, 2)); // [b, n, L]
+    let far = (lane_mask.clone().detach().neg() + 1.0).reshape([b, 1, l]) * 1e9;
+    let dist2 = pc * (-2.0) + c2.expand([b, n, l]) + far.expand([b, n, l]);
+    let nearest = dist2.argmin(2); // [b, n, 1]
+    let pick = |t: Tensor<3>, w: usize| t.gather(1, nearest.clone().expand([b, n, w]));
+    let at = pick(lane_path.clone(), 4); // [b, n, 4]
+    let rel = xy - at.clone().narrow(2, 0, 2);
+    let (tx, ty) = (at.clone().narrow(2, 2, 1), at.narrow(2, 3, 1));
+    let (rx, ry) = (rel.clone().narrow(2, 0, 1), rel.narrow(2, 1, 1));
+    let along = rx.clone() * tx.clone() + ry.clone() * ty.clone();
+    let offset = ry * tx - rx * ty; // left of the path is positive
+    let arc = nearest.float().reshape([b, n, 1]) * scbg_features::LANE_PATH_SPACING_M
+        - scbg_features::LANE_PATH_BEHIND_M;
+    let has_lane = lane_mask
+        .clone()
+        .max_dim(1)
+        .reshape([b, 1, 1])
+        .expand([b, n, 1])
+        * valid;
+    Tensor::cat(
+        vec![
+            (arc + along) / CONDITION_SCALE_M * has_lane.clone(),
+            (offset / LANE_OFFSET_SCALE_M).clamp(-LANE_OFFSET_CLAMP, LANE_OFFSET_CLAMP)
+                * has_lane.clone(),
+            has_lane,
+        ],
+        2,
+    )
 }
 
 /// Multipath++ with a conditional future encoder (marginal when the condition flag is 0).
@@ -275,9 +360,12 @@ impl Multipath {
             .forward(road, road_ctx, batch.road_mask.clone());
         let target_for_condition = target.clone();
         let scene = Tensor::cat(vec![target, interaction, road], 1);
-        let condition = self
-            .future_encoder
-            .forward(&batch.condition, target_for_condition, b);
+        let condition = self.future_encoder.forward(
+            &batch.condition,
+            (&batch.lane_path, &batch.lane_mask),
+            target_for_condition,
+            b,
+        );
         let flag = batch.condition_flag.clone();
         let fused = Tensor::cat(vec![scene.clone(), condition * flag.clone(), flag], 1);
         scene + self.fuse.forward(fused)
@@ -386,6 +474,63 @@ mod tests {
         assert!(
             small < paper && paper > 10_000_000,
             "paper preset has {paper} parameters"
+        );
+    }
+
+    /// On a lane curving left (radius 200 m), a point 3.5 m right of the lane 145 m along is
+    /// at arc length 145 m and offset −3.5 m in the lane frame, although the target frame puts
+    /// it 47 m to the left of the x axis; the offset's gradient w.r.t. the point is the lane's
+    /// left normal there. Invalid points and targets without a lane path give zeros.
+    #[test]
+    fn the_lane_frame_places_points_by_arc_length_and_offset() {
+        let device = Device::flex().autodiff();
+        let (radius, l) = (200.0f32, scbg_features::LANE_PATH_POINTS);
+        let mut lane = Vec::new();
+        for k in 0..l {
+            let phi = scbg_features::lane_path_arc_m(k) / radius;
+            lane.extend([
+                radius * phi.sin(),
+                radius * (1.0 - phi.cos()),
+                phi.cos(),
+                phi.sin(),
+            ]);
+        }
+        let lane = Tensor::<3>::from_data(TensorData::new(lane.clone(), [1, l, 4]), &device)
+            .repeat_dim(0, 2);
+        let mask = Tensor::<2>::from_data(
+            TensorData::new([vec![1.0f32; l], vec![0.0; l]].concat(), [2, l]),
+            &device,
+        );
+        let phi = 145.0 / radius;
+        let (x, y) = (
+            (radius + 3.5) * phi.sin(),
+            radius - (radius + 3.5) * phi.cos(),
+        );
+        assert!(y > 45.0);
+        let xy = Tensor::<3>::from_data(
+            TensorData::new(vec![x, y, 0.0, 0.0, x, y, x, y], [2, 2, 2]),
+            &device,
+        )
+        .require_grad();
+        let valid = Tensor::<3>::from_data(
+            TensorData::new(vec![1.0f32, 0.0, 1.0, 1.0], [2, 2, 1]),
+            &device,
+        );
+        let out = lane_frame(xy.clone(), valid, &lane, &mask);
+        let v: Vec<f32> = out.clone().into_data().to_vec().unwrap();
+        assert!((v[0] * CONDITION_SCALE_M - 145.0).abs() < 0.1, "{v:?}");
+        assert!((v[1] * LANE_OFFSET_SCALE_M + 3.5).abs() < 0.05, "{v:?}");
+        assert_eq!(v[2], 1.0);
+        assert!(v[3..].iter().all(|&x| x == 0.0), "{v:?}");
+        let grads = out.narrow(1, 0, 1).narrow(2, 1, 1).sum().backward();
+        let g: Vec<f32> = xy.grad(&grads).unwrap().into_data().to_vec().unwrap();
+        let n = [
+            -phi.sin() / LANE_OFFSET_SCALE_M,
+            phi.cos() / LANE_OFFSET_SCALE_M,
+        ];
+        assert!(
+            (g[0] - n[0]).abs() < 2e-3 && (g[1] - n[1]).abs() < 2e-3,
+            "{g:?} vs {n:?}"
         );
     }
 

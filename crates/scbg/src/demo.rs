@@ -44,6 +44,9 @@ pub struct DemoOptions {
     pub counterfactuals: usize,
     /// Train the generators told who A is (see [`crate::generator::examples_of`]).
     pub condition_on_a: bool,
+    /// Train the predictor with B's future in A's lane frame
+    /// ([`scbg_train::TrainConfig::lane_frame_condition`]).
+    pub lane_frame: bool,
     /// Predictor training epochs.
     pub epochs: usize,
     /// Training epochs of each generator variant.
@@ -249,6 +252,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         epochs: options.epochs,
         seed: options.seed,
         counterfactual_cache,
+        lane_frame_condition: options.lane_frame,
         ..Default::default()
     };
     let predictor_dir = out.join("predictor");

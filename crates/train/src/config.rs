@@ -57,6 +57,9 @@ pub struct TrainConfig {
     /// its pairs is used: interventions on the condition, which the logged data alone cannot
     /// show. Siblings of validation scenes are left out.
     pub counterfactual_cache: Option<std::path::PathBuf>,
+    /// Place B's future in A's lane frame in the future encoder (turns on
+    /// `MultipathConfig::lane_frame_condition` of the preset or the `[model]` table).
+    pub lane_frame_condition: bool,
 }
 
 impl Default for TrainConfig {
@@ -82,6 +85,7 @@ impl Default for TrainConfig {
             classification_weight: 1.0,
             backend: "flex".into(),
             counterfactual_cache: None,
+            lane_frame_condition: false,
         }
     }
 }
@@ -136,13 +140,16 @@ impl TrainConfig {
         Ok(())
     }
 
-    /// The model widths: `model` if given, else the `preset`.
+    /// The model widths: `model` if given, else the `preset`; with `lane_frame_condition`,
+    /// the future encoder's lane frame on.
     pub fn model_config(&self) -> Result<MultipathConfig, ConfigError> {
-        match &self.model {
-            Some(m) => Ok(m.clone()),
+        let mut config = match &self.model {
+            Some(m) => m.clone(),
             None => MultipathConfig::preset(&self.preset)
-                .ok_or_else(|| ConfigError::UnknownPreset(self.preset.clone())),
-        }
+                .ok_or_else(|| ConfigError::UnknownPreset(self.preset.clone()))?,
+        };
+        config.lane_frame_condition |= self.lane_frame_condition;
+        Ok(config)
     }
 
     /// The feature extraction settings (agent and road caps; other settings default).

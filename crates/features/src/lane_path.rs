@@ -1,0 +1,289 @@
+//! The target's lane path: the centreline of the lane the target drives in, chained forward
+//! through the lanes that continue it, resampled at fixed arc lengths.
+//!
+//! Why: the conditioning future of another agent is given in the target's frame, a straight
+//! frame. On a curved road the lane of a point 150 m ahead is off that frame's x axis by tens
+//! of metres, so *which lane* the other agent drives in (stays in A's lane, leaves it, cuts
+//! into it) is invisible in its x, y alone. Its offset from this path is what says so; the
+//! model computes it from the path (`scbg_model`'s future encoder).
+//!
+//! The map gives no lane connectivity after preparation (polylines only), so continuation is
+//! geometric: the lane polyline whose first point lies within [`CONTINUATION_M`] of the
+//! current end, heading on within [`MAX_TURN_RAD`], the straightest first.
+
+use crate::prepared::{RoadKind, RoadPolyline};
+use crate::road_index::{Scratch, SegmentIndex};
+
+/// Points of the lane path.
+pub const LANE_PATH_POINTS: usize = 80;
+/// Arc length between consecutive points, metres.
+pub const LANE_PATH_SPACING_M: f32 = 5.0;
+/// Arc length of the first point behind the target's projection on the lane, metres (the
+/// path covers `[-20 m, 375 m]` along the lane).
+pub const LANE_PATH_BEHIND_M: f32 = 20.0;
+/// The target must be this close to a lane centreline for a path, metres.
+const MAX_OFFSET_M: f32 = 4.0;
+/// The lane's direction at the target must be within this of the target's heading.
+const MAX_HEADING_RAD: f32 = std::f32::consts::FRAC_PI_4;
+/// A continuing lane starts within this of the current end, metres.
+const CONTINUATION_M: f32 = 5.0;
+/// A continuing lane's first direction is within this of the current end's direction.
+const MAX_TURN_RAD: f32 = std::f32::consts::FRAC_PI_6;
+
+/// Arc length of lane path point `k` from the target's projection on its lane, metres.
+pub fn lane_path_arc_m(k: usize) -> f32 {
+    k as f32 * LANE_PATH_SPACING_M - LANE_PATH_BEHIND_M
+}
+
+fn is_vehicle_lane(kind: RoadKind) -> bool {
+    kind.is_lane() && kind != RoadKind::LaneBike
+}
+
+fn sub(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
+    [a[0] - b[0], a[1] - b[1]]
+}
+
+fn norm(a: [f32; 2]) -> f32 {
+    (a[0] * a[0] + a[1] * a[1]).sqrt()
+}
+
+fn angle_between(a: [f32; 2], b: [f32; 2]) -> f32 {
+    let cross = a[0] * b[1] - a[1] * b[0];
+    let dot = a[0] * b[0] + a[1] * b[1];
+    cross.atan2(dot).abs()
+}
+
+/// Candidate segments asked of the grid per target (the nearest few within reach).
+const CANDIDATES: usize = 16;
+
+/// A scene's vehicle lanes, made once per scene: each lane's points with their arc lengths,
+/// its continuation, and a grid over the lane segments (the target's lane is found among the
+/// few segments near it, not by scanning the map: real scenes have thousands).
+#[derive(Debug, Clone)]
+pub(crate) struct LaneNetwork {
+    /// Per lane: its points (scene frame) and the arc length at each.
+    points: Vec<Vec<[f32; 2]>>,
+    arc_m: Vec<Vec<f32>>,
+    /// Per lane: the lane that continues it, if any.
+    next: Vec<Option<usize>>,
+    /// Lane segments in lane order (segment `i` of the grid is `segment_of[i]`).
+    grid: SegmentIndex,
+    segment_of: Vec<(u32, u32)>,
+}
+
+impl LaneNetwork {
+    /// The network of `road`'s vehicle lanes (bike lanes and one-point lanes left out).
+    pub(crate) fn new(road: &[RoadPolyline]) -> Self {
+        let lanes: Vec<&RoadPolyline> = road
+            .iter()
+            .filter(|p| is_vehicle_lane(p.kind) && p.xy_m.len() >= 2)
+            .collect();
+        let points: Vec<Vec<[f32; 2]>> = lanes.iter().map(|p| p.xy_m.clone()).collect();
+        let arc_m: Vec<Vec<f32>> = points
+            .iter()
+            .map(|pts| {
+                let mut at = 0.0;
+                std::iter::once(0.0)
+                    .chain(pts.windows(2).map(|w| {
+                        at += norm(sub(w[1], w[0]));
+                        at
+                    }))
+                    .collect()
+            })
+            .collect();
+        // Continuations through a hash of lane starts by cell (CONTINUATION_M wide): each
+        // lane end looks at the 3 × 3 cells around it.
+        let cell = |p: [f32; 2]| {
+            (
+                (p[0] / CONTINUATION_M).floor() as i64,
+                (p[1] / CONTINUATION_M).floor() as i64,
+            )
+        };
+        let mut starts: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
+        for (i, pts) in points.iter().enumerate() {
+            if pts[0].iter().all(|v| v.is_finite()) {
+                starts.entry(cell(pts[0])).or_default().push(i);
+            }
+        }
+        let next = points
+            .iter()
+            .enumerate()
+            .map(|(i, pts)| {
+                let n = pts.len();
+                let (end, end_dir) = (pts[n - 1], sub(pts[n - 1], pts[n - 2]));
+                if !end.iter().all(|v| v.is_finite()) {
+                    return None;
+                }
+                let (cx, cy) = cell(end);
+                let mut best: Option<(f32, usize)> = None;
+                for dx in -1..=1 {
+                    for dy in -1..=1 {
+                        for &j in starts.get(&(cx + dx, cy + dy)).into_iter().flatten() {
+                            let q = &points[j];
+                            let turn = angle_between(end_dir, sub(q[1], q[0]));
+                            if j != i
+                                && norm(sub(q[0], end)) <= CONTINUATION_M
+                                && turn <= MAX_TURN_RAD
+                                && best.is_none_or(|b| (turn, j) < b)
+                            {
+                                best = Some((turn, j));
+                            }
+                        }
+                    }
+                }
+                best.map(|b| b.1)
+            })
+            .collect();
+        let owned: Vec<RoadPolyline> = lanes.into_iter().cloned().collect();
+        let segment_of = points
+            .iter()
+            .enumerate()
+            .flat_map(|(l, pts)| (0..pts.len() - 1).map(move |s| (l as u32, s as u32)))
+            .collect();
+        Self {
+            points,
+            arc_m,
+            next,
+            grid: SegmentIndex::from_road(&owned),
+            segment_of,
+        }
+    }
+
+    /// The lane path of a target at `xy` (scene frame) heading `heading_rad`; see
+    /// [`lane_path`]. `scratch` and `found` are the grid query's buffers.
+    pub(crate) fn path(
+        &self,
+        xy: [f32; 2],
+        heading_rad: f32,
+        scratch: &mut Scratch,
+        found: &mut Vec<(u32, f32)>,
+    ) -> Option<(Vec<[f32; 2]>, Vec<bool>)> {
+        let dir = [heading_rad.cos(), heading_rad.sin()];
+        // The grid ranks by the closest point but admits by the nearer endpoint: ask a reach
+        // of a segment length beyond the offset limit, then check the distance itself.
+        self.grid
+            .closest(xy, CANDIDATES, MAX_OFFSET_M + 10.0, scratch, found);
+        let (lane, seg, u) = found.iter().find_map(|&(i, d2)| {
+            let (lane, seg) = self.segment_of[i as usize];
+            let (lane, seg) = (lane as usize, seg as usize);
+            let (a, b) = (self.points[lane][seg], self.points[lane][seg + 1]);
+            let d = sub(b, a);
+            let len2 = d[0] * d[0] + d[1] * d[1];
+            if d2 > MAX_OFFSET_M * MAX_OFFSET_M
+                || len2 < 1e-6
+                || angle_between(d, dir) > MAX_HEADING_RAD
+            {
+                return None;
+            }
+            let r = sub(xy, a);
+            Some((
+                lane,
+                seg,
+                ((r[0] * d[0] + r[1] * d[1]) / len2).clamp(0.0, 1.0),
+            ))
+        })?;
+        let arc = &self.arc_m[lane];
+        let s0 = arc[seg] + u * (arc[seg + 1] - arc[seg]);
+        // Walk the chain of lanes once: `(lane, arc length of its first point on the chain)`.
+        let mut chain = vec![(lane, 0.0f32)];
+        let mut end = *arc.last().expect("two points");
+        let (mut points, mut valid) = (
+            Vec::with_capacity(LANE_PATH_POINTS),
+            Vec::with_capacity(LANE_PATH_POINTS),
+        );
+        let (mut c, mut k) = (0usize, 0usize);
+        for i in 0..LANE_PATH_POINTS {
+            let s = s0 + lane_path_arc_m(i);
+            // Extend the chain while it ends before s.
+            while s > end && chain.len() < 32 {
+                let (last, _) = *chain.last().expect("non-empty");
+                match self.next[last] {
+                    Some(n) if !chain.iter().any(|&(l, _)| l == n) => {
+                        // A continuation starts where its predecessor ends (within 5 m).
+                        chain.push((n, end));
+                        end += *self.arc_m[n].last().expect("two points");
+                    }
+                    _ => break,
+                }
+            }
+            // Move to the lane and segment holding s (or stay at the ends, extrapolating).
+            while c + 1 < chain.len() && s > chain[c + 1].1 {
+                c += 1;
+                k = 0;
+            }
+            let (l, base) = chain[c];
+            let (pts, arc) = (&self.points[l], &self.arc_m[l]);
+            while k + 2 < pts.len() && s - base > arc[k + 1] {
+                k += 1;
+            }
+            let len = (arc[k + 1] - arc[k]).max(1e-6);
+            let f = (s - base - arc[k]) / len;
+            let d = sub(pts[k + 1], pts[k]);
+            points.push([pts[k][0] + f * d[0], pts[k][1] + f * d[1]]);
+            valid.push(s >= 0.0 && s <= end);
+        }
+        Some((points, valid))
+    }
+}
+
+/// The lane path of a target at `xy` (scene frame) heading `heading_rad`: `LANE_PATH_POINTS`
+/// points in the scene frame at arc lengths [`lane_path_arc_m`] and whether each lies on a
+/// known lane (points past the chain's ends are not). `None` when no vehicle lane passes
+/// within 4 m of the target in its direction (off-road, parking lots, maps without lanes).
+/// (Samples get theirs from the [`SampleBuilder`](crate::SampleBuilder), which builds the
+/// scene's lane network once.)
+pub fn lane_path(
+    road: &[RoadPolyline],
+    xy: [f32; 2],
+    heading_rad: f32,
+) -> Option<(Vec<[f32; 2]>, Vec<bool>)> {
+    LaneNetwork::new(road).path(xy, heading_rad, &mut Scratch::default(), &mut Vec::new())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn lane(points: Vec<[f32; 2]>) -> RoadPolyline {
+        RoadPolyline {
+            kind: RoadKind::LaneSurfaceStreet,
+            xy_m: points,
+        }
+    }
+
+    #[test]
+    fn the_path_follows_the_lane_and_its_continuation_not_the_branch() {
+        // A straight lane to x = 100, then a straight continuation and a branch turning left.
+        let road = vec![
+            lane((0..=25).map(|i| [4.0 * i as f32, 0.0]).collect()),
+            // The branch: first direction 40° off (beyond the 30° continuation limit).
+            lane(
+                (0..=50)
+                    .map(|i| [100.0 + 3.0 * i as f32, 2.5 * i as f32])
+                    .collect(),
+            ),
+            lane((0..=100).map(|i| [100.0 + 4.0 * i as f32, 0.0]).collect()),
+            // A lane the other way, nearer than the first: not the target's.
+            lane((0..=25).map(|i| [100.0 - 4.0 * i as f32, 1.0]).collect()),
+            RoadPolyline {
+                kind: RoadKind::EdgeBoundary,
+                xy_m: vec![[0.0, 0.5], [500.0, 0.5]],
+            },
+        ];
+        let (pts, valid) = lane_path(&road, [30.0, 1.5], 0.05).expect("a path");
+        assert_eq!(pts.len(), LANE_PATH_POINTS);
+        for (k, (p, v)) in pts.iter().zip(&valid).enumerate() {
+            let s = 30.0 + lane_path_arc_m(k);
+            assert!(
+                (p[0] - s).abs() < 1e-3 && p[1].abs() < 1e-3,
+                "point {k}: {p:?}"
+            );
+            assert_eq!(*v, (0.0..=500.0).contains(&s), "point {k}");
+        }
+        // Facing the other way the target is on the opposite lane.
+        let (pts, _) = lane_path(&road, [30.0, 1.5], std::f32::consts::PI).expect("a path");
+        assert!((pts[4][0] - 30.0).abs() < 1e-3 && (pts[4][1] - 1.0).abs() < 1e-3);
+        // Off every lane: no path.
+        assert!(lane_path(&road, [30.0, 9.0], 0.0).is_none());
+    }
+}
