@@ -250,28 +250,15 @@ impl<'a> SampleBuilder<'a> {
             (frame.cos * vx + frame.sin * vy) as f32,
             (-frame.sin * vx + frame.cos * vy) as f32,
         ];
-        let (mut lane_path_xy_m, mut lane_path_valid) = (
-            vec![0.0; 2 * LANE_PATH_POINTS],
-            vec![false; LANE_PATH_POINTS],
-        );
-        let lanes = self
-            .lanes
-            .get_or_insert_with(|| LaneNetwork::new(&scene.road));
-        if let Some((points, valid)) = lanes.path(
-            [track.x_m[now], track.y_m[now]],
-            track.heading_rad[now],
-            &mut self.lane_scratch,
-            &mut self.candidates,
-        ) {
-            for (k, (p, v)) in points.iter().zip(valid).enumerate() {
-                if v {
-                    let (x, y) = frame.point(p[0], p[1]);
-                    lane_path_xy_m[2 * k] = x;
-                    lane_path_xy_m[2 * k + 1] = y;
-                    lane_path_valid[k] = true;
-                }
-            }
-        }
+        let (lane_path_xy_m, lane_path_valid) = if config.lane_path {
+            self.lane_path(
+                &frame,
+                [track.x_m[now], track.y_m[now]],
+                track.heading_rad[now],
+            )
+        } else {
+            (Vec::new(), Vec::new())
+        };
         let sample = AgentSample {
             scenario_id: scene.scenario_id.clone(),
             window: *window,
@@ -354,6 +341,44 @@ impl<'a> SampleBuilder<'a> {
             s.others_valid[k] = true;
         }
         s
+    }
+
+    /// The lane path of a target at `xy` heading `heading_rad` (scene frame) in the target's
+    /// `frame`: `[LANE_PATH_POINTS, 2]` points (zeros where invalid) and their validity. The
+    /// scene's lane network is made on first use.
+    fn lane_path(
+        &mut self,
+        frame: &AgentFrame,
+        xy: [f32; 2],
+        heading_rad: f32,
+    ) -> (Vec<f32>, Vec<bool>) {
+        let (mut points_xy_m, mut valid) = (
+            vec![0.0; 2 * LANE_PATH_POINTS],
+            vec![false; LANE_PATH_POINTS],
+        );
+        let scene = self.scene;
+        let lanes = self
+            .lanes
+            .get_or_insert_with(|| LaneNetwork::new(&scene.road));
+        let path = lanes.path(
+            xy,
+            heading_rad,
+            &mut self.lane_scratch,
+            &mut self.candidates,
+        );
+        for (k, (p, v)) in path
+            .into_iter()
+            .flat_map(|(p, v)| p.into_iter().zip(v))
+            .enumerate()
+        {
+            if v {
+                let (x, y) = frame.point(p[0], p[1]);
+                points_xy_m[2 * k] = x;
+                points_xy_m[2 * k + 1] = y;
+                valid[k] = true;
+            }
+        }
+        (points_xy_m, valid)
     }
 
     /// The P closest road segments in the target frame, with their 27 features.

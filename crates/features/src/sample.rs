@@ -32,6 +32,9 @@ pub struct FeatureConfig {
     pub max_road_segments: usize,
     /// Segments whose nearest endpoint is farther than this are dropped.
     pub road_radius_m: f32,
+    /// Build the target's lane path ([`AgentSample::lane_path_xy_m`]); only a model with the
+    /// lane frame uses it, so it is off unless that model's configuration asks for it.
+    pub lane_path: bool,
 }
 
 impl Default for FeatureConfig {
@@ -42,6 +45,7 @@ impl Default for FeatureConfig {
             max_other_agents: 32,
             max_road_segments: 128,
             road_radius_m: 150.0,
+            lane_path: false,
         }
     }
 }
@@ -87,10 +91,11 @@ pub struct AgentSample {
     /// Target velocity at the current step, in the target frame.
     pub current_velocity_mps: [f32; 2],
     /// `[LANE_PATH_POINTS, 2]`: the target's lane path in its frame, at arc lengths
-    /// [`lane_path_arc_m`](crate::lane_path_arc_m) (zeros where invalid).
+    /// [`lane_path_arc_m`](crate::lane_path_arc_m) (zeros where invalid); empty unless
+    /// [`FeatureConfig::lane_path`].
     pub lane_path_xy_m: Vec<f32>,
     /// `[LANE_PATH_POINTS]`: whether each point lies on a known lane; all false when the
-    /// target is on no lane.
+    /// target is on no lane; empty unless [`FeatureConfig::lane_path`].
     pub lane_path_valid: Vec<bool>,
 }
 

@@ -3,10 +3,9 @@
 //! a deliberate change of the features updates `EXPECTED` (run with `--nocapture` to see the
 //! new value) and says why in the commit.
 
-use scbg_features::{
-    AgentSample, FeatureConfig, PairConfig, PreparedScene, SampleBuilder, WindowConfig,
-    marginal_targets,
-};
+mod common;
+
+use scbg_features::{AgentSample, FeatureConfig, SampleBuilder, WindowConfig, marginal_targets};
 
 /// FNV-1a over every field of the samples.
 struct Fnv(u64);
@@ -59,34 +58,26 @@ const EXPECTED: u64 = 0x65d3_041c_f634_cc25;
 
 #[test]
 fn features_of_the_shared_real_scenes_are_unchanged() {
-    let Some(paths) = scbg_womd::fixtures::real_tfrecords() else {
+    let Some(scenes) = common::real_prepared_scenes() else {
         return; // real_data_dir said why (and fails under CI)
     };
-    let (window, pair, features) = (
-        WindowConfig::default(),
-        PairConfig::default(),
+    let (future_steps, features) = (
+        WindowConfig::default().future_steps,
         FeatureConfig::default(),
     );
     let mut hash = Fnv(0xcbf2_9ce4_8422_2325);
     let mut samples = 0;
-    for path in &paths {
-        let file = scbg_womd::WomdFile::open(path).unwrap();
-        for scene in file.scenes() {
-            let scene = scene.unwrap();
-            let Ok(prepared) = PreparedScene::from_scene(&scene, &window, &pair, 4) else {
-                continue;
-            };
-            let mut builder = SampleBuilder::new(&prepared, &features);
-            for (w, pairs) in prepared.windows.iter().zip(&prepared.pairs) {
-                for target in marginal_targets(&prepared, w, window.future_steps, 1) {
-                    hash.sample(&builder.sample(w, target, None).unwrap());
+    for prepared in &scenes {
+        let mut builder = SampleBuilder::new(prepared, &features);
+        for (w, pairs) in prepared.windows.iter().zip(&prepared.pairs) {
+            for target in marginal_targets(prepared, w, future_steps, 1) {
+                hash.sample(&builder.sample(w, target, None).unwrap());
+                samples += 1;
+            }
+            for p in pairs {
+                for (a, b) in [(p.first, p.second), (p.second, p.first)] {
+                    hash.sample(&builder.sample(w, a, Some(b)).unwrap());
                     samples += 1;
-                }
-                for p in pairs {
-                    for (a, b) in [(p.first, p.second), (p.second, p.first)] {
-                        hash.sample(&builder.sample(w, a, Some(b)).unwrap());
-                        samples += 1;
-                    }
                 }
             }
         }

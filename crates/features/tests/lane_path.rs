@@ -1,6 +1,8 @@
 //! The target's lane path (`AgentSample::lane_path_xy_m`) on scenes whose lanes are known
 //! (synthetic) and on the shared real WOMD scenes.
 
+mod common;
+
 use scbg_features::{
     FeatureConfig, LANE_PATH_BEHIND_M, LANE_PATH_SPACING_M, PairConfig, PreparedScene,
     SampleBuilder, WindowConfig, marginal_targets,
@@ -30,7 +32,10 @@ fn offset_from_path(path: &[f32], valid: &[bool], p: [f32; 2]) -> Option<f32> {
 /// in A's lane, B's offset from A's path is −1 or 0 lane widths although the road curves.
 #[test]
 fn synthetic_targets_have_their_lane_and_b_its_offset_from_it() {
-    let features = FeatureConfig::default();
+    let features = FeatureConfig {
+        lane_path: true,
+        ..Default::default()
+    };
     let mut cutin_offsets = Vec::new();
     for index in 0..24 {
         let g = scbg_synth::generate(11, index, &Family::ALL);
@@ -86,36 +91,30 @@ fn synthetic_targets_have_their_lane_and_b_its_offset_from_it() {
 /// them; the share is printed (`--nocapture`).
 #[test]
 fn most_moving_real_vehicles_have_a_lane_path() {
-    let Some(paths) = scbg_womd::fixtures::real_tfrecords() else {
+    let Some(scenes) = common::real_prepared_scenes() else {
         return; // real_data_dir said why (and fails under CI)
     };
-    let (window, pair, features) = (
-        WindowConfig::default(),
-        PairConfig::default(),
-        FeatureConfig::default(),
-    );
+    let future_steps = WindowConfig::default().future_steps;
+    let features = FeatureConfig {
+        lane_path: true,
+        ..Default::default()
+    };
+    let at_a = (LANE_PATH_BEHIND_M / LANE_PATH_SPACING_M) as usize;
     let (mut moving, mut with_path) = (0usize, 0usize);
-    for path in &paths {
-        let file = scbg_womd::WomdFile::open(path).unwrap();
-        for scene in file.scenes() {
-            let Ok(prepared) = PreparedScene::from_scene(&scene.unwrap(), &window, &pair, 4) else {
-                continue;
-            };
-            let mut builder = SampleBuilder::new(&prepared, &features);
-            for w in &prepared.windows {
-                for target in marginal_targets(&prepared, w, window.future_steps, 1) {
-                    let s = builder.sample(w, target, None).unwrap();
-                    let [vx, vy] = s.current_velocity_mps;
-                    if (vx * vx + vy * vy).sqrt() < 3.0 {
-                        continue;
-                    }
-                    moving += 1;
-                    let at_a = (LANE_PATH_BEHIND_M / LANE_PATH_SPACING_M) as usize;
-                    if s.lane_path_valid.iter().any(|&v| v) {
-                        with_path += 1;
-                        let (x, y) = (s.lane_path_xy_m[2 * at_a], s.lane_path_xy_m[2 * at_a + 1]);
-                        assert!((x * x + y * y).sqrt() <= 4.0 + 1e-3, "{x}, {y}");
-                    }
+    for prepared in &scenes {
+        let mut builder = SampleBuilder::new(prepared, &features);
+        for w in &prepared.windows {
+            for target in marginal_targets(prepared, w, future_steps, 1) {
+                let s = builder.sample(w, target, None).unwrap();
+                let [vx, vy] = s.current_velocity_mps;
+                if (vx * vx + vy * vy).sqrt() < 3.0 {
+                    continue;
+                }
+                moving += 1;
+                if s.lane_path_valid.iter().any(|&v| v) {
+                    with_path += 1;
+                    let (x, y) = (s.lane_path_xy_m[2 * at_a], s.lane_path_xy_m[2 * at_a + 1]);
+                    assert!((x * x + y * y).sqrt() <= 4.0 + 1e-3, "{x}, {y}");
                 }
             }
         }

@@ -29,10 +29,10 @@ pub struct Batch {
     pub future_xy: Tensor<3>,
     /// `[batch, future_steps]`
     pub future_valid: Tensor<2>,
-    /// `[batch, lane points, 4]`: the target's lane path (x, y, unit tangent) in its frame.
-    pub lane_path: Tensor<3>,
-    /// `[batch, lane points]`, 1 for a point on a known lane.
-    pub lane_mask: Tensor<2>,
+    /// The targets' lane paths when the samples have them (`FeatureConfig::lane_path`):
+    /// `[batch, lane points, 4]` (x, y, unit tangent; target frame) and `[batch, lane points]`
+    /// (1 for a point on a known lane).
+    pub lane_path: Option<(Tensor<3>, Tensor<2>)>,
 }
 
 /// Inference mode of the predictor: the one way to ask for either distribution.
@@ -118,13 +118,16 @@ impl Batch {
             Vec::with_capacity(b * future),
         );
         let lane_points = s0.lane_path_valid.len();
+        let with_lanes = lane_points > 0;
         let (mut lane, mut lm) = (
             Vec::with_capacity(b * lane_points * 4),
             Vec::with_capacity(b * lane_points),
         );
         for s in samples {
-            push_lane_path(s, &mut lane);
-            lm.extend(bools(&s.lane_path_valid));
+            if with_lanes {
+                push_lane_path(s, &mut lane);
+                lm.extend(bools(&s.lane_path_valid));
+            }
             let mut hist = s.target_history.clone();
             let mut diffs = s.target_diffs.clone();
             if augment.history_mask_prob > 0.0 {
@@ -180,8 +183,8 @@ impl Batch {
             condition_flag: t2(flag, [b, 1]),
             future_xy: t3(fxy, [b, future, 2]),
             future_valid: t2(fv, [b, future]),
-            lane_path: t3(lane, [b, lane_points, 4]),
-            lane_mask: t2(lm, [b, lane_points]),
+            lane_path: with_lanes
+                .then(|| (t3(lane, [b, lane_points, 4]), t2(lm, [b, lane_points]))),
         }
     }
 
@@ -238,8 +241,10 @@ impl Batch {
             condition_flag: rep(&self.condition_flag, times),
             future_xy: rep(&self.future_xy, times),
             future_valid: rep(&self.future_valid, times),
-            lane_path: rep(&self.lane_path, times),
-            lane_mask: rep(&self.lane_mask, times),
+            lane_path: self
+                .lane_path
+                .as_ref()
+                .map(|(p, m)| (rep(p, times), rep(m, times))),
         }
     }
 }

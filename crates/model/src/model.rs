@@ -145,13 +145,13 @@ impl FutureEncoder {
     /// zeros with their validity flag; velocities are zero unless both points are valid.
     ///
     /// # Shapes
-    /// `condition: [batch, T, 3]` (x m, y m, valid), `lane_path: [batch, L, 4]` (x m, y m,
-    /// unit tangent), `lane_mask: [batch, L]`, `target: [batch, target_width]`
-    /// `-> [batch, future_hidden]`
+    /// `condition: [batch, T, 3]` (x m, y m, valid), `lane_path: Option<([batch, L, 4],
+    /// [batch, L])>` (x m, y m, unit tangent; mask — [`Batch::lane_path`], needed in the lane
+    /// frame), `target: [batch, target_width]` `-> [batch, future_hidden]`
     pub fn forward(
         &self,
         condition: &Tensor<3>,
-        (lane_path, lane_mask): (&Tensor<3>, &Tensor<2>),
+        lane_path: Option<&(Tensor<3>, Tensor<2>)>,
         target: Tensor<2>,
         b: usize,
     ) -> Tensor<2> {
@@ -177,7 +177,11 @@ impl FutureEncoder {
         let xy = pts.narrow(2, 0, 2);
         let mut parts = vec![xy.clone() / CONDITION_SCALE_M, valid.clone(), velocity];
         if self.point_features > CONDITION_POINT_FEATURES {
-            parts.push(lane_frame(xy, valid, lane_path, lane_mask));
+            let (path, mask) = lane_path.expect(
+                "a model in the lane frame needs samples with lane paths \
+                 (FeatureConfig::lane_path, set by TrainConfig::feature_config)",
+            );
+            parts.push(lane_frame(xy, valid, path, mask));
         }
         let feats = Tensor::cat(parts, 2).reshape([b, n * self.point_features]);
         self.mlp.forward(Tensor::cat(vec![feats, target], 1))
@@ -362,7 +366,7 @@ impl Multipath {
         let scene = Tensor::cat(vec![target, interaction, road], 1);
         let condition = self.future_encoder.forward(
             &batch.condition,
-            (&batch.lane_path, &batch.lane_mask),
+            batch.lane_path.as_ref(),
             target_for_condition,
             b,
         );
@@ -517,13 +521,18 @@ mod tests {
             &device,
         );
         let out = lane_frame(xy.clone(), valid, &lane, &mask);
-        let v: Vec<f32> = out.clone().into_data().to_vec().unwrap();
+        let v: Vec<f32> = out.clone().into_data().try_to_vec::<f32>().unwrap();
         assert!((v[0] * CONDITION_SCALE_M - 145.0).abs() < 0.1, "{v:?}");
         assert!((v[1] * LANE_OFFSET_SCALE_M + 3.5).abs() < 0.05, "{v:?}");
         assert_eq!(v[2], 1.0);
         assert!(v[3..].iter().all(|&x| x == 0.0), "{v:?}");
         let grads = out.narrow(1, 0, 1).narrow(2, 1, 1).sum().backward();
-        let g: Vec<f32> = xy.grad(&grads).unwrap().into_data().to_vec().unwrap();
+        let g: Vec<f32> = xy
+            .grad(&grads)
+            .unwrap()
+            .into_data()
+            .try_to_vec::<f32>()
+            .unwrap();
         let n = [
             -phi.sin() / LANE_OFFSET_SCALE_M,
             phi.cos() / LANE_OFFSET_SCALE_M,

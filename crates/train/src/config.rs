@@ -152,11 +152,14 @@ impl TrainConfig {
         Ok(config)
     }
 
-    /// The feature extraction settings (agent and road caps; other settings default).
+    /// The feature extraction settings (agent and road caps, lane paths for the lane frame;
+    /// other settings default).
     pub fn feature_config(&self) -> FeatureConfig {
         FeatureConfig {
             max_other_agents: self.max_other_agents,
             max_road_segments: self.max_road_segments,
+            // Lane paths only for a model that reads them.
+            lane_path: self.model_config().is_ok_and(|m| m.lane_frame_condition),
             ..Default::default()
         }
     }
