@@ -73,6 +73,11 @@ pub struct DemoArgs {
     /// Predictor training epochs.
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
+    /// Predictors to train (seeds --seed, --seed + 1, …) and label with as an ensemble (ψ
+    /// averaged; the first one is the generators' J_φ). Each adds a predictor training
+    /// (~5 minutes on 2 cores); 1 by default (BENCHMARKS.md, issue 11).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=16))]
+    pub predictors: u64,
     /// Training epochs of each generator variant.
     #[arg(long, default_value_t = 6)]
     pub generator_epochs: usize,
@@ -122,9 +127,11 @@ pub struct EstimatorArgs {
 
 #[derive(Debug, Clone, Args)]
 pub struct LabelArgs {
-    /// Predictor checkpoint folder.
-    #[arg(long)]
-    pub model: PathBuf,
+    /// Predictor checkpoint folder. Give it several times for an ensemble: ψ is averaged over
+    /// the predictors (B's sampled futures come from the first one's marginal, every predictor
+    /// scores the same futures).
+    #[arg(long, required = true)]
+    pub model: Vec<PathBuf>,
     /// Prepared cache folder.
     #[arg(long)]
     pub data: PathBuf,

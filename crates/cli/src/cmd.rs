@@ -28,6 +28,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     condition_on_a: a.condition_on_a,
                     lane_frame: a.lane_frame,
                     epochs: a.epochs,
+                    predictors: a.predictors as usize,
                     generator_epochs: a.generator_epochs,
                     generator_seeds: a.generator_seeds,
                     closed_loop_scenes: a.closed_loop_scenes,
@@ -43,7 +44,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             let options = label_options(&a.estimator, a.samples, a.reward)?;
             labels::label_cache(
                 &labels::LabelRun {
-                    model: a.model,
+                    model: a.model[0].clone(),
+                    ensemble: a.model[1..].to_vec(),
                     data: a.data,
                     out: a.out,
                     options,

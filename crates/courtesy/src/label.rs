@@ -95,6 +95,40 @@ pub struct PairLabels {
     pub terms: Vec<AudienceTerm>,
 }
 
+impl PairLabels {
+    /// The labels of an equal-weight ensemble: the mean of each member's ψ, expectations and
+    /// audience terms, for the same futures (the first member's `futures_in_a` are kept).
+    ///
+    /// # Panics
+    /// If `members` is empty or their futures or audiences differ in number.
+    pub fn mean(members: Vec<PairLabels>) -> PairLabels {
+        let n = members.len() as f32;
+        let mut it = members.into_iter();
+        let mut sum = it.next().expect("at least one member");
+        for m in it {
+            assert_eq!(m.psi.len(), sum.psi.len(), "the same futures");
+            assert_eq!(m.terms.len(), sum.terms.len(), "the same audience");
+            for (s, x) in sum.psi.iter_mut().zip(&m.psi) {
+                *s += x;
+            }
+            for (s, x) in sum.e_cond.iter_mut().zip(&m.e_cond) {
+                *s += x;
+            }
+            sum.e_marg += m.e_marg;
+            for (s, x) in sum.terms.iter_mut().zip(&m.terms) {
+                s.e_marg += x.e_marg;
+            }
+        }
+        sum.psi
+            .iter_mut()
+            .chain(&mut sum.e_cond)
+            .for_each(|x| *x /= n);
+        sum.e_marg /= n;
+        sum.terms.iter_mut().for_each(|t| t.e_marg /= n);
+        sum
+    }
+}
+
 /// One audience member's part of ψ: `weight · (E[r(Y_j) | x, y_B] − e_marg)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AudienceTerm {
@@ -415,22 +449,51 @@ pub fn label_scene(
     stats: &FeatureStats,
     features: &FeatureConfig,
     options: LabelOptions,
-    rng: &mut impl Rng,
+    rng: &mut (impl Rng + Clone),
     device: &Device,
 ) -> Vec<LabelledRole> {
+    label_scene_ensemble(&[(model, stats)], scene, features, options, rng, device)
+}
+
+/// [`label_scene`] with ψ averaged over an ensemble of predictors (each with the feature
+/// statistics it was trained with): a deep ensemble, whose predictive distribution is the
+/// equal-weight mixture of the members', so its `E[r(Y_A) | …]` — and ψ, both expectations and
+/// each audience term — is the mean of the members'. B's futures are drawn once, from the
+/// first member's marginal, and every member scores the same futures; the role's samples and
+/// audience are the first member's, and the random stream advances as with the first member
+/// alone (so the futures do not depend on the ensemble's size). [`label_scene`] is this with
+/// one member.
+///
+/// # Panics
+/// If `members` is empty.
+pub fn label_scene_ensemble(
+    members: &[(&Multipath, &FeatureStats)],
+    scene: &PreparedScene,
+    features: &FeatureConfig,
+    options: LabelOptions,
+    rng: &mut (impl Rng + Clone),
+    device: &Device,
+) -> Vec<LabelledRole> {
+    let (&(model, stats), rest) = members.split_first().expect("at least one predictor");
     let mut out = Vec::new();
     let mut builder = SampleBuilder::new(scene, features);
     for (w, pairs) in scene.windows.iter().zip(&scene.pairs) {
         for p in pairs {
             for (ia, ib) in [(p.first, p.second), (p.second, p.first)] {
-                let (Ok(mut a), Ok(mut b)) =
+                let (Ok(a_raw), Ok(b_raw)) =
                     (builder.sample(w, ia, Some(ib)), builder.sample(w, ib, None))
                 else {
                     continue;
                 };
-                stats.normalize(&mut a);
-                stats.normalize(&mut b);
-                out.push(label_built_role(
+                let normalized = |stats: &FeatureStats| {
+                    let (mut a, mut b) = (a_raw.clone(), b_raw.clone());
+                    stats.normalize(&mut a);
+                    stats.normalize(&mut b);
+                    (a, b)
+                };
+                let (a, b) = normalized(stats);
+                let draws = rng.clone();
+                let mut role = label_built_role(
                     model,
                     &mut builder,
                     stats,
@@ -440,7 +503,39 @@ pub fn label_scene(
                     options,
                     rng,
                     device,
-                ));
+                );
+                if !rest.is_empty() {
+                    let a_weight = options
+                        .audience
+                        .weight(Audience::distance_between(scene, w, ia, ib));
+                    // The first member's mixture and the same draws: the same futures.
+                    let mixture = marginal_mixtures(model, &[&role.b], device).remove(0);
+                    let mut each = vec![role.labels.clone()];
+                    for &(model_m, stats_m) in rest {
+                        let (a_m, b_m) = normalized(stats_m);
+                        let others = audience_members(
+                            &mut builder,
+                            scene,
+                            stats_m,
+                            w,
+                            ia,
+                            ib,
+                            options.audience,
+                        );
+                        each.push(label_role(
+                            model_m,
+                            (&a_m, a_weight),
+                            &others,
+                            &b_m,
+                            &mixture,
+                            options,
+                            &mut draws.clone(),
+                            device,
+                        ));
+                    }
+                    role.labels = PairLabels::mean(each);
+                }
+                out.push(role);
             }
         }
     }

@@ -392,3 +392,113 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
         assert!((f64::from(all.e_marg) - e_marg).abs() < 1e-3 * (1.0 + e_marg.abs()));
     }
 }
+
+#[test]
+fn an_ensemble_scores_the_first_members_futures_with_every_member_and_averages() {
+    use crate::label::{
+        LabelOptions, MarginalEstimate, label_role, label_scene, label_scene_ensemble,
+        marginal_mixtures,
+    };
+    use rand::Rng;
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex();
+    device.seed(11);
+    let first = MultipathConfig::cpu_small().init(&device);
+    let second = MultipathConfig::cpu_small().init(&device);
+    let (scene, cfg) = audience_setup();
+    let w = scene.windows[0];
+    let mut builder = SampleBuilder::new(&scene, &cfg);
+    let pair = scene.pairs[0][0];
+    let raw = builder.sample(&w, pair.first, Some(pair.second)).unwrap();
+    // Different statistics per member: each member standardises its own inputs.
+    let stats_first = FeatureStats::fit([&raw]);
+    let everyone: Vec<AgentSample> = (0..scene.tracks.len())
+        .filter_map(|t| builder.sample(&w, t, None).ok())
+        .collect();
+    assert!(everyone.len() > 2);
+    let stats_second = FeatureStats::fit(&everyone);
+    assert_ne!(stats_first, stats_second);
+    let options = LabelOptions {
+        samples: 3,
+        reward: Reward::AverageSpeed,
+        marginal: MarginalEstimate::ConditionalAverage,
+        sample_noise: 1.0,
+        audience: Audience::Pair,
+    };
+    let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(4);
+    let label = |members: &[(&Multipath, &FeatureStats)]| {
+        let mut r = rng();
+        let roles = label_scene_ensemble(members, &scene, &cfg, options, &mut r, &device);
+        (roles, r.random::<u64>())
+    };
+    let (alone, after_alone) = {
+        let mut r = rng();
+        let roles = label_scene(&first, &scene, &stats_first, &cfg, options, &mut r, &device);
+        (roles, r.random::<u64>())
+    };
+    assert!(!alone.is_empty());
+
+    // A member twice is that member: same labels, same futures, the same stream afterwards.
+    let (twice, after_twice) = label(&[(&first, &stats_first), (&first, &stats_first)]);
+    assert_eq!(after_twice, after_alone);
+    assert_eq!(twice.len(), alone.len());
+    for (t, a) in twice.iter().zip(&alone) {
+        assert_eq!(t.labels, a.labels);
+    }
+
+    // Two members: each future's ψ and E[r | x, y_B] are the means of the members' on the
+    // first member's futures, which the second standardises with its own statistics.
+    let (both, after_both) = label(&[(&first, &stats_first), (&second, &stats_second)]);
+    assert_eq!(after_both, after_alone);
+    let mut r = rng();
+    for (e, a) in both.iter().zip(&alone) {
+        assert_eq!(e.labels.futures_in_a, a.labels.futures_in_a);
+        assert_eq!((e.a_id, e.b_id), (a.a_id, a.b_id));
+        // The second member on the first member's futures, by hand.
+        let mut a2 = builder.sample(&w, e.a_index, Some(e.b_index)).unwrap();
+        let mut b2 = builder.sample(&w, e.b_index, None).unwrap();
+        stats_second.normalize(&mut a2);
+        stats_second.normalize(&mut b2);
+        let mixture = marginal_mixtures(&first, &[&a.b], &device).remove(0);
+        let draws = r.clone();
+        let by_hand = label_role(
+            &second,
+            (&a2, 1.0),
+            &[],
+            &b2,
+            &mixture,
+            options,
+            &mut draws.clone(),
+            &device,
+        );
+        // Advance the reference stream as the role's labelling did.
+        let _ = label_role(
+            &first,
+            (&a.a, 1.0),
+            &[],
+            &a.b,
+            &mixture,
+            options,
+            &mut r,
+            &device,
+        );
+        assert_eq!(by_hand.futures_in_a, a.labels.futures_in_a);
+        let close = |x: f32, y: f32| (x - y).abs() <= 1e-5 * (1.0 + x.abs().max(y.abs()));
+        for k in 0..e.labels.psi.len() {
+            let want = 0.5 * (a.labels.psi[k] + by_hand.psi[k]);
+            assert!(
+                close(e.labels.psi[k], want),
+                "future {k}: {} vs {want}",
+                e.labels.psi[k]
+            );
+            let want = 0.5 * (a.labels.e_cond[k] + by_hand.e_cond[k]);
+            assert!(close(e.labels.e_cond[k], want));
+        }
+        assert!(close(
+            e.labels.e_marg,
+            0.5 * (a.labels.e_marg + by_hand.e_marg)
+        ));
+        // The members disagree: the mean is neither.
+        assert_ne!(by_hand.psi, a.labels.psi);
+    }
+}

@@ -20,7 +20,7 @@ use serde::Serialize;
 
 use crate::data::PrepareOptions;
 use crate::generator::{VariantSettings, examples_of, load_predictors, load_scbg, train_variant};
-use crate::labels::{LabelSummary, label_scenes, write_label_outputs};
+use crate::labels::{LabelSummary, label_scenes_ensemble, write_label_outputs};
 use crate::predictor::{ModeSelection, PredictorEval, SplitSelection};
 use crate::scbg_eval::ScbgEval;
 use crate::synth::{GROUND_TRUTH_FILE, SynthOptions};
@@ -49,6 +49,10 @@ pub struct DemoOptions {
     pub lane_frame: bool,
     /// Predictor training epochs.
     pub epochs: usize,
+    /// Predictors to train (seeds `seed`, `seed + 1`, …) and label with as an ensemble (ψ
+    /// averaged, [`crate::labels::label_scenes_ensemble`]); the first is the generators' J_φ
+    /// and the one evaluated. 1: the paper's single predictor.
+    pub predictors: usize,
     /// Training epochs of each generator variant.
     pub generator_epochs: usize,
     /// Seeds of the generator stage (`seed`, `seed + 1`, …): the three variants and the range
@@ -101,6 +105,8 @@ pub struct LabelsReport {
     pub logged: usize,
     /// The part of ψ's spread that B's future decides.
     pub psi_within_pair_std: f64,
+    /// Predictors whose ψ is averaged (the ensemble's size; 1 by default).
+    pub predictors: usize,
 }
 
 /// The report's `scbg_eval` section.
@@ -261,6 +267,23 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         &predictor::train_config_toml(&config)?,
     )?;
     predictor::train_predictor(&cache, &predictor_dir, &config, false, progress)?;
+    // Further members of the labelling ensemble: the same training, other seeds.
+    let mut ensemble_dirs = Vec::new();
+    for k in 1..options.predictors.max(1) as u64 {
+        let dir = out.join(format!("predictor_seed{k}"));
+        progress.note(&format!(
+            "training ensemble member {} of {} (seed {})",
+            k + 1,
+            options.predictors,
+            options.seed + k
+        ));
+        let member = scbg_train::TrainConfig {
+            seed: options.seed + k,
+            ..config.clone()
+        };
+        predictor::train_predictor(&cache, &dir, &member, false, progress)?;
+        ensemble_dirs.push(dir);
+    }
 
     stage(
         4,
@@ -283,9 +306,20 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     );
     let predictors = load_predictors(&predictor_dir)?;
     let dataset = PreparedDataset::open(&cache)?;
-    let labelled = label_scenes(
-        &predictors.plain,
-        &predictors.ckpt,
+    let others = ensemble_dirs
+        .iter()
+        .map(|dir| {
+            let ckpt = scbg_train::Checkpoint::read(dir)?;
+            let model = ckpt.load_model(dir, &predictors.plain_device)?;
+            Ok((model, ckpt))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let members: Vec<(&scbg_model::Multipath, &scbg_train::Checkpoint)> =
+        std::iter::once((&predictors.plain, &predictors.ckpt))
+            .chain(others.iter().map(|(m, c)| (m, c)))
+            .collect();
+    let labelled = label_scenes_ensemble(
+        &members,
         &predictors.plain_device,
         &dataset,
         0..dataset.len(),
@@ -307,7 +341,10 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         &labelled,
         options.labels,
         truth.as_deref(),
+        members.len(),
     )?;
+    drop(members);
+    drop(others);
     progress.note(&label_summary.to_text());
     for figure in ["psi_histogram.png", "psi_fidelity.png"] {
         let from = labels_dir.join(figure);
@@ -544,6 +581,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             futures: rows.len(),
             logged: label_summary.pairs_roles,
             psi_within_pair_std: label_summary.psi_within_pair_std,
+            predictors: label_summary.predictors,
         },
         spearman_latent: label_summary
             .spearman_latent

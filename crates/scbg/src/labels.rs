@@ -9,9 +9,9 @@ use anyhow::Context;
 use burn::tensor::Device;
 use rand::SeedableRng;
 use scbg_courtesy::Reward;
-use scbg_courtesy::label::{LabelOptions, LabelledRole, label_scene, scene_seed};
-use scbg_features::PreparedScene;
+use scbg_courtesy::label::{LabelOptions, LabelledRole, label_scene_ensemble, scene_seed};
 use scbg_features::cache::PreparedDataset;
+use scbg_features::{FeatureConfig, PreparedScene};
 use scbg_model::Multipath;
 use scbg_synth::GroundTruth;
 use scbg_train::Checkpoint;
@@ -201,7 +201,62 @@ pub fn label_scenes(
     seed: u64,
     progress: &dyn Progress,
 ) -> anyhow::Result<Vec<SceneLabels>> {
-    let features = ckpt.train_config.feature_config();
+    label_scenes_ensemble(
+        &[(predictor, ckpt)],
+        device,
+        dataset,
+        range,
+        keep,
+        options,
+        seed,
+        progress,
+    )
+}
+
+/// The feature settings that serve every member of an ensemble: the members' own, which must
+/// agree except for the lane path (built when any member reads it; a model that does not
+/// read it ignores it).
+pub fn ensemble_features(members: &[&Checkpoint]) -> anyhow::Result<FeatureConfig> {
+    let first = members
+        .first()
+        .context("an ensemble needs at least one predictor")?;
+    let mut features = first.train_config.feature_config();
+    for (i, m) in members.iter().enumerate().skip(1) {
+        let mine = m.train_config.feature_config();
+        let comparable = FeatureConfig {
+            lane_path: features.lane_path,
+            ..mine.clone()
+        };
+        ensure_request!(
+            comparable == features,
+            "predictor {} of the ensemble was trained with other feature settings than the first \
+             ({mine:?} against {features:?}); an ensemble's members must read the same features",
+            i + 1
+        );
+        features.lane_path |= mine.lane_path;
+    }
+    Ok(features)
+}
+
+/// [`label_scenes`] with ψ averaged over an ensemble of predictors (each standardised by its
+/// own statistics; B's sampled futures drawn from the first member's marginal and scored by
+/// every member; see [`scbg_courtesy::label::label_scene_ensemble`]). [`label_scenes`] is this
+/// with one member.
+#[allow(clippy::too_many_arguments)]
+pub fn label_scenes_ensemble(
+    members: &[(&Multipath, &Checkpoint)],
+    device: &Device,
+    dataset: &PreparedDataset,
+    range: std::ops::Range<usize>,
+    keep: &dyn Fn(&PreparedScene) -> bool,
+    options: LabelOptions,
+    seed: u64,
+    progress: &dyn Progress,
+) -> anyhow::Result<Vec<SceneLabels>> {
+    let ckpts: Vec<&Checkpoint> = members.iter().map(|&(_, c)| c).collect();
+    let features = ensemble_features(&ckpts)?;
+    let scorers: Vec<(&Multipath, &scbg_features::FeatureStats)> =
+        members.iter().map(|&(m, c)| (m, &c.stats)).collect();
     let pb = progress.bar("label", range.len() as u64);
     let mut out = Vec::new();
     for i in range {
@@ -211,15 +266,7 @@ pub fn label_scenes(
             continue;
         }
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(scene_seed(seed, i as u64));
-        let roles = label_scene(
-            predictor,
-            &scene,
-            &ckpt.stats,
-            &features,
-            options,
-            &mut rng,
-            device,
-        );
+        let roles = label_scene_ensemble(&scorers, &scene, &features, options, &mut rng, device);
         out.push(SceneLabels {
             index: i,
             scenario_id: scene.scenario_id,
@@ -314,6 +361,9 @@ pub struct FamilyRho {
 pub struct LabelSummary {
     /// Labelled futures.
     pub rows: usize,
+    /// Predictors whose ψ is averaged (1, or the size of the ensemble of `scbg label --model
+    /// P1 --model P2 …`).
+    pub predictors: usize,
     /// Labelled pair roles (= logged futures).
     pub pairs_roles: usize,
     /// Futures sampled from B's marginal prediction per pair role.
@@ -356,6 +406,7 @@ impl LabelSummary {
         let high = all.iter().filter(|p| p.abs() > 2.0).count();
         Self {
             rows: rows.len(),
+            predictors: 1,
             pairs_roles: logged.len(),
             samples_per_pair: options.samples,
             reward: options.reward,
@@ -405,6 +456,12 @@ impl LabelSummary {
             self.psi_within_pair_std,
             100.0 * self.psi_all.fraction_abs_gt_2
         );
+        if self.predictors > 1 {
+            s += &format!(
+                "\nψ averaged over an ensemble of {} predictors",
+                self.predictors
+            );
+        }
         for (family, r) in &self.spearman_latent {
             s += &format!(
                 "\nSpearman(ψ, latent courtesy) {family}: {} (n = {})",
@@ -429,8 +486,11 @@ impl LabelSummary {
 /// A `scbg label` run.
 #[derive(Debug, Clone)]
 pub struct LabelRun {
-    /// Predictor checkpoint folder.
+    /// Predictor checkpoint folder (B's sampled futures come from its marginal).
     pub model: PathBuf,
+    /// Further predictor checkpoint folders: ψ is averaged over `model` and these (a deep
+    /// ensemble, [`label_scenes_ensemble`]); empty for one predictor.
+    pub ensemble: Vec<PathBuf>,
     /// Prepared cache folder.
     pub data: PathBuf,
     /// Output folder: `labels-NNNNN.parquet` per cache shard, `psi_histogram.png`,
@@ -476,13 +536,15 @@ pub fn shard_table_name(index: usize) -> String {
 }
 
 /// Writes the label table of each cache shard, the ψ histogram (paper Fig. 3) and
-/// `summary.json` in `out` from labelled scenes, and returns the rows and the summary.
+/// `summary.json` in `out` from labelled scenes (by an ensemble of `predictors`), and returns
+/// the rows and the summary.
 pub fn write_label_outputs(
     out: &Path,
     dataset: &PreparedDataset,
     labelled: &[SceneLabels],
     options: LabelOptions,
     truth: Option<&[GroundTruth]>,
+    predictors: usize,
 ) -> anyhow::Result<(Vec<LabelRow>, LabelSummary)> {
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     let index = truth
@@ -499,7 +561,7 @@ pub fn write_label_outputs(
         write_label_table(&out.join(shard_table_name(si)), &shard_rows)?;
         rows.extend(shard_rows);
     }
-    let summary = finish_labels(out, &rows, options, truth)?;
+    let summary = finish_labels(out, &rows, options, truth, predictors)?;
     Ok((rows, summary))
 }
 
@@ -523,6 +585,7 @@ fn finish_labels(
     rows: &[LabelRow],
     options: LabelOptions,
     truth: Option<&[GroundTruth]>,
+    predictors: usize,
 ) -> anyhow::Result<LabelSummary> {
     let logged: Vec<f64> = rows
         .iter()
@@ -535,7 +598,10 @@ fn finish_labels(
         "courtesy ψ of logged trajectories (m/s)",
         &out.join("psi_histogram.png"),
     )?;
-    let summary = LabelSummary::of(rows, options, truth);
+    let summary = LabelSummary {
+        predictors,
+        ..LabelSummary::of(rows, options, truth)
+    };
     if let (Some(truth), Some(_)) = (truth, &summary.fidelity) {
         crate::fidelity::write_scatter(rows, truth, &out.join("psi_fidelity.png"))?;
     }
@@ -573,6 +639,14 @@ pub fn label_cache(
     let ckpt = Checkpoint::read(&run.model)?;
     let device = scbg_model::device::device(&ckpt.train_config.backend)?;
     let model = ckpt.load_model(&run.model, &device)?;
+    let mut loaded = vec![(model, ckpt)];
+    for dir in &run.ensemble {
+        let ckpt = Checkpoint::read(dir)?;
+        let model = ckpt.load_model(dir, &device)?;
+        loaded.push((model, ckpt));
+    }
+    let members: Vec<(&Multipath, &Checkpoint)> = loaded.iter().map(|(m, c)| (m, c)).collect();
+    ensemble_features(&members.iter().map(|&(_, c)| c).collect::<Vec<_>>())?;
     let dataset = PreparedDataset::open(&run.data)?;
     let truth = run
         .ground_truth
@@ -595,9 +669,8 @@ pub fn label_cache(
             rows.extend(read_label_table(&path)?);
             continue;
         }
-        let labelled = label_scenes(
-            &model,
-            &ckpt,
+        let labelled = label_scenes_ensemble(
+            &members,
             &device,
             &dataset,
             range,
@@ -619,7 +692,10 @@ pub fn label_cache(
             run.data.display(),
             rows.len()
         ));
-        let summary = LabelSummary::of(&rows, run.options, None);
+        let summary = LabelSummary {
+            predictors: members.len(),
+            ..LabelSummary::of(&rows, run.options, None)
+        };
         return Ok((rows, summary));
     }
     ensure_request!(
@@ -627,7 +703,13 @@ pub fn label_cache(
         "no interacting pairs to label in {}",
         run.data.display()
     );
-    let summary = finish_labels(&run.out, &rows, run.options, truth.as_deref())?;
+    let summary = finish_labels(
+        &run.out,
+        &rows,
+        run.options,
+        truth.as_deref(),
+        members.len(),
+    )?;
     progress.note(&summary.to_text());
     Ok((rows, summary))
 }

@@ -2,7 +2,7 @@
 //! predictor → labels → a tiny generator → generation at a quantile and at a ψ, plus the
 //! artefact errors a front end has to show.
 
-use scbg::choices::{Courtesy, Family, MarginalEstimate, Reward, Variant};
+use scbg::choices::{Courtesy, Family, LabelOptions, MarginalEstimate, Reward, Variant};
 use scbg::{Quiet, data, generate, generator, labels, predictor, synth};
 
 /// A tiny predictor config, shared with the CLI tests.
@@ -41,6 +41,7 @@ fn label_train_and_generate_through_the_library() {
     let (rows, summary) = labels::label_cache(
         &labels::LabelRun {
             model: p("model"),
+            ensemble: vec![],
             data: p("cache"),
             out: p("labels"),
             options,
@@ -59,6 +60,8 @@ fn label_train_and_generate_through_the_library() {
         rows
     );
     assert!(!summary.spearman_latent.is_empty());
+    assert_eq!(summary.predictors, 1);
+    ensemble_labels(&rows, options, dir.path());
 
     // The generator's training labels are the label table's: same path, same stream.
     let predictors = generator::load_predictors(&p("model")).unwrap();
@@ -529,6 +532,7 @@ fn courtesy_toward_neighbours(
     let (rows, summary) = labels::label_cache(
         &labels::LabelRun {
             model: p("model"),
+            ensemble: vec![],
             data: p("cache"),
             out: p("labels_neighbours"),
             options,
@@ -676,4 +680,83 @@ fn generator_heads(
         scbg::is_invalid_request(&err) && format!("{err:#}").contains(&format!("{} modes", k + 1)),
         "{err:#}"
     );
+}
+
+/// `scbg label --model P --model Q`: ψ averaged over an ensemble of predictors.
+fn ensemble_labels(single: &[labels::LabelRow], options: LabelOptions, dir: &std::path::Path) {
+    let p = |s: &str| dir.join(s);
+    let run = |ensemble: Vec<std::path::PathBuf>, out: &str| {
+        labels::label_cache(
+            &labels::LabelRun {
+                model: p("model"),
+                ensemble,
+                data: p("cache"),
+                out: p(out),
+                options,
+                seed: 0,
+                ground_truth: Some(p("synth").join(synth::GROUND_TRUTH_FILE)),
+                shard_index: 0,
+                num_shards: 1,
+            },
+            &Quiet,
+        )
+    };
+    // A predictor twice is that predictor.
+    let (twice, summary) = run(vec![p("model")], "labels_twice").unwrap();
+    assert_eq!(summary.predictors, 2);
+    assert_eq!(twice, single);
+
+    // A second predictor (another seed): the same futures, each logged future's E[r | x, y_B]
+    // the mean of the two predictors' (the estimate of E[r | x] averages the sampled futures,
+    // which differ when the second predictor labels alone).
+    let mut config = predictor::TrainConfig::from_toml(TINY_CONFIG).unwrap();
+    config.seed += 1;
+    config.epochs = 1;
+    predictor::train_predictor(&p("cache"), &p("model2"), &config, false, &Quiet).unwrap();
+    let (both, _) = run(vec![p("model2")], "labels_both").unwrap();
+    let (second, _) = labels::label_cache(
+        &labels::LabelRun {
+            model: p("model2"),
+            ensemble: vec![],
+            data: p("cache"),
+            out: p("labels_second"),
+            options,
+            seed: 0,
+            ground_truth: None,
+            shard_index: 0,
+            num_shards: 1,
+        },
+        &Quiet,
+    )
+    .unwrap();
+    assert_eq!(both.len(), single.len());
+    let mut differs = false;
+    for ((e, a), b) in both.iter().zip(single).zip(&second) {
+        assert_eq!(
+            (&e.scenario_id, e.a_id, e.b_id, e.sample),
+            (&a.scenario_id, a.a_id, a.b_id, a.sample)
+        );
+        assert_eq!(
+            e.psi_true, a.psi_true,
+            "the same futures, scored by the oracle"
+        );
+        if e.sample == 0 {
+            let want = 0.5 * (a.e_cond + b.e_cond);
+            assert!((e.e_cond - want).abs() < 1e-4 * (1.0 + want.abs()), "{e:?}");
+            differs |= (a.e_cond - b.e_cond).abs() > 1e-3;
+        }
+    }
+    assert!(differs, "the two predictors agree everywhere");
+
+    // Members must read the same features; the lane path may differ (built for any member).
+    let ckpt = generator::load_predictors(&p("model")).unwrap().ckpt;
+    let mut other = ckpt.clone();
+    other.train_config.max_other_agents += 1;
+    let err = labels::ensemble_features(&[&ckpt, &other]).unwrap_err();
+    assert!(err.to_string().contains("predictor 2"), "{err}");
+    assert!(scbg::is_invalid_request(&err));
+    let mut lane = ckpt.clone();
+    lane.train_config.lane_frame_condition = !ckpt.train_config.lane_frame_condition;
+    let features = labels::ensemble_features(&[&ckpt, &lane]).unwrap();
+    assert!(features.lane_path);
 }
