@@ -70,6 +70,11 @@ pub struct DemoArgs {
     /// offset from A's lane); off by default (BENCHMARKS.md, issue 11).
     #[arg(long)]
     pub lane_frame: bool,
+    /// Train the predictor with B's future acting step by step on A's decoder (A's steps in
+    /// each 0.5 s block react only to B's future up to the block's start: interventional
+    /// conditioning); off by default (BENCHMARKS.md, issue 11).
+    #[arg(long)]
+    pub stepwise: bool,
     /// Predictor training epochs.
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,

@@ -27,6 +27,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     counterfactuals: a.counterfactuals,
                     condition_on_a: a.condition_on_a,
                     lane_frame: a.lane_frame,
+                    stepwise: a.stepwise,
                     epochs: a.epochs,
                     predictors: a.predictors as usize,
                     generator_epochs: a.generator_epochs,

@@ -85,6 +85,12 @@ pub struct MultipathConfig {
     /// a checkpoint written before it existed reads as off.
     #[serde(default)]
     pub lane_frame_condition: bool,
+    /// Whether the conditioning future acts step by step on the decoder (interventional, see
+    /// `StepwiseCondition`: the target's displacements in each 0.5 s block react only to the
+    /// other agent's future up to the block's start) instead of through one fused vector (the
+    /// CBP default). Off in the presets; a checkpoint written before it existed reads as off.
+    #[serde(default)]
+    pub stepwise_condition: bool,
 }
 
 impl MultipathConfig {
@@ -105,6 +111,7 @@ impl MultipathConfig {
             mcg_blocks: 5,
             future_hidden: 256,
             lane_frame_condition: false,
+            stepwise_condition: false,
         }
     }
 
@@ -126,6 +133,7 @@ impl MultipathConfig {
             mcg_blocks: 2,
             future_hidden: 64,
             lane_frame_condition: false,
+            stepwise_condition: false,
         }
     }
 

@@ -47,6 +47,9 @@ pub struct DemoOptions {
     /// Train the predictor with B's future in A's lane frame
     /// ([`scbg_train::TrainConfig::lane_frame_condition`]).
     pub lane_frame: bool,
+    /// Train the predictor with B's future acting step by step on A's decoder
+    /// ([`scbg_train::TrainConfig::stepwise_condition`]).
+    pub stepwise: bool,
     /// Predictor training epochs.
     pub epochs: usize,
     /// Predictors to train (seeds `seed`, `seed + 1`, …) and label with as an ensemble (ψ
@@ -157,6 +160,10 @@ pub struct DemoReport {
     /// The yardstick of `truth_control`: the same scoring of the synthetic world's own B at
     /// courtesy c = q ([`crate::fidelity::WorldKnob`]); `null` without a ground truth.
     pub truth_control_world: Option<crate::fidelity::WorldKnob>,
+    /// The other yardsticks of `truth_control`: choosing among B's labelled futures (the
+    /// generators' training candidates) by the labels and by ψ_true
+    /// ([`crate::fidelity::SelectionControl`]); `null` without a ground truth.
+    pub truth_control_selection: Option<crate::fidelity::SelectionControl>,
     /// The evaluation's settings and figures.
     pub scbg_eval: ScbgEvalSummary,
     /// The closed-loop stage (full variant, first seed, held-out scenes): realised courtesy,
@@ -259,6 +266,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         seed: options.seed,
         counterfactual_cache,
         lane_frame_condition: options.lane_frame,
+        stepwise_condition: options.stepwise,
         ..Default::default()
     };
     let predictor_dir = out.join("predictor");
@@ -597,6 +605,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         truth_control: truth_mean,
         truth_control_seed_std: truth_std,
         truth_control_world: scbg.truth_control_world.clone(),
+        truth_control_selection: scbg.truth_control_selection.clone(),
         scbg_eval: ScbgEvalSummary {
             examples: scbg.examples,
             high_threshold_psi: scbg.high_threshold_psi,

@@ -441,6 +441,77 @@ pub fn world_truth_control(
     Some(quantile_summary(&rows))
 }
 
+/// How much control in truth a *selector* among each example's labelled futures of B (the
+/// logged one and those sampled from B's marginal prediction — the candidates the generator is
+/// trained on) would reach: at input quantile q, the candidate at rank ⌊q·n⌋ of n by a key.
+/// It splits the generator's control in truth into what the candidates offer and what the
+/// labels rank right: a generator that follows its labels perfectly reaches `by_label`, and
+/// no choice among these candidates beats `by_truth`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SelectionControl {
+    /// Spearman(q, ψ_true) when the candidates are ranked by ψ_true itself (the ceiling).
+    pub by_truth: WorldKnob,
+    /// The same ranked by the labels ψ_label (J_φ), i.e. a perfect follower of the labels.
+    pub by_label: WorldKnob,
+    /// Candidates per example (1 logged + M sampled, those the oracle could score).
+    pub candidates_mean: f64,
+}
+
+/// The index of the candidate a selector takes at quantile `q` among `n` ranked candidates.
+fn rank_at(q: f32, n: usize) -> usize {
+    ((f64::from(q) * n as f64).floor() as usize).min(n.saturating_sub(1))
+}
+
+/// [`SelectionControl`] over the ground-truth roles among `examples`; `None` when there is
+/// none.
+pub fn selection_control(
+    examples: &[&scbg_generator::Example],
+    truth: &TruthIndex<'_>,
+) -> Option<SelectionControl> {
+    use rayon::prelude::*;
+    use scbg_generator::eval::EVAL_QUANTILES;
+    // Per scored example: family, and (ψ_label, ψ_true) of every candidate it could score.
+    let scored: Vec<(&'static str, Vec<(f64, f64)>)> = examples
+        .par_iter()
+        .filter_map(|e| {
+            let (t, scenario) = truth_scenario(e, truth)?;
+            let oracle = scenario.oracle();
+            let pairs: Vec<(f64, f64)> = e
+                .futures_b
+                .iter()
+                .zip(&e.psi)
+                .filter_map(|(future, &label)| {
+                    let world = world_points(&e.b.world_from_agent, future);
+                    Some((f64::from(label), oracle.psi_true(&world).ok()?))
+                })
+                .collect();
+            (pairs.len() >= 2).then_some((t.family.name(), pairs))
+        })
+        .collect();
+    if scored.is_empty() {
+        return None;
+    }
+    let select = |key: fn(&(f64, f64)) -> f64| -> Vec<QuantileRow> {
+        scored
+            .iter()
+            .map(|(family, pairs)| {
+                let mut ranked = pairs.clone();
+                ranked.sort_by(|a, b| key(a).total_cmp(&key(b)));
+                let truths = EVAL_QUANTILES
+                    .iter()
+                    .map(|&q| ranked[rank_at(q, ranked.len())].1)
+                    .collect();
+                (*family, truths)
+            })
+            .collect()
+    };
+    Some(SelectionControl {
+        by_truth: quantile_summary(&select(|p| p.1)),
+        by_label: quantile_summary(&select(|p| p.0)),
+        candidates_mean: scored.iter().map(|s| s.1.len() as f64).sum::<f64>() / scored.len() as f64,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -457,6 +528,18 @@ mod tests {
         assert!((a.spread_ratio.unwrap() - 0.5).abs() < 1e-12);
         let flat = agreement(&[1.0, 2.0], &[3.0, 3.0]);
         assert_eq!((flat.slope, flat.spread_ratio), (None, None));
+    }
+
+    /// A selector's pick at quantile q among n ranked candidates: the lowest rank for small q,
+    /// the highest for q near 1, every rank for the 9 evaluation quantiles of 9 candidates.
+    #[test]
+    fn rank_at_spreads_the_quantiles_over_the_candidates() {
+        use scbg_generator::eval::EVAL_QUANTILES;
+        let picks: Vec<usize> = EVAL_QUANTILES.iter().map(|&q| rank_at(q, 9)).collect();
+        assert_eq!(picks, vec![0, 1, 2, 3, 4, 5, 6, 7, 8]);
+        assert_eq!(rank_at(0.0, 4), 0);
+        assert_eq!(rank_at(1.0, 4), 3);
+        assert_eq!(rank_at(0.5, 1), 0);
     }
 
     /// The world's B at the scene's own courtesy drives the logged future (so the world knob

@@ -37,6 +37,9 @@ pub struct ScbgEval {
     /// The same scoring of the synthetic world's own B at courtesy c = q: the yardstick of
     /// `truth_control` (synthetic data with its ground truth only).
     pub truth_control_world: Option<crate::fidelity::WorldKnob>,
+    /// What a selector among the labelled futures of B reaches: ranked by ψ_true (the
+    /// candidates' ceiling) and by the labels (a perfect follower of J_φ) — synthetic data only.
+    pub truth_control_selection: Option<crate::fidelity::SelectionControl>,
 }
 
 fn ms_json(m: &Option<MeanStd>) -> serde_json::Value {
@@ -80,6 +83,7 @@ impl ScbgEval {
             not_evaluated: Some(why),
             truth_control: Vec::new(),
             truth_control_world: None,
+            truth_control_selection: None,
         }
     }
 
@@ -121,13 +125,14 @@ impl ScbgEval {
         )
     }
 
-    /// The report JSON: `{variants, truth_control, truth_control_world, examples,
-    /// high_threshold_psi, psi_min, psi_max, figures}`.
+    /// The report JSON: `{variants, truth_control, truth_control_world,
+    /// truth_control_selection, examples, high_threshold_psi, psi_min, psi_max, figures}`.
     pub fn to_json(&self) -> serde_json::Value {
         json!({
             "variants": self.variants_json(),
             "truth_control": self.truth_control_json(),
             "truth_control_world": self.truth_control_world,
+            "truth_control_selection": self.truth_control_selection,
             "examples": self.examples,
             "high_threshold_psi": self.high_threshold_psi,
             "psi_min": self.psi_range.0,
@@ -189,6 +194,20 @@ impl ScbgEval {
                     "the world's own B at c = q (yardstick)",
                     &w.spearman_quantile_psi_true,
                     &w.examples,
+                    None,
+                ));
+            }
+            if let Some(sel) = &self.truth_control_selection {
+                s.push_str(&row(
+                    "choosing among B's labelled futures by ψ_label (a perfect follower of the labels)",
+                    &sel.by_label.spearman_quantile_psi_true,
+                    &sel.by_label.examples,
+                    None,
+                ));
+                s.push_str(&row(
+                    "choosing among B's labelled futures by ψ_true (what the candidates allow)",
+                    &sel.by_truth.spearman_quantile_psi_true,
+                    &sel.by_truth.examples,
                     None,
                 ));
             }
@@ -324,6 +343,9 @@ pub fn evaluate_examples(
         truth_control_world: index
             .as_ref()
             .and_then(|index| crate::fidelity::world_truth_control(&refs, index)),
+        truth_control_selection: index
+            .as_ref()
+            .and_then(|index| crate::fidelity::selection_control(&refs, index)),
     })
 }
 

@@ -706,12 +706,14 @@ fn ensemble_labels(single: &[labels::LabelRow], options: LabelOptions, dir: &std
     assert_eq!(summary.predictors, 2);
     assert_eq!(twice, single);
 
-    // A second predictor (another seed): the same futures, each logged future's E[r | x, y_B]
-    // the mean of the two predictors' (the estimate of E[r | x] averages the sampled futures,
-    // which differ when the second predictor labels alone).
+    // A second predictor (another seed, and the step-wise interventional conditioning, so
+    // that it trains and labels through the library too): the same futures, each logged
+    // future's E[r | x, y_B] the mean of the two predictors' (the estimate of E[r | x]
+    // averages the sampled futures, which differ when the second predictor labels alone).
     let mut config = predictor::TrainConfig::from_toml(TINY_CONFIG).unwrap();
     config.seed += 1;
     config.epochs = 1;
+    config.stepwise_condition = true;
     predictor::train_predictor(&p("cache"), &p("model2"), &config, false, &Quiet).unwrap();
     let (both, _) = run(vec![p("model2")], "labels_both").unwrap();
     let (second, _) = labels::label_cache(

@@ -60,6 +60,9 @@ pub struct TrainConfig {
     /// Place B's future in A's lane frame in the future encoder (turns on
     /// `MultipathConfig::lane_frame_condition` of the preset or the `[model]` table).
     pub lane_frame_condition: bool,
+    /// Condition A's decoder step by step on B's future up to each step (interventional; turns
+    /// on `MultipathConfig::stepwise_condition` of the preset or the `[model]` table).
+    pub stepwise_condition: bool,
 }
 
 impl Default for TrainConfig {
@@ -86,6 +89,7 @@ impl Default for TrainConfig {
             backend: "flex".into(),
             counterfactual_cache: None,
             lane_frame_condition: false,
+            stepwise_condition: false,
         }
     }
 }
@@ -141,7 +145,8 @@ impl TrainConfig {
     }
 
     /// The model widths: `model` if given, else the `preset`; with `lane_frame_condition`,
-    /// the future encoder's lane frame on.
+    /// the future encoder's lane frame on, with `stepwise_condition` the step-wise decoder
+    /// conditioning.
     pub fn model_config(&self) -> Result<MultipathConfig, ConfigError> {
         let mut config = match &self.model {
             Some(m) => m.clone(),
@@ -149,6 +154,14 @@ impl TrainConfig {
                 .ok_or_else(|| ConfigError::UnknownPreset(self.preset.clone()))?,
         };
         config.lane_frame_condition |= self.lane_frame_condition;
+        config.stepwise_condition |= self.stepwise_condition;
+        if config.stepwise_condition && config.future_steps % scbg_model::CONDITION_STRIDE != 0 {
+            return Err(ConfigError::Invalid(format!(
+                "stepwise_condition needs future_steps divisible by {} (got {})",
+                scbg_model::CONDITION_STRIDE,
+                config.future_steps
+            )));
+        }
         Ok(config)
     }
 
@@ -162,5 +175,46 @@ impl TrainConfig {
             lane_path: self.model_config().is_ok_and(|m| m.lane_frame_condition),
             ..Default::default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The step-wise conditioning is a top-level switch like the lane frame: off by default,
+    /// on in the model when the TOML says so, refused for a horizon the 0.5 s blocks do not
+    /// divide.
+    #[test]
+    fn stepwise_condition_switches_the_model_and_checks_the_horizon() {
+        assert!(
+            !TrainConfig::default()
+                .model_config()
+                .unwrap()
+                .stepwise_condition
+        );
+        let on = TrainConfig::from_toml("stepwise_condition = true\nlane_frame_condition = true")
+            .unwrap();
+        let model = on.model_config().unwrap();
+        assert!(model.stepwise_condition && model.lane_frame_condition);
+        let odd = TrainConfig {
+            model: Some(MultipathConfig {
+                future_steps: 42,
+                ..MultipathConfig::cpu_small()
+            }),
+            stepwise_condition: true,
+            ..Default::default()
+        };
+        let err = odd.validate().unwrap_err().to_string();
+        assert!(err.contains("future_steps"), "{err}");
+        // Without the option the same horizon is fine.
+        assert!(
+            TrainConfig {
+                stepwise_condition: false,
+                ..odd
+            }
+            .validate()
+            .is_ok()
+        );
     }
 }

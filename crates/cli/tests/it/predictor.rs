@@ -529,6 +529,23 @@ fn train_generator_saves_generator_and_range_predictor() {
         Some(roles)
     );
     assert!(eval["truth_control_world"]["spearman_quantile_psi_true"]["all"].is_number());
+    // The selectors among B's labelled futures score the same roles; ranked by ψ_true itself,
+    // each role's picks rise with the quantile, so the mean does too.
+    let selection = &eval["truth_control_selection"];
+    assert_eq!(
+        selection["by_label"]["examples"]["all"].as_u64(),
+        Some(roles),
+        "{eval}"
+    );
+    let means: Vec<f64> = selection["by_truth"]["per_quantile"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|q| q["psi_true_mean"].as_f64().unwrap())
+        .collect();
+    assert_eq!(means.len(), 9);
+    assert!(means.windows(2).all(|w| w[0] <= w[1]), "{means:?}");
+    assert!(selection["candidates_mean"].as_f64().unwrap() >= 2.0);
     for variant in ["baseline", "full"] {
         let v = &eval["variants"][variant];
         for key in [

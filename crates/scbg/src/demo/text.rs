@@ -122,7 +122,22 @@ impl DemoReport {
                 rho("cutin"),
             );
         }
-        if let Some(w) = &self.truth_control_world {
+        let yardsticks = [
+            (
+                "the world's own B at c = q (yardstick)",
+                self.truth_control_world.as_ref(),
+            ),
+            (
+                "choosing among B's labelled futures by ψ_label (a perfect follower)",
+                self.truth_control_selection.as_ref().map(|s| &s.by_label),
+            ),
+            (
+                "choosing among B's labelled futures by ψ_true (their ceiling)",
+                self.truth_control_selection.as_ref().map(|s| &s.by_truth),
+            ),
+        ];
+        for (label, w) in yardsticks {
+            let Some(w) = w else { continue };
             let rho = |k: &str| {
                 w.spearman_quantile_psi_true
                     .get(k)
@@ -131,7 +146,7 @@ impl DemoReport {
                     .map_or("-".into(), |x| format!("{x:.3}"))
             };
             out += &format!(
-                "| the world's own B at c = q (yardstick) | | | | | | | {} | {} | {} | {} |\n",
+                "| {label} | | | | | | | {} | {} | {} | {} |\n",
                 rho(crate::fidelity::POOLED),
                 rho("merge"),
                 rho("crossing"),
