@@ -13,6 +13,7 @@
 
 pub mod batch;
 pub mod blocks;
+pub mod condition;
 pub mod config;
 pub mod device;
 pub mod fixtures;

@@ -457,6 +457,22 @@ pub struct SelectionControl {
     pub candidates_mean: f64,
 }
 
+impl SelectionControl {
+    /// The two selectors with the label their rows carry in the reports.
+    pub fn yardsticks(&self) -> [(&'static str, &WorldKnob); 2] {
+        [
+            (
+                "choosing among B's labelled futures by ψ_label (a perfect follower of the labels)",
+                &self.by_label,
+            ),
+            (
+                "choosing among B's labelled futures by ψ_true (what the candidates allow)",
+                &self.by_truth,
+            ),
+        ]
+    }
+}
+
 /// The index of the candidate a selector takes at quantile `q` among `n` ranked candidates.
 fn rank_at(q: f32, n: usize) -> usize {
     ((f64::from(q) * n as f64).floor() as usize).min(n.saturating_sub(1))

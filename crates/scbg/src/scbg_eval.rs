@@ -197,17 +197,15 @@ impl ScbgEval {
                     None,
                 ));
             }
-            if let Some(sel) = &self.truth_control_selection {
+            for (label, w) in self
+                .truth_control_selection
+                .iter()
+                .flat_map(|sel| sel.yardsticks())
+            {
                 s.push_str(&row(
-                    "choosing among B's labelled futures by ψ_label (a perfect follower of the labels)",
-                    &sel.by_label.spearman_quantile_psi_true,
-                    &sel.by_label.examples,
-                    None,
-                ));
-                s.push_str(&row(
-                    "choosing among B's labelled futures by ψ_true (what the candidates allow)",
-                    &sel.by_truth.spearman_quantile_psi_true,
-                    &sel.by_truth.examples,
+                    label,
+                    &w.spearman_quantile_psi_true,
+                    &w.examples,
                     None,
                 ));
             }

@@ -155,7 +155,11 @@ impl TrainConfig {
         };
         config.lane_frame_condition |= self.lane_frame_condition;
         config.stepwise_condition |= self.stepwise_condition;
-        if config.stepwise_condition && config.future_steps % scbg_model::CONDITION_STRIDE != 0 {
+        if config.stepwise_condition
+            && !config
+                .future_steps
+                .is_multiple_of(scbg_model::CONDITION_STRIDE)
+        {
             return Err(ConfigError::Invalid(format!(
                 "stepwise_condition needs future_steps divisible by {} (got {})",
                 scbg_model::CONDITION_STRIDE,

@@ -122,22 +122,15 @@ impl DemoReport {
                 rho("cutin"),
             );
         }
-        let yardsticks = [
-            (
-                "the world's own B at c = q (yardstick)",
-                self.truth_control_world.as_ref(),
-            ),
-            (
-                "choosing among B's labelled futures by ψ_label (a perfect follower)",
-                self.truth_control_selection.as_ref().map(|s| &s.by_label),
-            ),
-            (
-                "choosing among B's labelled futures by ψ_true (their ceiling)",
-                self.truth_control_selection.as_ref().map(|s| &s.by_truth),
-            ),
-        ];
-        for (label, w) in yardsticks {
-            let Some(w) = w else { continue };
+        let world = self
+            .truth_control_world
+            .iter()
+            .map(|w| ("the world's own B at c = q (yardstick)", w));
+        let selection = self
+            .truth_control_selection
+            .iter()
+            .flat_map(|sel| sel.yardsticks());
+        for (label, w) in world.chain(selection) {
             let rho = |k: &str| {
                 w.spearman_quantile_psi_true
                     .get(k)
