@@ -10,7 +10,7 @@ use scbg_features::{
 use scbg_model::{Batch, Mixture, Mode, Multipath};
 use scbg_scene::Pose2;
 
-use crate::{Audience, Reward, expected_reward};
+use crate::{Audience, Reward, expected_reward, expected_reward_shared};
 
 /// The marginal mixture of each (standardised) sample.
 pub fn marginal_mixtures(
@@ -310,33 +310,28 @@ pub fn label_role(
         }
     }
     let rows = members.len() * n;
-    let refs: Vec<&AgentSample> = members
-        .iter()
-        .flat_map(|&(s, _)| std::iter::repeat_n(s, n))
+    // Every member's scene is encoded once for its n futures of B.
+    let samples: Vec<&AgentSample> = members.iter().map(|&(s, _)| s).collect();
+    let base = Batch::for_mode(&samples, Mode::Conditional, device);
+    let member_of_row: Vec<usize> = (0..members.len())
+        .flat_map(|j| std::iter::repeat_n(j, n))
         .collect();
-    let batch = Batch::for_mode(&refs, Mode::Conditional, device);
     let condition = Tensor::<3>::from_data(TensorData::new(cond, [rows, t, 3]), device);
-    let e_cond_all: Vec<f32> = expected_reward(model, &batch, Some(condition), reward, 0.1)
-        .into_data()
-        .try_to_vec::<f32>()
-        .expect("f32");
+    let e_cond_all: Vec<f32> =
+        expected_reward_shared(model, &base, &member_of_row, condition, reward, 0.1)
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("f32");
     let e_marg_members: Vec<f32> = if marginal == MarginalEstimate::ConditionalAverage && n > 1 {
         e_cond_all
             .chunks(n)
             .map(|e| e[1..].iter().sum::<f32>() / (n - 1) as f32)
             .collect()
     } else {
-        let samples: Vec<&AgentSample> = members.iter().map(|&(s, _)| s).collect();
-        expected_reward(
-            model,
-            &Batch::for_mode(&samples, Mode::Conditional, device),
-            None,
-            reward,
-            0.1,
-        )
-        .into_data()
-        .try_to_vec::<f32>()
-        .expect("f32")
+        expected_reward(model, &base, None, reward, 0.1)
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("f32")
     };
     let mut psi = vec![0.0f32; n];
     let mut e_cond = vec![0.0f32; n];

@@ -59,6 +59,35 @@ pub fn expected_reward(
     (probs * r).sum_dim(1).reshape([n])
 }
 
+/// [`expected_reward`] conditional on `condition` for rows that share their scene: row `r`
+/// is target `rows[r]` of `base` ([`Multipath::forward_shared`]: the scene is encoded once per
+/// target, not once per future).
+///
+/// # Shapes
+/// `base`: batch of `u` targets, `rows: [n]` (each < u), `condition: [n, T, 3]` `-> [n]`
+pub fn expected_reward_shared(
+    model: &Multipath,
+    base: &Batch,
+    rows: &[usize],
+    condition: Tensor<3>,
+    reward: Reward,
+    step_secs: f32,
+) -> Tensor<1> {
+    let device = condition.device();
+    let index: Vec<i64> = rows.iter().map(|&r| r as i64).collect();
+    let index = Tensor::<1, burn::tensor::Int>::from_data(
+        burn::tensor::TensorData::new(index, [rows.len()]),
+        &device,
+    );
+    let out = model.forward_shared(base, index, condition);
+    let [n, k, steps, _] = out.xy.dims();
+    let probs = softmax(out.logits, 1); // [n, k]
+    let r = reward
+        .evaluate(out.xy.reshape([n * k, steps, 2]), step_secs)
+        .reshape([n, k]);
+    (probs * r).sum_dim(1).reshape([n])
+}
+
 /// ψ of the futures `y_b` (in each target A's frame) — paper eq. (2).
 ///
 /// # Shapes

@@ -6,7 +6,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand::seq::IndexedRandom;
 use scbg_courtesy::losses::{courtesy_loss, huber_trajectory};
-use scbg_courtesy::{Reward, expected_reward};
+use scbg_courtesy::{Reward, expected_reward, expected_reward_shared};
 use scbg_features::AgentSample;
 use scbg_model::{Batch, BatchAugment, Multipath};
 
@@ -356,13 +356,13 @@ pub(crate) fn audience_courtesy(
             device,
         );
         let in_a = b_to_a_frame(pred, examples, times, device);
-        let e_cond = expected_reward(
+        // A's scene is encoded once for its `times` futures of B (row k·n + i is example i).
+        let example_of_row: Vec<usize> = (0..times).flat_map(|_| 0..examples.len()).collect();
+        let e_cond = expected_reward_shared(
             predictor,
-            &a_batch(examples, device).repeat(times),
-            Some(Tensor::cat(
-                vec![in_a, Tensor::ones([rows, t, 1], device)],
-                2,
-            )),
+            &a_batch(examples, device),
+            &example_of_row,
+            Tensor::cat(vec![in_a, Tensor::ones([rows, t, 1], device)], 2),
             reward,
             STEP_SECS,
         );

@@ -180,6 +180,21 @@ impl Multipath {
     /// # Shapes
     /// batch tensors `-> ([batch, embedding_width], Option<[batch, n, future_hidden]>)`
     fn encode_with_prefixes(&self, batch: &Batch) -> (Tensor<2>, Option<Tensor<3>>) {
+        self.condition_scene(
+            self.encode_scene(batch),
+            &batch.condition,
+            batch.lane_path.as_ref(),
+            batch.condition_flag.clone(),
+        )
+    }
+
+    /// The scene part of the encoder (the target's and the other agents' histories, their
+    /// interaction and the road), without the conditioning future: what rows that differ only
+    /// in their conditioning share ([`Self::forward_shared`]).
+    ///
+    /// # Shapes
+    /// batch tensors `-> SceneEncoding` of `[batch, ·]`
+    pub fn encode_scene(&self, batch: &Batch) -> SceneEncoding {
         let [b, a, steps, f] = batch.others_history.dims();
         let device = batch.target_history.device();
         let target_hist = self
@@ -212,14 +227,32 @@ impl Multipath {
         let (_, road) = self
             .road_mcg
             .forward(road, road_ctx, batch.road_mask.clone());
-        let target_for_condition = target.clone();
-        let scene = Tensor::cat(vec![target, interaction, road], 1);
+        SceneEncoding {
+            scene: Tensor::cat(vec![target.clone(), interaction, road], 1),
+            target,
+        }
+    }
+
+    /// The conditioning part of the encoder: `scene` fused with the conditioning future where
+    /// `flag` is 1, and with [`Self::stepwise`] the future's prefix encodings.
+    ///
+    /// # Shapes
+    /// `scene: SceneEncoding` of `[batch, ·]`, `condition: [batch, T, 3]`, `lane_path` as
+    /// [`Batch::lane_path`], `flag: [batch, 1]`
+    /// `-> ([batch, embedding_width], Option<[batch, n, future_hidden]>)`
+    fn condition_scene(
+        &self,
+        scene: SceneEncoding,
+        condition: &Tensor<3>,
+        lane_path: Option<&(Tensor<3>, Tensor<2>)>,
+        flag: Tensor<2>,
+    ) -> (Tensor<2>, Option<Tensor<3>>) {
+        let SceneEncoding { scene, target } = scene;
+        let [b, _] = scene.dims();
         let (condition, prefixes) = if self.stepwise.is_some() {
-            let prefixes = self.future_encoder.forward_prefixes(
-                &batch.condition,
-                batch.lane_path.as_ref(),
-                target_for_condition,
-            );
+            let prefixes = self
+                .future_encoder
+                .forward_prefixes(condition, lane_path, target);
             let [_, n, h] = prefixes.dims();
             let first = prefixes
                 .clone()
@@ -227,14 +260,9 @@ impl Multipath {
                 .reshape([b, h]);
             (first, Some(prefixes))
         } else {
-            let condition = self.future_encoder.forward(
-                &batch.condition,
-                batch.lane_path.as_ref(),
-                target_for_condition,
-            );
+            let condition = self.future_encoder.forward(condition, lane_path, target);
             (condition, None)
         };
-        let flag = batch.condition_flag.clone();
         let fused = Tensor::cat(vec![scene.clone(), condition * flag.clone(), flag], 1);
         (scene + self.fuse.forward(fused), prefixes)
     }
@@ -301,6 +329,59 @@ impl Multipath {
             embedding,
             prefixes.map(|p| (p, batch.condition_flag.clone())),
         )
+    }
+
+    /// [`Self::forward`] conditional on `condition` for rows that share their scene: row `r`
+    /// is row `rows[r]` of `base` (its histories, road and lane path) conditioned on
+    /// `condition[r]`. The scene is encoded once per row of `base` instead of once per row —
+    /// the same outputs as `forward(&base.select_rows(rows).with_condition(Some(condition)))`
+    /// up to floating-point rounding. For J_φ over many futures of B toward the same A (the
+    /// labels, the courtesy loss, sample and rank).
+    ///
+    /// # Shapes
+    /// `base`: batch tensors of `[u, ·]`, `rows: [n]` (indices < u),
+    /// `condition: [n, future_steps, 3]` (target frame: x m, y m, valid) `-> GmmOutput` of `[n, ·]`
+    pub fn forward_shared(
+        &self,
+        base: &Batch,
+        rows: Tensor<1, burn::tensor::Int>,
+        condition: Tensor<3>,
+    ) -> GmmOutput {
+        let [n, _, _] = condition.dims();
+        let device = condition.device();
+        let scene = self.encode_scene(base).select(rows.clone());
+        let lane_path = base.lane_path.as_ref().map(|(p, m)| {
+            (
+                p.clone().select(0, rows.clone()),
+                m.clone().select(0, rows.clone()),
+            )
+        });
+        let flag = Tensor::ones([n, 1], &device);
+        let (embedding, prefixes) =
+            self.condition_scene(scene, &condition, lane_path.as_ref(), flag.clone());
+        self.decode_with(embedding, prefixes.map(|p| (p, flag)))
+    }
+}
+
+/// The scene part of the encoder for a batch's rows ([`Multipath::encode_scene`]).
+#[derive(Debug, Clone)]
+pub struct SceneEncoding {
+    /// `[batch, target ‖ interaction ‖ road]`: the scene embedding before conditioning.
+    pub scene: Tensor<2>,
+    /// `[batch, target width]`: the target's own encoding (the conditioning future's query).
+    pub target: Tensor<2>,
+}
+
+impl SceneEncoding {
+    /// The encodings of `rows` (indices into this encoding's rows), in that order.
+    ///
+    /// # Shapes
+    /// `rows: [n]` `-> SceneEncoding` of `[n, ·]`
+    pub fn select(self, rows: burn::tensor::Tensor<1, burn::tensor::Int>) -> Self {
+        Self {
+            scene: self.scene.select(0, rows.clone()),
+            target: self.target.select(0, rows),
+        }
     }
 }
 
@@ -438,6 +519,84 @@ mod tests {
             } else {
                 assert!(early > 1e-7, "the fused model anticipates: {early}");
             }
+        }
+    }
+
+    /// Rows that share their scene give the same prediction through `forward_shared` (the
+    /// scene encoded once per target) as through `forward` of the repeated rows, for the fused
+    /// and the step-wise model, with and without the lane frame.
+    #[test]
+    fn forward_shared_matches_forward_of_the_repeated_rows() {
+        let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+        let features = FeatureConfig {
+            max_other_agents: 4,
+            max_road_segments: 8,
+            ..Default::default()
+        };
+        let device = Device::flex();
+        let first = straight_sample(&features, true);
+        let mut second = first.clone();
+        for v in second.target_history.iter_mut().step_by(3) {
+            *v += 0.7;
+        }
+        for k in 0..second.lane_path_xy_m.len() / 2 {
+            second.lane_path_xy_m[2 * k + 1] += 1.5;
+        }
+        let targets = [&first, &second];
+        let rows = [1usize, 0, 1, 1, 0];
+        // Each row its own future of the other agent.
+        let repeated: Vec<AgentSample> = rows
+            .iter()
+            .enumerate()
+            .map(|(r, &t)| {
+                let mut s = targets[t].clone();
+                for (k, v) in s.condition_future_xy_m.iter_mut().enumerate() {
+                    *v += 0.3 * r as f32 * (k % 2) as f32 + 0.01 * (k / 2) as f32 * r as f32;
+                }
+                s
+            })
+            .collect();
+        let repeated_refs: Vec<&AgentSample> = repeated.iter().collect();
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
+        let full = Batch::from_samples(&repeated_refs, &BatchAugment::default(), &mut rng, &device);
+        let base = Batch::from_samples(&targets, &BatchAugment::default(), &mut rng, &device);
+        let index = Tensor::<1, burn::tensor::Int>::from_data(
+            TensorData::new(rows.iter().map(|&r| r as i64).collect(), [rows.len()]),
+            &device,
+        );
+        for (stepwise, lane_frame) in [(false, false), (false, true), (true, false), (true, true)] {
+            device.seed(11);
+            let mut model = MultipathConfig {
+                stepwise_condition: stepwise,
+                lane_frame_condition: lane_frame,
+                ..MultipathConfig::cpu_small()
+            }
+            .init(&device);
+            if stepwise {
+                with_random_corrections(&mut model, &device);
+            }
+            let expected = model.forward(&full);
+            let shared = model.forward_shared(&base, index.clone(), full.condition.clone());
+            let diff = |a: Tensor<4>, b: Tensor<4>| -> f32 { (a - b).abs().max().into_scalar() };
+            let (dxy, dcov) = (
+                diff(expected.xy.clone(), shared.xy.clone()),
+                diff(expected.cov_abc.clone(), shared.cov_abc.clone()),
+            );
+            let dlogits: f32 = (expected.logits.clone() - shared.logits.clone())
+                .abs()
+                .max()
+                .into_scalar();
+            assert!(
+                dxy < 1e-4 && dcov < 1e-4 && dlogits < 1e-4,
+                "stepwise {stepwise}, lane frame {lane_frame}: {dxy} {dcov} {dlogits}"
+            );
+            // The rows do differ: the test would notice a row taken from the wrong target.
+            let rows_differ: f32 = (expected.xy.clone().narrow(0, 0, 1)
+                - expected.xy.clone().narrow(0, 1, 1))
+            .abs()
+            .max()
+            .into_scalar();
+            assert!(rows_differ > 1e-3, "{rows_differ}");
         }
     }
 
