@@ -3,7 +3,9 @@
 use std::path::PathBuf;
 
 use clap::{Args, Parser, Subcommand};
-use scbg::choices::{Family, MarginalEstimate, Preset, Reward, Threshold, Variant, Weighting};
+use scbg::choices::{
+    Family, MarginalEstimate, Policy, Preset, Reward, Threshold, Variant, Weighting,
+};
 use scbg::predictor::{ModeSelection, SplitSelection};
 
 /// Socially-controllable behavior generation for interactive traffic simulation.
@@ -312,6 +314,10 @@ pub struct SimArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
+    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
+    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    #[arg(long, value_enum, default_value_t = Policy::Generator)]
+    pub policy: Policy,
     /// WOMD Scenario TFRecord file.
     #[arg(long)]
     pub scenario: PathBuf,
@@ -367,6 +373,10 @@ pub struct EvalSimArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
+    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
+    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    #[arg(long, value_enum, default_value_t = Policy::Generator)]
+    pub policy: Policy,
     /// WOMD Scenario files (globs, folders or paths).
     #[arg(long, required = true, num_args = 1..)]
     pub data: Vec<String>,
@@ -420,6 +430,10 @@ pub struct EvalScbgArgs {
     /// Folder for the figures (fig4_quantile_courtesy.png, fig5a_*.png, fig5b_*.png).
     #[arg(long)]
     pub figures: Option<PathBuf>,
+    /// Futures of B sampled per held-out pair role (default: as many as the training labels
+    /// drew): the candidates of the `ranked` row and of the selection yardsticks.
+    #[arg(long)]
+    pub samples: Option<usize>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[arg(long)]
@@ -434,6 +448,10 @@ pub struct GenerateArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
+    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
+    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    #[arg(long, value_enum, default_value_t = Policy::Generator)]
+    pub policy: Policy,
     /// WOMD Scenario or tf.Example TFRecord file.
     #[arg(long)]
     pub scenario: PathBuf,
@@ -610,6 +628,10 @@ pub struct ServeArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
+    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
+    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    #[arg(long, value_enum, default_value_t = Policy::Generator)]
+    pub policy: Policy,
     /// Address to bind; anything but loopback needs --token.
     #[arg(long, default_value = "127.0.0.1:8080")]
     pub addr: std::net::SocketAddr,
@@ -660,6 +682,10 @@ pub struct BenchSimArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
+    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
+    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    #[arg(long, value_enum, default_value_t = Policy::Generator)]
+    pub policy: Policy,
     /// Synthetic scenes to time.
     #[arg(long, default_value_t = 12)]
     pub scenes: usize,

@@ -111,13 +111,15 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             );
         }
         Command::Bench(BenchCommand::Sim(a)) => {
-            let model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
+            let mut model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
+            model.scbg.policy = a.policy;
             print!("{}", scbg::bench::sim(&model, a.scenes)?.to_text());
             println!();
         }
         Command::Sim(a) => sim(&a, progress)?,
         Command::Serve(a) => {
-            let model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
+            let mut model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
+            model.scbg.policy = a.policy;
             let defaults = scbg_serve::ServeConfig::default();
             scbg_serve::run(
                 model,
@@ -153,6 +155,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         }
         Command::Eval(EvalCommand::Sim(a)) => {
             let options = scbg::sim_eval::SimEvalOptions {
+                policy: a.policy,
                 scenes: a.scenes,
                 wosac_scenes: a.wosac_scenes,
                 wosac_quantiles: a.wosac_quantiles.clone(),
@@ -229,6 +232,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 a.predictor.as_deref(),
                 a.split.split(),
                 a.seed,
+                a.samples,
                 a.figures.as_deref(),
                 truth.as_deref(),
                 progress,
@@ -320,6 +324,7 @@ fn sim(a: &crate::cli::SimArgs, progress: &dyn Progress) -> anyhow::Result<()> {
         &scbg::sim::SimRun {
             model: a.model.clone(),
             predictor: a.predictor.clone(),
+            policy: a.policy,
             scenario: a.scenario.clone(),
             scenario_id: a.scenario_id.clone(),
             ego: a.a,
@@ -469,7 +474,8 @@ fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
 
 /// `scbg generate`.
 fn generate(args: &GenerateArgs, progress: &dyn Progress) -> anyhow::Result<()> {
-    let model = scbg::generator::load_scbg(&args.model, args.predictor.as_deref())?;
+    let mut model = scbg::generator::load_scbg(&args.model, args.predictor.as_deref())?;
+    model.scbg.policy = args.policy;
     let (index, scene) =
         scbg::generate::find_scene(&args.scenario, args.scenario_id.as_deref(), args.a, args.b)?;
     let courtesy: Vec<Courtesy> = if args.psi.is_empty() {

@@ -25,7 +25,7 @@ use crate::train::{audience_courtesy, repeat_rows};
 pub const EVAL_QUANTILES: [f32; 9] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9];
 
 /// Generated futures of B and what J_φ says about them.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Measured {
     /// `[example][k]` achieved ψ = E[r(Y_A) | x, ŷ] − E[r(Y_A) | x].
     pub psi: Vec<Vec<f32>>,
@@ -52,12 +52,7 @@ pub fn generate_and_measure(
     device: &Device,
 ) -> Measured {
     let k = psi.first().map_or(0, Vec::len);
-    let mut out = Measured {
-        psi: Vec::new(),
-        e_cond: Vec::new(),
-        e_marg: Vec::new(),
-        futures_b: Vec::new(),
-    };
+    let mut out = Measured::default();
     if k == 0 {
         return out;
     }
@@ -78,30 +73,45 @@ pub fn generate_and_measure(
             Tensor::from_data(TensorData::new(psi_rows, [rows]), device),
             modes,
         );
-        let [_, t, _] = pred.dims();
-        // E[r(Y_A) | x] as the labels estimated it.
-        let e_marg: Vec<f32> = exs.iter().map(|e| e.e_marg).collect();
-        let (achieved, e_cond) = audience_courtesy(predictor, pred.clone(), exs, k, reward, device);
-        let (achieved, e_cond) = (to_vec(achieved), to_vec(e_cond));
-        let xy = to_vec(pred);
-        for i in 0..n {
-            let cond: Vec<f32> = (0..k).map(|j| e_cond[j * n + i]).collect();
-            out.psi.push((0..k).map(|j| achieved[j * n + i]).collect());
-            out.e_cond.push(cond);
-            out.e_marg.push(e_marg[i]);
-            out.futures_b.push(
-                (0..k)
-                    .map(|j| {
-                        let base = (j * n + i) * t * 2;
-                        (0..t)
-                            .map(|s| [xy[base + 2 * s], xy[base + 2 * s + 1]])
-                            .collect()
-                    })
-                    .collect(),
-            );
-        }
+        measure_chunk(predictor, exs, pred, k, reward, device, &mut out);
     }
     out
+}
+
+/// J_φ of `k` futures per example of `exs` (`pred: [k · n, T, 2]`, row `j · n + i` is
+/// example `i`'s `j`-th future, B's frame), appended to `out`.
+pub(crate) fn measure_chunk(
+    predictor: &Multipath,
+    exs: &[&Example],
+    pred: Tensor<3>,
+    k: usize,
+    reward: Reward,
+    device: &Device,
+    out: &mut Measured,
+) {
+    let n = exs.len();
+    let [_, t, _] = pred.dims();
+    // E[r(Y_A) | x] as the labels estimated it.
+    let e_marg: Vec<f32> = exs.iter().map(|e| e.e_marg).collect();
+    let (achieved, e_cond) = audience_courtesy(predictor, pred.clone(), exs, k, reward, device);
+    let (achieved, e_cond) = (to_vec(achieved), to_vec(e_cond));
+    let xy = to_vec(pred);
+    for i in 0..n {
+        let cond: Vec<f32> = (0..k).map(|j| e_cond[j * n + i]).collect();
+        out.psi.push((0..k).map(|j| achieved[j * n + i]).collect());
+        out.e_cond.push(cond);
+        out.e_marg.push(e_marg[i]);
+        out.futures_b.push(
+            (0..k)
+                .map(|j| {
+                    let base = (j * n + i) * t * 2;
+                    (0..t)
+                        .map(|s| [xy[base + 2 * s], xy[base + 2 * s + 1]])
+                        .collect()
+                })
+                .collect(),
+        );
+    }
 }
 
 /// The predicted 0.1 and 0.9 quantiles of ψ for each example.
@@ -223,24 +233,7 @@ pub fn evaluate_measured(
     device: &Device,
 ) -> (VariantEval, Measured) {
     let ranges = predicted_ranges(range, examples, device);
-    let nq = EVAL_QUANTILES.len();
-    let arbitrary: Vec<f32> = (0..nq)
-        .map(|j| {
-            options.arbitrary_min
-                + (options.arbitrary_max - options.arbitrary_min) * j as f32 / (nq - 1) as f32
-        })
-        .collect();
-    // Per example: [ψ_data, ψ of the 9 quantiles, the 9 arbitrary values].
-    let requested: Vec<Vec<f32>> = examples
-        .iter()
-        .zip(&ranges)
-        .map(|(e, &(lo, hi))| {
-            let mut v = vec![e.psi[0]];
-            v.extend(EVAL_QUANTILES.iter().map(|&q| psi_for_quantile(q, lo, hi)));
-            v.extend(&arbitrary);
-            v
-        })
-        .collect();
+    let requested = requested_psi(examples, &ranges, options);
     let m = generate_and_measure(
         generator,
         predictor,
@@ -249,6 +242,44 @@ pub fn evaluate_measured(
         options.reward,
         device,
     );
+    (summarize(examples, &requested, &m, options), m)
+}
+
+/// The ψ an evaluation requests of each example: `[ψ_data, ψ of the 9 quantiles of its
+/// predicted range (`ranges`), the 9 arbitrary values]`.
+pub(crate) fn requested_psi(
+    examples: &[&Example],
+    ranges: &[(f32, f32)],
+    options: &EvalOptions,
+) -> Vec<Vec<f32>> {
+    let nq = EVAL_QUANTILES.len();
+    let arbitrary: Vec<f32> = (0..nq)
+        .map(|j| {
+            options.arbitrary_min
+                + (options.arbitrary_max - options.arbitrary_min) * j as f32 / (nq - 1) as f32
+        })
+        .collect();
+    examples
+        .iter()
+        .zip(ranges)
+        .map(|(e, &(lo, hi))| {
+            let mut v = vec![e.psi[0]];
+            v.extend(EVAL_QUANTILES.iter().map(|&q| psi_for_quantile(q, lo, hi)));
+            v.extend(&arbitrary);
+            v
+        })
+        .collect()
+}
+
+/// Table II's row and the curves of the futures `m` produced for `requested`
+/// ([`requested_psi`]).
+pub(crate) fn summarize(
+    examples: &[&Example],
+    requested: &[Vec<f32>],
+    m: &Measured,
+    options: &EvalOptions,
+) -> VariantEval {
+    let nq = EVAL_QUANTILES.len();
     let sq = |i: usize, j: usize| f64::from(requested[i][j] - m.psi[i][j]).powi(2);
     let n = examples.len();
     let data: Vec<f64> = (0..n).map(|i| sq(i, 0)).collect();
@@ -311,7 +342,7 @@ pub fn evaluate_measured(
     };
     let per_quantile = curve(&|_| true);
     let per_quantile_high = curve(&high);
-    let eval = VariantEval {
+    VariantEval {
         courtesy_mse_data: MeanStd::of(&data),
         courtesy_mse_range: MeanStd::of(&range_err),
         courtesy_mse_arbitrary: MeanStd::of(&arbitrary_err),
@@ -332,6 +363,5 @@ pub fn evaluate_measured(
         high_examples: (0..n).filter(|&i| high(i)).count(),
         per_quantile,
         per_quantile_high,
-    };
-    (eval, m)
+    }
 }

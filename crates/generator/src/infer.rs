@@ -5,7 +5,7 @@
 
 use burn::tensor::Device;
 use rand::SeedableRng;
-use scbg_courtesy::label::{LabelOptions, label_built_role};
+use scbg_courtesy::label::{LabelOptions, LabelledRole, label_built_role};
 use scbg_features::{
     FeatureConfig, FeatureStats, PreparedScene, SampleBuilder, SampleError, Window,
 };
@@ -16,6 +16,7 @@ use crate::data::{Example, a_context, marginal_embedding};
 use crate::eval::{generate_and_measure, predicted_ranges};
 use crate::model::Generator;
 use crate::range::{RangePredictor, psi_for_quantile, quantile_for_psi};
+use crate::ranked::{measure_futures, ranked_choice};
 
 /// The courtesy asked of a generated future.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -25,6 +26,43 @@ pub enum Courtesy {
     Quantile(f32),
     /// An explicit ψ (m/s for the default reward).
     Psi(f32),
+}
+
+/// How a [`Scbg`] turns a requested courtesy into B's future.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum Policy {
+    /// The learned generator `g(x, ψ)` (the paper).
+    #[default]
+    Generator,
+    /// Sample and rank: of B's M sampled futures (as many as the labels drew), the one whose
+    /// ψ label has the requested rank, or is nearest the requested ψ; no generator (the range
+    /// predictor still maps an explicit ψ to its quantile in reports).
+    Ranked,
+}
+
+impl Policy {
+    /// Both policies.
+    pub const ALL: [Policy; 2] = [Policy::Generator, Policy::Ranked];
+
+    /// The policy's name (`generator`, `ranked`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Generator => "generator",
+            Self::Ranked => "ranked",
+        }
+    }
+}
+
+impl std::str::FromStr for Policy {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Self::ALL
+            .into_iter()
+            .find(|p| p.name() == s)
+            .ok_or_else(|| format!("unknown policy {s:?} (generator or ranked)"))
+    }
 }
 
 /// The trained models and the feature settings they were trained with, on one plain device.
@@ -43,6 +81,8 @@ pub struct Scbg {
     /// Reward, number of sampled futures of B and marginal estimator: as in training, so ψ
     /// means the same thing.
     pub labels: LabelOptions,
+    /// How a courtesy becomes B's future (the generator by default).
+    pub policy: Policy,
 }
 
 /// What every generation for one (scene, A, B) shares ([`Scbg::pair_context`]).
@@ -51,6 +91,10 @@ pub struct PairContext {
     example: Example,
     low: f32,
     high: f32,
+    /// B's sampled futures (B's frame) and their ψ labels: the candidates of
+    /// [`Policy::Ranked`].
+    candidates: Vec<Vec<[f32; 2]>>,
+    candidate_psi: Vec<f32>,
 }
 
 impl PairContext {
@@ -75,6 +119,9 @@ pub enum GenerateError {
     /// A and B are the same track (its id).
     #[error("A and B are the same track ({0})")]
     SameTrack(i64),
+    /// [`Policy::Ranked`] without candidates: the labels draw no sampled future of B.
+    #[error("the ranked policy needs sampled futures of B, but the labels draw none (samples = 0)")]
+    NoCandidates,
     /// A given future of B is malformed (what is wrong).
     #[error("B's future: {0}")]
     Future(String),
@@ -131,6 +178,41 @@ impl Scbg {
         self.generate_in(&ctx, courtesy, device)
     }
 
+    /// The pair's samples and the labels of B's logged and sampled futures, as training
+    /// labelled them (E[r(Y_A) | x] from B's sampled futures with a fixed seed, toward the
+    /// audience the generator was trained for).
+    fn labelled_role(
+        &self,
+        scene: &PreparedScene,
+        window: &Window,
+        a_id: i64,
+        b_id: i64,
+        device: &Device,
+    ) -> Result<LabelledRole, GenerateError> {
+        let (ia, ib) = check_request(scene, a_id, b_id, &[])?;
+        let mut builder = SampleBuilder::new(scene, &self.features);
+        let mut a = builder
+            .sample(window, ia, Some(ib))
+            .map_err(|error| GenerateError::Sample { id: a_id, error })?;
+        let mut b = builder
+            .sample(window, ib, None)
+            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
+        self.stats.normalize(&mut a);
+        self.stats.normalize(&mut b);
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0x5cb6);
+        Ok(label_built_role(
+            &self.predictor,
+            &mut builder,
+            &self.stats,
+            window,
+            (ia, a),
+            (ib, b),
+            self.labels,
+            &mut rng,
+            device,
+        ))
+    }
+
     /// What every generation for one pair shares (its samples, B's frozen embedding,
     /// E[r(Y_A) | x] and the predicted range of ψ): computed once, a front end can keep it
     /// and generate at many courtesies for the cost of the generator and J_φ alone.
@@ -142,39 +224,26 @@ impl Scbg {
         b_id: i64,
         device: &Device,
     ) -> Result<PairContext, GenerateError> {
-        let (ia, ib) = check_request(scene, a_id, b_id, &[])?;
-        let mut builder = SampleBuilder::new(scene, &self.features);
-        let mut a = builder
-            .sample(window, ia, Some(ib))
-            .map_err(|error| GenerateError::Sample { id: a_id, error })?;
-        let mut b = builder
-            .sample(window, ib, None)
-            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
-        self.stats.normalize(&mut a);
-        self.stats.normalize(&mut b);
-        // E[r(Y_A) | x] estimated as in the labels (B's sampled futures, fixed seed), toward
-        // the audience the generator was trained for.
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0x5cb6);
-        let role = label_built_role(
-            &self.predictor,
-            &mut builder,
-            &self.stats,
-            window,
-            (ia, a),
-            (ib, b),
-            self.labels,
-            &mut rng,
-            device,
-        );
+        let role = self.labelled_role(scene, window, a_id, b_id, device)?;
         let mut example =
             Example::from_role(scene.scenario_id.clone(), role, &self.predictor, device);
+        // Index 0 is B's logged future (whatever the scene holds after its current step):
+        // never a candidate.
+        let candidates = example.futures_b.split_off(1.min(example.futures_b.len()));
+        let candidate_psi = example.psi.split_off(1.min(example.psi.len()));
         example.futures_b.clear();
         example.psi.clear();
         if self.generator.a_context_width == 0 {
             example.a_context.clear();
         }
         let (low, high) = predicted_ranges(&self.range, &[&example], device)[0];
-        Ok(PairContext { example, low, high })
+        Ok(PairContext {
+            example,
+            low,
+            high,
+            candidates,
+            candidate_psi,
+        })
     }
 
     /// B's futures for each requested courtesy of a pair whose context is known.
@@ -186,21 +255,45 @@ impl Scbg {
     ) -> Result<Vec<Generated>, GenerateError> {
         check_courtesy(courtesy)?;
         let (example, low, high) = (&ctx.example, ctx.low, ctx.high);
-        let (psi, quantiles): (Vec<f32>, Vec<f32>) = courtesy
+        let (mut psi, quantiles): (Vec<f32>, Vec<f32>) = courtesy
             .iter()
             .map(|c| match *c {
                 Courtesy::Quantile(q) => (psi_for_quantile(q, low, high), q),
                 Courtesy::Psi(p) => (p, quantile_for_psi(p, low, high)),
             })
             .unzip();
-        let measured = generate_and_measure(
-            &self.generator,
-            &self.predictor,
-            &[example],
-            std::slice::from_ref(&psi),
-            self.labels.reward,
-            device,
-        );
+        let measured = match self.policy {
+            Policy::Generator => generate_and_measure(
+                &self.generator,
+                &self.predictor,
+                &[example],
+                std::slice::from_ref(&psi),
+                self.labels.reward,
+                device,
+            ),
+            Policy::Ranked => {
+                let chosen = courtesy
+                    .iter()
+                    .map(|&c| ranked_choice(&ctx.candidate_psi, c))
+                    .collect::<Option<Vec<usize>>>()
+                    .ok_or(GenerateError::NoCandidates)?;
+                for (p, (c, &k)) in psi.iter_mut().zip(courtesy.iter().zip(&chosen)) {
+                    if let Courtesy::Quantile(_) = c {
+                        // The ψ the rank stands for: the chosen candidate's label.
+                        *p = ctx.candidate_psi[k];
+                    }
+                }
+                let futures: Vec<Vec<[f32; 2]>> =
+                    chosen.iter().map(|&k| ctx.candidates[k].clone()).collect();
+                measure_futures(
+                    &self.predictor,
+                    &[example],
+                    &[futures],
+                    self.labels.reward,
+                    device,
+                )
+            }
+        };
         let pose = example.b.world_from_agent;
         Ok(quantiles
             .iter()
@@ -284,6 +377,21 @@ impl Scbg {
                     step: now,
                 },
             });
+        }
+        if self.policy == Policy::Ranked {
+            // The labels alone, no embedding of B and no range: the choice `generate_in` makes
+            // (its candidates are these futures, in B's frame).
+            let role = self.labelled_role(scene, window, a_id, b_id, device)?;
+            let sampled = role.labels.psi.get(1..).unwrap_or_default();
+            let k = ranked_choice(sampled, courtesy).ok_or(GenerateError::NoCandidates)?;
+            let pose = role.a.world_from_agent;
+            return Ok(role.labels.futures_in_a[1 + k]
+                .iter()
+                .map(|p| {
+                    let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
+                    [x, y]
+                })
+                .collect());
         }
         let mut b = SampleBuilder::new(scene, &self.features)
             .sample(window, ib, None)

@@ -19,13 +19,14 @@ pub mod eval;
 mod infer;
 mod model;
 mod range;
+pub mod ranked;
 mod train;
 
 pub use data::{
     A_CONTEXT_WIDTH, Example, a_context, a_context_of, a_from_b, b_modes, b_modes_of,
     build_examples, marginal_embedding,
 };
-pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Scbg};
+pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Policy, Scbg};
 pub use model::{BModes, Generator, GeneratorConfig};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,

@@ -376,6 +376,67 @@ fn measured_courtesy_matches_the_courtesy_function() {
     assert_eq!(result.per_quantile.len(), 9);
     assert!(result.traj_ade.unwrap().mean > 0.0);
     assert!(result.courtesy_mse_arbitrary.unwrap().mean.is_finite());
+    // The ranked choice through the same evaluation: its futures are the examples' sampled
+    // ones, J_φ measures each at its label, and the chosen labels rise with the quantile.
+    let options = eval::EvalOptions {
+        arbitrary_min: -1.0,
+        arbitrary_max: 1.0,
+        high_threshold: 0.0,
+        reward: Reward::AverageSpeed,
+    };
+    let (ranked, m) =
+        crate::ranked::evaluate_ranked(&range, &predictor, &refs, &options, &device).unwrap();
+    assert_eq!(ranked.examples, refs.len());
+    for (i, e) in refs.iter().enumerate() {
+        let mut previous = f32::NEG_INFINITY;
+        for j in 1..=9 {
+            let k = e.futures_b[1..]
+                .iter()
+                .position(|f| *f == m.futures_b[i][j])
+                .expect("a sampled future of the example");
+            let label = e.psi[1 + k];
+            assert!((m.psi[i][j] - label).abs() < 1e-4 * (1.0 + label.abs()));
+            assert!(label >= previous);
+            previous = label;
+        }
+    }
+    assert!(ranked.corr_quantile.unwrap() > 0.0);
+}
+
+/// An untrained model (cpu-small predictor, generator told who A is) for the test scenes,
+/// labelling `samples` futures of B; and the ids of A and B of the first scene's first pair.
+fn untrained_scbg(
+    scenes: &[PreparedScene],
+    samples: usize,
+    policy: crate::Policy,
+    device: &Device,
+) -> (Scbg, i64, i64) {
+    let config = MultipathConfig::cpu_small();
+    let pair = scenes[0].pairs[0][0];
+    let ids = (
+        scenes[0].tracks[pair.first].id,
+        scenes[0].tracks[pair.second].id,
+    );
+    let scbg = Scbg {
+        predictor: config.init(device),
+        generator: GeneratorConfig::with_a_context(config.embedding_width()).init(device),
+        range: RangePredictor::init(
+            config.embedding_width() + crate::A_CONTEXT_WIDTH,
+            16,
+            device,
+        ),
+        stats: stats(scenes),
+        features: features(),
+        labels: LabelOptions {
+            samples,
+            reward: Reward::AverageSpeed,
+            marginal: MarginalEstimate::ConditionalAverage,
+            sample_noise: 1.0,
+            audience: Default::default(),
+        },
+        policy,
+    };
+    (scbg, ids.0, ids.1)
 }
 
 #[test]
@@ -383,29 +444,9 @@ fn generate_maps_quantiles_and_reports_bad_requests() {
     let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
     device.seed(12);
-    let config = MultipathConfig::cpu_small();
     let scenes = scenes(2);
     let scene = &scenes[0];
-    let pair = scene.pairs[0][0];
-    let (a_id, b_id) = (scene.tracks[pair.first].id, scene.tracks[pair.second].id);
-    let scbg = Scbg {
-        predictor: config.init(&device),
-        generator: GeneratorConfig::with_a_context(config.embedding_width()).init(&device),
-        range: RangePredictor::init(
-            config.embedding_width() + crate::A_CONTEXT_WIDTH,
-            16,
-            &device,
-        ),
-        stats: stats(&scenes),
-        features: features(),
-        labels: LabelOptions {
-            samples: 3,
-            reward: Reward::AverageSpeed,
-            marginal: MarginalEstimate::ConditionalAverage,
-            sample_noise: 1.0,
-            audience: Default::default(),
-        },
-    };
+    let (scbg, a_id, b_id) = untrained_scbg(&scenes, 3, crate::Policy::Generator, &device);
     let window = &scene.windows[0];
     let out = scbg
         .generate(
@@ -491,6 +532,78 @@ fn generate_maps_quantiles_and_reports_bad_requests() {
             &device
         ),
         Err(GenerateError::SameTrack(_))
+    ));
+}
+
+#[test]
+fn the_ranked_policy_picks_sampled_futures_by_their_labels() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex();
+    device.seed(13);
+    let scenes = scenes(2);
+    let scene = &scenes[0];
+    let (mut scbg, a_id, b_id) = untrained_scbg(&scenes, 6, crate::Policy::Ranked, &device);
+    let window = &scene.windows[0];
+    let quantiles = [0.0, 0.2, 0.4, 0.6, 0.8, 1.0];
+    let out = scbg
+        .generate(
+            scene,
+            window,
+            a_id,
+            b_id,
+            &quantiles.map(Courtesy::Quantile),
+            &device,
+        )
+        .unwrap();
+    // Six candidates, six quantiles 1/6 apart: every candidate once, in the order of their
+    // labels, and J_φ measures each at its label.
+    for w in out.windows(2) {
+        assert!(w[1].psi > w[0].psi, "{} then {}", w[0].psi, w[1].psi);
+        assert_ne!(w[0].world_xy_m, w[1].world_xy_m);
+    }
+    for g in &out {
+        assert!(
+            (g.achieved_psi - g.psi).abs() < 1e-4,
+            "{} vs {}",
+            g.achieved_psi,
+            g.psi
+        );
+        assert_eq!(g.world_xy_m.len(), 80);
+    }
+    // An explicit ψ takes the candidate with the nearest label; plan() gives the same futures.
+    let by_psi = scbg
+        .generate(
+            scene,
+            window,
+            a_id,
+            b_id,
+            &[Courtesy::Psi(out[3].psi)],
+            &device,
+        )
+        .unwrap();
+    assert_eq!(by_psi[0].world_xy_m, out[3].world_xy_m);
+    let plan = scbg
+        .plan(scene, window, a_id, b_id, Courtesy::Quantile(0.8), &device)
+        .unwrap();
+    for (p, q) in plan.iter().zip(&out[4].world_xy_m) {
+        assert!((p[0] - q[0]).abs() < 1e-3 && (p[1] - q[1]).abs() < 1e-3);
+    }
+    // Without sampled futures there is nothing to rank: a clear error, not a panic.
+    scbg.labels.samples = 0;
+    assert!(matches!(
+        scbg.generate(
+            scene,
+            window,
+            a_id,
+            b_id,
+            &[Courtesy::Quantile(0.5)],
+            &device
+        ),
+        Err(GenerateError::NoCandidates)
+    ));
+    assert!(matches!(
+        scbg.plan(scene, window, a_id, b_id, Courtesy::Quantile(0.5), &device),
+        Err(GenerateError::NoCandidates)
     ));
 }
 

@@ -302,16 +302,21 @@ fn courtesy_of(quantile: Option<f32>, psi: Option<f32>) -> PyResult<Courtesy> {
 
 #[pymethods]
 impl Model {
+    /// `policy`: how a courtesy becomes B's future, `"generator"` (the learned g(x, ψ)) or
+    /// `"ranked"` (B's sampled futures ranked by their ψ labels).
     #[new]
-    #[pyo3(signature = (path, predictor=None))]
+    #[pyo3(signature = (path, predictor=None, policy="generator"))]
     fn new(
         py: Python<'_>,
         path: std::path::PathBuf,
         predictor: Option<std::path::PathBuf>,
+        policy: &str,
     ) -> PyResult<Self> {
-        let model = py
+        let policy: scbg::choices::Policy = policy.parse().map_err(PyValueError::new_err)?;
+        let mut model = py
             .detach(|| scbg::generator::load_scbg(&path, predictor.as_deref()))
             .map_err(py_err)?;
+        model.scbg.policy = policy;
         Ok(Self {
             inner: Arc::new(model),
             contexts: Mutex::new(HashMap::new()),
@@ -321,6 +326,12 @@ impl Model {
     #[getter]
     fn variant(&self) -> String {
         self.inner.checkpoint.variant.name().to_string()
+    }
+
+    /// How a courtesy becomes B's future: `generator` or `ranked`.
+    #[getter]
+    fn policy(&self) -> String {
+        self.inner.scbg.policy.name().to_string()
     }
 
     /// Whose reward the model's courtesy counts: `pair` (A alone) or

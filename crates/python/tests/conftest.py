@@ -13,7 +13,8 @@ def _scbg(*args):
 
 
 @pytest.fixture(scope="session")
-def trained(tmp_path_factory):
+def trained_dirs(tmp_path_factory):
+    """The tiny generator's folder and the scenario file it was trained on."""
     d = tmp_path_factory.mktemp("scbg")
     data, cache, model, gen = (str(d / n) for n in ("data", "cache", "model", "gen"))
     _scbg("synth", "--scenarios", "12", "--seed", "4", "--out", data, "--scenarios-per-file", "12")
@@ -22,4 +23,10 @@ def trained(tmp_path_factory):
           "--out", model)
     _scbg("train", "generator", "--predictor", model, "--data", cache, "--out", gen,
           "--epochs", "1", "--samples", "2", "--batch-size", "8", "--range-steps", "5")
-    return scbg.Model(gen), os.path.join(data, "synth-00000.tfrecord")
+    return gen, os.path.join(data, "synth-00000.tfrecord")
+
+
+@pytest.fixture(scope="session")
+def trained(trained_dirs):
+    gen, file = trained_dirs
+    return scbg.Model(gen), file

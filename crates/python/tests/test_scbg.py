@@ -28,6 +28,22 @@ def test_generate_and_courtesy(trained):
     np.testing.assert_allclose(again["world_xy_m"], high["world_xy_m"])
 
 
+def test_the_ranked_policy_picks_labelled_samples(trained_dirs):
+    gen, file = trained_dirs
+    model = scbg.Model(gen, policy="ranked")
+    assert model.policy == "ranked"
+    scene = scbg.read_scenarios(file)[0]
+    a, b = _pair(scene)
+    # The tiny model's labels draw 2 futures of B: quantiles below 0.5 take the lower-ψ one.
+    low = model.generate(scene, a, b, quantile=0.0)
+    high = model.generate(scene, a, b, quantile=1.0)
+    assert low["psi"] <= high["psi"]
+    for out in (low, high):
+        assert abs(out["achieved_psi"] - out["psi"]) < 1e-3
+    with pytest.raises(ValueError, match="unknown policy"):
+        scbg.Model(gen, policy="oracle")
+
+
 def test_scenes_from_bytes_and_arrays(trained):
     model, file = trained
     with open(file, "rb") as f:

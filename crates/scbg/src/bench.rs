@@ -540,6 +540,8 @@ pub struct SimBench {
     pub scenes: usize,
     /// Steps between plans.
     pub replan_every: usize,
+    /// What drives the agent: `generator` or `ranked` (the model's [`scbg_generator::Policy`]).
+    pub policy: &'static str,
     /// One 80-step rollout with one generator agent (B at quantile 0.5), A and the others
     /// reactive (the synthetic rule): best and mean over the scenes, ms.
     pub rollout_ms_best: f64,
@@ -562,11 +564,15 @@ impl SimBench {
     pub fn to_text(&self) -> String {
         format!(
             "closed loop, 1 thread, {} synthetic scenes, re-plan every {} steps\n\
-             one 80-step rollout, 1 generator agent: best {:.2} ms, mean {:.2} ms (target ≤ 20 ms)\n\
+             one 80-step rollout, 1 agent driven by the {}: best {:.2} ms, mean {:.2} ms (target ≤ 20 ms for the generator)\n\
              world only (B replays its log):        mean {:.2} ms\n\
              WOSAC metrics, 1 scenario × 32 rollouts: best {:.1} ms, mean {:.1} ms (target ≤ 1000 ms){}",
             self.scenes,
             self.replan_every,
+            match self.policy {
+                "ranked" => "ranked policy",
+                _ => "generator",
+            },
             self.rollout_ms_best,
             self.rollout_ms_mean,
             self.world_only_ms_mean,
@@ -696,6 +702,7 @@ pub fn sim(model: &crate::generator::LoadedScbg, scenes: usize) -> anyhow::Resul
             real,
             scenes,
             replan_every: config.replan_every,
+            policy: model.scbg.policy.name(),
             rollout_ms_best: best(&gen_ms),
             rollout_ms_mean: mean(&gen_ms),
             world_only_ms_mean: mean(&world_ms),

@@ -473,11 +473,6 @@ impl SelectionControl {
     }
 }
 
-/// The index of the candidate a selector takes at quantile `q` among `n` ranked candidates.
-fn rank_at(q: f32, n: usize) -> usize {
-    ((f64::from(q) * n as f64).floor() as usize).min(n.saturating_sub(1))
-}
-
 /// [`SelectionControl`] over the ground-truth roles among `examples`; `None` when there is
 /// none.
 pub fn selection_control(
@@ -515,7 +510,7 @@ pub fn selection_control(
                 ranked.sort_by(|a, b| key(a).total_cmp(&key(b)));
                 let truths = EVAL_QUANTILES
                     .iter()
-                    .map(|&q| ranked[rank_at(q, ranked.len())].1)
+                    .map(|&q| ranked[scbg_generator::ranked::rank_at(q, ranked.len())].1)
                     .collect();
                 (*family, truths)
             })
@@ -548,16 +543,6 @@ mod tests {
 
     /// A selector's pick at quantile q among n ranked candidates: the lowest rank for small q,
     /// the highest for q near 1, every rank for the 9 evaluation quantiles of 9 candidates.
-    #[test]
-    fn rank_at_spreads_the_quantiles_over_the_candidates() {
-        use scbg_generator::eval::EVAL_QUANTILES;
-        let picks: Vec<usize> = EVAL_QUANTILES.iter().map(|&q| rank_at(q, 9)).collect();
-        assert_eq!(picks, vec![0, 1, 2, 3, 4, 5, 6, 7, 8]);
-        assert_eq!(rank_at(0.0, 4), 0);
-        assert_eq!(rank_at(1.0, 4), 3);
-        assert_eq!(rank_at(0.5, 1), 0);
-    }
-
     /// The world's B at the scene's own courtesy drives the logged future (so the world knob
     /// at c = the latent courtesy scores ψ_true of the log); other courtesies change it in
     /// some scenes (in others B's decision does not depend on it).

@@ -580,6 +580,7 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
             stats: ckpt.stats.clone(),
             features: ckpt.train_config.feature_config(),
             labels: checkpoint.labels,
+            policy: scbg_generator::Policy::Generator,
         },
         checkpoint,
         predictor: ckpt,

@@ -6,6 +6,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
+use scbg_courtesy::label::LabelOptions;
 use scbg_generator::Example;
 use scbg_generator::eval::{EvalOptions, MeanStd, VariantEval};
 use scbg_train::data::Split;
@@ -67,6 +68,7 @@ fn label_of(name: &str) -> &str {
         "baseline" => "① baseline",
         "aug" => "①+② augmentation",
         "full" => "①+②+③ courtesy loss",
+        "ranked" => "sample and rank (B's sampled futures by ψ label; no generator)",
         other => other,
     }
 }
@@ -223,8 +225,9 @@ impl ScbgEval {
 }
 
 /// Evaluates the generator folders `models` on the pair roles of `split` of the cache `data`
-/// (labelled as in training) and writes the figures to `figures`; with a synthetic ground truth
-/// the generated futures are also scored by the oracle.
+/// (labelled as in training, with `samples` futures of B per role when given) and writes the
+/// figures to `figures`; with a synthetic ground truth the generated futures are also scored by
+/// the oracle.
 #[allow(clippy::too_many_arguments)]
 pub fn evaluate_scbg(
     models: &[PathBuf],
@@ -232,6 +235,7 @@ pub fn evaluate_scbg(
     predictor: Option<&Path>,
     split: Option<Split>,
     seed: u64,
+    samples: Option<usize>,
     figures: Option<&Path>,
     truth: Option<&[scbg_synth::GroundTruth]>,
     progress: &dyn Progress,
@@ -269,7 +273,10 @@ pub fn evaluate_scbg(
         &first.device,
         data,
         split,
-        first.checkpoint.labels,
+        LabelOptions {
+            samples: samples.unwrap_or(first.checkpoint.labels.samples),
+            ..first.checkpoint.labels
+        },
         seed,
         condition_on_a,
         progress,
@@ -317,6 +324,31 @@ pub fn evaluate_examples(
             &l.device,
         );
         pb.inc(1);
+        if let Some(t) = index
+            .as_ref()
+            .and_then(|index| crate::fidelity::truth_control(&refs, &measured, index))
+        {
+            truth_control.push((name.to_string(), t));
+        }
+        variants.push((name.to_string(), v));
+    }
+    // Sample and rank, the untrained yardstick every variant is compared with: B's sampled
+    // futures chosen by their labels (the first variant's range predictor turns the quantiles
+    // into the requested ψ of CourtesyMSE *range*).
+    let options = EvalOptions {
+        arbitrary_min: first.checkpoint.psi_min,
+        arbitrary_max: first.checkpoint.psi_max,
+        high_threshold: high,
+        reward: first.scbg.labels.reward,
+    };
+    if let Some((v, measured)) = scbg_generator::ranked::evaluate_ranked(
+        &first.scbg.range,
+        &first.scbg.predictor,
+        &refs,
+        &options,
+        &first.device,
+    ) {
+        let name = scbg_generator::ranked::RANKED;
         if let Some(t) = index
             .as_ref()
             .and_then(|index| crate::fidelity::truth_control(&refs, &measured, index))

@@ -337,6 +337,8 @@ pub struct SimRun {
     pub model: std::path::PathBuf,
     /// Predictor folder overriding generator.json's.
     pub predictor: Option<std::path::PathBuf>,
+    /// How the controlled agents' courtesy becomes their plans.
+    pub policy: scbg_generator::Policy,
     /// WOMD file holding the scenario.
     pub scenario: std::path::PathBuf,
     /// Which scenario (default: the first with A and the first controlled agent).
@@ -422,7 +424,8 @@ pub fn run_sim(run: &SimRun, progress: &dyn crate::Progress) -> anyhow::Result<S
         run.rollouts
     );
     check_courtesy(&run.controlled)?;
-    let model = crate::generator::load_scbg(&run.model, run.predictor.as_deref())?;
+    let mut model = crate::generator::load_scbg(&run.model, run.predictor.as_deref())?;
+    model.scbg.policy = run.policy;
     let (_, scene) = crate::generate::find_scene(
         &run.scenario,
         run.scenario_id.as_deref(),

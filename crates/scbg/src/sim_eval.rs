@@ -29,6 +29,9 @@ use crate::sim::{AgentRolloutMetrics, Contact, ControlledAgent, OthersMode, repo
 /// What `eval sim` runs.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SimEvalOptions {
+    /// How the controlled agent's courtesy becomes its plans ([`eval_sim_files`] applies it
+    /// to the model it loads; [`evaluate_sim`] uses the model's own).
+    pub policy: scbg_generator::Policy,
     /// Quantiles of the courtesy curve (0.5 is added for realised courtesy when missing).
     pub quantiles: Vec<f32>,
     /// Scenes of the courtesy curve (the first ones given).
@@ -53,6 +56,7 @@ pub struct SimEvalOptions {
 impl Default for SimEvalOptions {
     fn default() -> Self {
         Self {
+            policy: scbg_generator::Policy::Generator,
             quantiles: (1..=9).map(|k| k as f32 / 10.0).collect(),
             scenes: 40,
             wosac_scenes: 8,
@@ -568,7 +572,8 @@ pub fn eval_sim_files(
     out: &Path,
     progress: &dyn crate::Progress,
 ) -> anyhow::Result<SimEval> {
-    let model = crate::generator::load_scbg(model, predictor)?;
+    let mut model = crate::generator::load_scbg(model, predictor)?;
+    model.scbg.policy = options.policy;
     let truth = ground_truth
         .map(crate::synth::read_ground_truth)
         .transpose()?;

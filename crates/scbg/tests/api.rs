@@ -148,6 +148,7 @@ fn label_train_and_generate_through_the_library() {
 
     generator_heads(&predictors, &examples, options, &scene, t, dir.path());
     closed_loop_through_the_library(&model, &scene, t, dir.path());
+    ranked_policy_in_the_loop(model, &scene, t);
     courtesy_toward_neighbours(&predictors, &scene, t, dir.path());
     oracle_labels(&predictors, &rows, &truth, dir.path());
 
@@ -166,6 +167,43 @@ fn label_train_and_generate_through_the_library() {
     std::fs::write(&json, old.to_string()).unwrap();
     let err = generator::load_scbg(&p("gen"), None).unwrap_err();
     assert!(format!("{err:#}").contains("older scbg"), "{err:#}");
+}
+
+/// Sample and rank through the library: the same entry points as the generator, plans equal
+/// generations, and a closed-loop rollout driven by it.
+fn ranked_policy_in_the_loop(
+    mut model: generator::LoadedScbg,
+    scene: &scbg_scene::Scene,
+    t: &scbg_synth::GroundTruth,
+) {
+    use scbg::sim::{self, ControlledAgent, SimConfig};
+    model.scbg.policy = scbg::choices::Policy::Ranked;
+    let quantiles = [0.0, 1.0].map(Courtesy::Quantile);
+    let out = generate::generate(&model, scene, t.a_id, t.b_id, &quantiles).unwrap();
+    let [low, high] = [&out.trajectories[0], &out.trajectories[1]];
+    // The tiny model's labels draw 2 futures of B: the two ends take one each, J_φ measures
+    // each at its label.
+    assert!(low.psi < high.psi, "{} vs {}", low.psi, high.psi);
+    assert_ne!(low.world_xy_m, high.world_xy_m);
+    for g in [low, high] {
+        assert!((g.achieved_psi - g.psi).abs() < 1e-4);
+    }
+    let planned = generate::plan(&model, scene, t.a_id, t.b_id, Courtesy::Quantile(1.0)).unwrap();
+    for (p, q) in planned.iter().zip(&high.world_xy_m) {
+        assert!((p[0] - q[0]).abs() < 1e-3 && (p[1] - q[1]).abs() < 1e-3);
+    }
+    let b = [ControlledAgent {
+        id: t.b_id,
+        courtesy: Courtesy::Quantile(0.9),
+    }];
+    let config = SimConfig {
+        others: sim::OthersMode::Reactive,
+        ..SimConfig::default()
+    };
+    let rolled = sim::rollout(&model, scene, Some(t.a_id), &b, config, Some(t)).unwrap();
+    rolled.validate().unwrap();
+    let ib = rolled.track_index(t.b_id).unwrap();
+    assert!(rolled.tracks[ib].states[11..].iter().all(|s| s.valid));
 }
 
 /// The oracle-label experiment: the ground truth's role of each scene keeps its futures with

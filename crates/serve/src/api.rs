@@ -18,6 +18,8 @@ pub struct Health {
     pub status: String,
     /// The generator variant loaded.
     pub variant: String,
+    /// How a courtesy becomes B's future: `generator` or `ranked` (`scbg serve --policy`).
+    pub policy: String,
     /// Whose reward the loaded model's courtesy counts: `pair` (A alone, the paper) or
     /// `neighbours <radius> m <sum|proximity>` (A and the vehicles near B).
     pub audience: String,

@@ -107,6 +107,7 @@ pub(crate) async fn healthz(State(state): State<Arc<AppState>>) -> Json<Health> 
     Json(Health {
         status: "ok".into(),
         variant: state.model.checkpoint.variant.name().to_string(),
+        policy: state.model.scbg.policy.name().to_string(),
         audience: state.model.checkpoint.labels.audience.describe(),
         scenarios: state.scenarios.lock().expect("scenarios lock").0.len(),
         sessions: state.expire_sessions(),

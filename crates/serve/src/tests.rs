@@ -193,6 +193,7 @@ async fn generate_courtesy_and_descriptions() {
     assert_eq!(status, StatusCode::OK);
     assert_eq!(health["status"], "ok");
     assert_eq!(health["audience"], "pair");
+    assert_eq!(health["policy"], "generator");
     let (status, doc) = json_call(&app, "GET", "/openapi.json", Value::Null).await;
     assert_eq!(status, StatusCode::OK);
     assert!(doc["openapi"].as_str().unwrap().starts_with("3.1"));

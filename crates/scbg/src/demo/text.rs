@@ -103,7 +103,7 @@ impl DemoReport {
             .variants
             .as_object()
             .map(|m| m.keys().cloned().collect::<Vec<_>>());
-        for name in ["baseline", "aug", "full"] {
+        for name in ["baseline", "aug", "full", scbg_generator::ranked::RANKED] {
             if !names.as_ref().is_some_and(|n| n.iter().any(|k| k == name)) {
                 continue;
             }
