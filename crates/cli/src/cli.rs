@@ -314,8 +314,7 @@ pub struct SimArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
-    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
-    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    /// How a courtesy becomes B's future.
     #[arg(long, value_enum, default_value_t = Policy::Generator)]
     pub policy: Policy,
     /// WOMD Scenario TFRecord file.
@@ -373,8 +372,7 @@ pub struct EvalSimArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
-    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
-    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    /// How a courtesy becomes B's future.
     #[arg(long, value_enum, default_value_t = Policy::Generator)]
     pub policy: Policy,
     /// WOMD Scenario files (globs, folders or paths).
@@ -431,9 +429,11 @@ pub struct EvalScbgArgs {
     #[arg(long)]
     pub figures: Option<PathBuf>,
     /// Futures of B sampled per held-out pair role (default: as many as the training labels
-    /// drew): the candidates of the `ranked` row and of the selection yardsticks.
-    #[arg(long)]
-    pub samples: Option<usize>,
+    /// drew): the candidates of the `ranked` row and of the selection yardsticks. With the
+    /// conditional-average estimator E[r(Y_A) | x] is their mean, so every row's ψ moves a
+    /// little with it.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub samples: Option<u64>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     #[arg(long)]
@@ -448,8 +448,7 @@ pub struct GenerateArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
-    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
-    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    /// How a courtesy becomes B's future.
     #[arg(long, value_enum, default_value_t = Policy::Generator)]
     pub policy: Policy,
     /// WOMD Scenario or tf.Example TFRecord file.
@@ -628,8 +627,7 @@ pub struct ServeArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
-    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
-    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    /// How a courtesy becomes B's future.
     #[arg(long, value_enum, default_value_t = Policy::Generator)]
     pub policy: Policy,
     /// Address to bind; anything but loopback needs --token.
@@ -682,8 +680,7 @@ pub struct BenchSimArgs {
     /// Predictor folder, overriding the one recorded in generator.json.
     #[arg(long)]
     pub predictor: Option<PathBuf>,
-    /// How a courtesy becomes B's future: `generator` (the learned g(x, ψ), the paper) or
-    /// `ranked` (B's sampled futures ranked by their ψ labels; no generator).
+    /// How a courtesy becomes B's future.
     #[arg(long, value_enum, default_value_t = Policy::Generator)]
     pub policy: Policy,
     /// Synthetic scenes to time.

@@ -232,7 +232,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 a.predictor.as_deref(),
                 a.split.split(),
                 a.seed,
-                a.samples,
+                a.samples.map(|n| n as usize),
                 a.figures.as_deref(),
                 truth.as_deref(),
                 progress,

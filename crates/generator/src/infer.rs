@@ -33,12 +33,11 @@ pub enum Courtesy {
 #[serde(rename_all = "snake_case")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum Policy {
-    /// The learned generator `g(x, ψ)` (the paper).
+    /// The learned generator g(x, ψ) (the paper).
     #[default]
     Generator,
-    /// Sample and rank: of B's M sampled futures (as many as the labels drew), the one whose
-    /// ψ label has the requested rank, or is nearest the requested ψ; no generator (the range
-    /// predictor still maps an explicit ψ to its quantile in reports).
+    /// Sample and rank: B's sampled future whose ψ label has the requested rank, or is nearest
+    /// the requested ψ (no generator).
     Ranked,
 }
 
@@ -119,9 +118,12 @@ pub enum GenerateError {
     /// A and B are the same track (its id).
     #[error("A and B are the same track ({0})")]
     SameTrack(i64),
-    /// [`Policy::Ranked`] without candidates: the labels draw no sampled future of B.
-    #[error("the ranked policy needs sampled futures of B, but the labels draw none (samples = 0)")]
-    NoCandidates,
+    /// [`Policy::Ranked`] without candidates: no sampled future of B with a finite ψ label
+    /// (the labels draw `.0` futures).
+    #[error(
+        "the ranked policy found no sampled future of B with a finite ψ label (the labels draw {0})"
+    )]
+    NoCandidates(usize),
     /// A given future of B is malformed (what is wrong).
     #[error("B's future: {0}")]
     Future(String),
@@ -142,7 +144,8 @@ pub struct Generated {
     /// The quantile asked for, or the one an explicit ψ corresponds to (linear between the
     /// predicted 0.1 and 0.9 quantiles, extended beyond them).
     pub quantile: f32,
-    /// The ψ the quantile maps to (m/s for the default reward).
+    /// The ψ the quantile maps to (m/s for the default reward); with [`Policy::Ranked`] and a
+    /// quantile, the label of the chosen sampled future.
     pub psi: f32,
     /// The predicted 0.1 quantile of ψ for this scene and pair.
     pub psi_low: f32,
@@ -276,7 +279,7 @@ impl Scbg {
                     .iter()
                     .map(|&c| ranked_choice(&ctx.candidate_psi, c))
                     .collect::<Option<Vec<usize>>>()
-                    .ok_or(GenerateError::NoCandidates)?;
+                    .ok_or(GenerateError::NoCandidates(self.labels.samples))?;
                 for (p, (c, &k)) in psi.iter_mut().zip(courtesy.iter().zip(&chosen)) {
                     if let Courtesy::Quantile(_) = c {
                         // The ψ the rank stands for: the chosen candidate's label.
@@ -356,7 +359,8 @@ fn check_request(
 impl Scbg {
     /// B's future only (world frame, 80 points at 10 Hz), for closed-loop planning: the
     /// encoder, the range predictor and the generator, without J_φ's measurement of the
-    /// achieved ψ (which [`Scbg::generate`] adds). A must be a track valid at the window's
+    /// achieved ψ (which [`Scbg::generate`] adds); with [`Policy::Ranked`], the labelling of
+    /// B's sampled futures and the choice among them. A must be a track valid at the window's
     /// current step; the same future as `generate` gives for the same request.
     pub fn plan(
         &self,
@@ -383,9 +387,16 @@ impl Scbg {
             // (its candidates are these futures, in B's frame).
             let role = self.labelled_role(scene, window, a_id, b_id, device)?;
             let sampled = role.labels.psi.get(1..).unwrap_or_default();
-            let k = ranked_choice(sampled, courtesy).ok_or(GenerateError::NoCandidates)?;
-            let pose = role.a.world_from_agent;
-            return Ok(role.labels.futures_in_a[1 + k]
+            let k = ranked_choice(sampled, courtesy)
+                .ok_or(GenerateError::NoCandidates(self.labels.samples))?;
+            // Through B's frame, as `generate_in`'s candidates are: the same numbers.
+            let in_b = scbg_courtesy::label::change_frame(
+                &role.labels.futures_in_a[1 + k],
+                &role.a.world_from_agent,
+                &role.b.world_from_agent,
+            );
+            let pose = role.b.world_from_agent;
+            return Ok(in_b
                 .iter()
                 .map(|p| {
                     let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));

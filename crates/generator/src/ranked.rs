@@ -8,7 +8,13 @@
 //!
 //! Every future is a sample of the predictor, so it is as realistic as the predictor; control
 //! is as faithful as J_φ's ranking and as wide as the candidates' spread. It costs the labels
-//! of `M` futures (one marginal and one conditional forward) per pair and no training.
+//! of the `M` futures per pair (B's marginal forward and one conditional forward of A over
+//! the futures, A's scene encoded once) and no training.
+//!
+//! Its achieved ψ (J_φ of the chosen future) is the chosen label by construction: in an
+//! evaluation, its CourtesyMSE and corr(q, ψ) measure how densely the candidates' labels cover
+//! the requested ψ, not how faithfully a model follows them; only a ground truth (the
+//! synthetic oracle's ψ_true) judges it like the generators.
 //!
 //! **Architecture invariant:** like the rest of the crate, no files; the predictor is frozen.
 
@@ -30,9 +36,9 @@ pub fn rank_at(q: f32, n: usize) -> usize {
 }
 
 /// The candidate (an index into `labels`) a ranked choice takes for `courtesy`; `None`
-/// without candidates. A NaN label ranks last and is never nearest.
+/// without a candidate of finite label (NaN labels are never chosen).
 pub fn ranked_choice(labels: &[f32], courtesy: Courtesy) -> Option<usize> {
-    if labels.is_empty() {
+    if labels.iter().all(|v| v.is_nan()) {
         return None;
     }
     match courtesy {
@@ -44,13 +50,12 @@ pub fn ranked_choice(labels: &[f32], courtesy: Courtesy) -> Option<usize> {
                 let (a, b) = (key(i), key(j));
                 a.0.cmp(&b.0).then(a.1.total_cmp(&b.1))
             });
-            let finite = labels.iter().filter(|v| !v.is_nan()).count().max(1);
+            let finite = labels.iter().filter(|v| !v.is_nan()).count();
             Some(order[rank_at(q, finite)])
         }
         Courtesy::Psi(p) => (0..labels.len())
             .filter(|&k| !labels[k].is_nan())
-            .min_by(|&i, &j| (labels[i] - p).abs().total_cmp(&(labels[j] - p).abs()))
-            .or(Some(0)),
+            .min_by(|&i, &j| (labels[i] - p).abs().total_cmp(&(labels[j] - p).abs())),
     }
 }
 
@@ -87,11 +92,14 @@ pub fn measure_futures(
     out
 }
 
-/// Evaluates the ranked choice on held-out examples exactly like a generator variant
-/// ([`crate::eval::evaluate_measured`], same requests and summaries): the candidates are each
-/// example's sampled futures (the logged one, index 0, is left out: it is the answer the
-/// evaluation compares with, and a deployed B does not have it). The quantile requests take
-/// the candidate of that rank; ψ_data and the arbitrary ψ the nearest label. `None` when an
+/// Evaluates the ranked choice on held-out examples with the requests and summaries of a
+/// generator variant ([`crate::eval::evaluate_measured`]): the candidates are each example's
+/// sampled futures (the logged one, index 0, is left out: it is the answer the evaluation
+/// compares with, and a deployed B does not have it). ψ_data and the arbitrary ψ take the
+/// nearest label; the quantiles take the candidate of that rank, as the policy does, while
+/// the ψ they are scored against (CourtesyMSE *range*, the curves' target) stays the range
+/// predictor's ψ for the quantile — so that column measures how far the rank's label is from
+/// the range predictor, not the policy's fidelity (see the module docs). `None` when an
 /// example has no sampled future.
 pub fn evaluate_ranked(
     range: &crate::range::RangePredictor,
@@ -119,7 +127,8 @@ pub fn evaluate_ranked(
                     } else {
                         Courtesy::Psi(psi)
                     };
-                    let k = ranked_choice(labels, courtesy).expect("candidates");
+                    // A NaN-only example: its first candidate (the scores will say NaN).
+                    let k = ranked_choice(labels, courtesy).unwrap_or(0);
                     e.futures_b[1 + k].clone()
                 })
                 .collect()
@@ -142,6 +151,7 @@ mod tests {
         let p = |p| ranked_choice(&labels, Courtesy::Psi(p)).unwrap();
         assert_eq!([p(-5.0), p(0.04), p(0.06), p(9.0)], [1, 3, 2, 0]);
         assert_eq!(ranked_choice(&[], Courtesy::Quantile(0.5)), None);
+        assert_eq!(ranked_choice(&[f32::NAN], Courtesy::Psi(0.0)), None);
     }
 
     #[test]

@@ -585,9 +585,7 @@ fn the_ranked_policy_picks_sampled_futures_by_their_labels() {
     let plan = scbg
         .plan(scene, window, a_id, b_id, Courtesy::Quantile(0.8), &device)
         .unwrap();
-    for (p, q) in plan.iter().zip(&out[4].world_xy_m) {
-        assert!((p[0] - q[0]).abs() < 1e-3 && (p[1] - q[1]).abs() < 1e-3);
-    }
+    assert_eq!(plan, out[4].world_xy_m);
     // Without sampled futures there is nothing to rank: a clear error, not a panic.
     scbg.labels.samples = 0;
     assert!(matches!(
@@ -599,11 +597,11 @@ fn the_ranked_policy_picks_sampled_futures_by_their_labels() {
             &[Courtesy::Quantile(0.5)],
             &device
         ),
-        Err(GenerateError::NoCandidates)
+        Err(GenerateError::NoCandidates(0))
     ));
     assert!(matches!(
         scbg.plan(scene, window, a_id, b_id, Courtesy::Quantile(0.5), &device),
-        Err(GenerateError::NoCandidates)
+        Err(GenerateError::NoCandidates(0))
     ));
 }
 

@@ -334,9 +334,9 @@ impl Multipath {
     /// [`Self::forward`] conditional on `condition` for rows that share their scene: row `r`
     /// is row `rows[r]` of `base` (its histories, road and lane path) conditioned on
     /// `condition[r]`. The scene is encoded once per row of `base` instead of once per row —
-    /// the same outputs as `forward(&base.select_rows(rows).with_condition(Some(condition)))`
-    /// up to floating-point rounding. For J_φ over many futures of B toward the same A (the
-    /// labels, the courtesy loss, sample and rank).
+    /// the same outputs as [`Self::forward`] of a batch holding row `rows[r]` of `base` as its
+    /// row `r`, conditional on `condition`, up to floating-point rounding. For J_φ over many
+    /// futures of B toward the same A (the labels, the courtesy loss, sample and rank).
     ///
     /// # Shapes
     /// `base`: batch tensors of `[u, ·]`, `rows: [n]` (indices < u),
@@ -348,6 +348,7 @@ impl Multipath {
         condition: Tensor<3>,
     ) -> GmmOutput {
         let [n, _, _] = condition.dims();
+        debug_assert_eq!(rows.dims()[0], n, "one row index per conditioning future");
         let device = condition.device();
         let scene = self.encode_scene(base).select(rows.clone());
         let lane_path = base.lane_path.as_ref().map(|(p, m)| {

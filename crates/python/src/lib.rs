@@ -467,9 +467,10 @@ impl Model {
 
     fn __repr__(&self) -> String {
         format!(
-            "Model(variant={:?}, audience={:?})",
+            "Model(variant={:?}, audience={:?}, policy={:?})",
             self.variant(),
-            self.audience()
+            self.audience(),
+            self.policy()
         )
     }
 }

@@ -542,8 +542,9 @@ pub struct SimBench {
     pub replan_every: usize,
     /// What drives the agent: `generator` or `ranked` (the model's [`scbg_generator::Policy`]).
     pub policy: &'static str,
-    /// One 80-step rollout with one generator agent (B at quantile 0.5), A and the others
-    /// reactive (the synthetic rule): best and mean over the scenes, ms.
+    /// One 80-step rollout with one controlled agent (B at quantile 0.5, driven by
+    /// [`Self::policy`]), A and the others reactive (the synthetic rule): best and mean over
+    /// the scenes, ms.
     pub rollout_ms_best: f64,
     /// Mean, ms.
     pub rollout_ms_mean: f64,

@@ -462,11 +462,11 @@ impl SelectionControl {
     pub fn yardsticks(&self) -> [(&'static str, &WorldKnob); 2] {
         [
             (
-                "choosing among B's labelled futures by ψ_label (a perfect follower of the labels)",
+                "choosing among B's labelled futures, the logged one included, by ψ_label (a perfect follower of the labels)",
                 &self.by_label,
             ),
             (
-                "choosing among B's labelled futures by ψ_true (what the candidates allow)",
+                "choosing among B's labelled futures, the logged one included, by ψ_true (what the candidates allow)",
                 &self.by_truth,
             ),
         ]
@@ -541,8 +541,6 @@ mod tests {
         assert_eq!((flat.slope, flat.spread_ratio), (None, None));
     }
 
-    /// A selector's pick at quantile q among n ranked candidates: the lowest rank for small q,
-    /// the highest for q near 1, every rank for the 9 evaluation quantiles of 9 candidates.
     /// The world's B at the scene's own courtesy drives the logged future (so the world knob
     /// at c = the latent courtesy scores ψ_true of the log); other courtesies change it in
     /// some scenes (in others B's decision does not depend on it).

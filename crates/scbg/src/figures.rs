@@ -16,6 +16,7 @@ fn plot_label(name: &str) -> &str {
         "baseline" => "(1) baseline",
         "aug" => "(1)+(2) augmentation",
         "full" => "(1)+(2)+(3) courtesy loss",
+        "ranked" => "sample and rank (no generator)",
         other => other,
     }
 }

@@ -1,8 +1,8 @@
 //! Closed-loop simulation with courtesy-controlled agents (the library behind `scbg sim`, the
 //! server's sessions and the Python `Simulation`).
 //!
-//! A controlled agent is driven by the generator: every `replan_every` steps its future is
-//! generated from the *simulated* history (features rebuilt from the simulated states) at its
+//! A controlled agent is driven by the model's policy (the generator by default, or sample and
+//! rank): every `replan_every` steps its future is planned from the *simulated* history (features rebuilt from the simulated states) at its
 //! own quantile or ψ toward the ego, and followed through the kinematic bicycle of
 //! [`scbg_sim::kinematics`]. See [`scbg_sim::rollout`] for the ego and the other agents.
 //!

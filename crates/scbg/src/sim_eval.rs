@@ -1,5 +1,6 @@
 //! `scbg eval sim`: the courtesy knob in closed loop. For each scene and quantile, a rollout
-//! with the controlled agent (B) driven by the generator and A reactive: A's realised average
+//! with the controlled agent (B) driven by the model's policy (the generator by default) and A
+//! reactive: A's realised average
 //! speed, *realised courtesy* (A's realised speed minus A's realised speed in the same scene
 //! with B at quantile 0.5 — the world is deterministic, so "same seeds" holds by
 //! construction), B's collision, off-road, jerk and progress; on a subset of scenes the WOSAC
@@ -104,6 +105,8 @@ pub type PerFamily = BTreeMap<String, Option<f64>>;
 /// Everything `eval sim` measures (`eval_sim.json`; the demo's `closed_loop`).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SimEval {
+    /// What drove B: `generator` or `ranked` (the model's policy).
+    pub policy: &'static str,
     /// The generator's courtesy curve: scenes, per quantile, the correlations (its fields
     /// appear at the top level of the JSON).
     #[serde(flatten)]
@@ -504,6 +507,7 @@ pub fn evaluate_sim(
     let world_knob = (!world.is_empty()).then(|| KnobCurve::of(&world, &quantiles));
     let rollouts_done = done.len() * quantiles.len();
     Ok(SimEval {
+        policy: model.scbg.policy.name(),
         curve,
         skipped,
         replan_every: options.config.replan_every,

@@ -189,9 +189,7 @@ fn ranked_policy_in_the_loop(
         assert!((g.achieved_psi - g.psi).abs() < 1e-4);
     }
     let planned = generate::plan(&model, scene, t.a_id, t.b_id, Courtesy::Quantile(1.0)).unwrap();
-    for (p, q) in planned.iter().zip(&high.world_xy_m) {
-        assert!((p[0] - q[0]).abs() < 1e-3 && (p[1] - q[1]).abs() < 1e-3);
-    }
+    assert_eq!(planned, high.world_xy_m);
     let b = [ControlledAgent {
         id: t.b_id,
         courtesy: Courtesy::Quantile(0.9),

@@ -76,9 +76,16 @@ class Simulation:
 class Model:
     """A trained generator folder (``scbg train generator`` / the demo's ``generator_full``)."""
 
-    def __init__(self, path: str, predictor: Optional[str] = None) -> None: ...
+    def __init__(
+        self, path: str, predictor: Optional[str] = None, policy: str = "generator"
+    ) -> None:
+        """``policy``: ``generator`` (the learned g(x, ψ)) or ``ranked`` (B's sampled futures
+        chosen by their ψ labels, no generator)."""
+        ...
     @property
     def variant(self) -> str: ...
+    @property
+    def policy(self) -> str: ...
     @property
     def audience(self) -> str:
         """Whose reward the courtesy counts: ``pair`` (A alone) or ``neighbours <r> m <sum|proximity>``."""
