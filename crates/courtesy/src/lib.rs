@@ -50,7 +50,14 @@ pub fn expected_reward(
     step_secs: f32,
 ) -> Tensor<1> {
     let b = batch.clone().with_condition(condition);
-    let out = model.forward(&b);
+    mixture_reward(model.forward(&b), reward, step_secs)
+}
+
+/// Σ_k π_k r(μ_k) of each row's predicted mixture.
+///
+/// # Shapes
+/// `out: GmmOutput` of `[n, ·]` `-> [n]`
+fn mixture_reward(out: scbg_model::GmmOutput, reward: Reward, step_secs: f32) -> Tensor<1> {
     let [n, k, steps, _] = out.xy.dims();
     let probs = softmax(out.logits, 1); // [n, k]
     let r = reward
@@ -79,13 +86,11 @@ pub fn expected_reward_shared(
         burn::tensor::TensorData::new(index, [rows.len()]),
         &device,
     );
-    let out = model.forward_shared(base, index, condition);
-    let [n, k, steps, _] = out.xy.dims();
-    let probs = softmax(out.logits, 1); // [n, k]
-    let r = reward
-        .evaluate(out.xy.reshape([n * k, steps, 2]), step_secs)
-        .reshape([n, k]);
-    (probs * r).sum_dim(1).reshape([n])
+    mixture_reward(
+        model.forward_shared(base, index, condition),
+        reward,
+        step_secs,
+    )
 }
 
 /// ψ of the futures `y_b` (in each target A's frame) — paper eq. (2).

@@ -307,6 +307,22 @@ pub fn evaluate_examples(
     let high = first.checkpoint.threshold_psi;
     let psi_range = (first.checkpoint.psi_min, first.checkpoint.psi_max);
     let mut variants = Vec::new();
+    let options = |l: &LoadedScbg| EvalOptions {
+        arbitrary_min: l.checkpoint.psi_min,
+        arbitrary_max: l.checkpoint.psi_max,
+        high_threshold: high,
+        reward: l.scbg.labels.reward,
+    };
+    // A row of Table II, and its control in truth where there is a ground truth.
+    let mut record = |name: &str, v: VariantEval, measured: &scbg_generator::eval::Measured| {
+        if let Some(t) = index
+            .as_ref()
+            .and_then(|index| crate::fidelity::truth_control(&refs, measured, index))
+        {
+            truth_control.push((name.to_string(), t));
+        }
+        variants.push((name.to_string(), v));
+    };
     for l in loaded {
         let name = l.checkpoint.variant.name();
         let pb = progress.bar(&format!("evaluating {name}"), 1);
@@ -315,47 +331,23 @@ pub fn evaluate_examples(
             &l.scbg.range,
             &l.scbg.predictor,
             &refs,
-            &EvalOptions {
-                arbitrary_min: l.checkpoint.psi_min,
-                arbitrary_max: l.checkpoint.psi_max,
-                high_threshold: high,
-                reward: l.scbg.labels.reward,
-            },
+            &options(l),
             &l.device,
         );
         pb.inc(1);
-        if let Some(t) = index
-            .as_ref()
-            .and_then(|index| crate::fidelity::truth_control(&refs, &measured, index))
-        {
-            truth_control.push((name.to_string(), t));
-        }
-        variants.push((name.to_string(), v));
+        record(name, v, &measured);
     }
     // Sample and rank, the untrained yardstick every variant is compared with: B's sampled
     // futures chosen by their labels (the first variant's range predictor turns the quantiles
     // into the requested ψ of CourtesyMSE *range*).
-    let options = EvalOptions {
-        arbitrary_min: first.checkpoint.psi_min,
-        arbitrary_max: first.checkpoint.psi_max,
-        high_threshold: high,
-        reward: first.scbg.labels.reward,
-    };
     if let Some((v, measured)) = scbg_generator::ranked::evaluate_ranked(
         &first.scbg.range,
         &first.scbg.predictor,
         &refs,
-        &options,
+        &options(first),
         &first.device,
     ) {
-        let name = scbg_generator::ranked::RANKED;
-        if let Some(t) = index
-            .as_ref()
-            .and_then(|index| crate::fidelity::truth_control(&refs, &measured, index))
-        {
-            truth_control.push((name.to_string(), t));
-        }
-        variants.push((name.to_string(), v));
+        record(scbg_generator::ranked::RANKED, v, &measured);
     }
     let mut written = Vec::new();
     if let Some(dir) = figures {
