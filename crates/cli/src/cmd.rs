@@ -405,6 +405,18 @@ fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
         "Spearman(quantile, realised courtesy): {}",
         fmt(&e.curve.spearman_quantile_realised_courtesy)
     );
+    println!(
+        "Spearman(quantile, A speed) within a scene (0 where it does not respond): {}; responsive scenes: {}",
+        fmt(&e.curve.spearman_within_scene_a_speed),
+        fmt(&e.curve.responsive_fraction)
+    );
+    if let Some(w) = &e.world_knob {
+        println!(
+            "the world's own B at c = q: Spearman(quantile, A speed) {}; within a scene {}",
+            fmt(&w.spearman_quantile_a_speed),
+            fmt(&w.spearman_within_scene_a_speed)
+        );
+    }
     println!("{}", e.realism_line());
 }
 

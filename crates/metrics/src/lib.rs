@@ -19,7 +19,7 @@ use std::f32::consts::PI;
 use serde::Serialize;
 
 mod stats;
-pub use stats::{pearson, ranks, spearman};
+pub use stats::{pearson, ranks, spearman, spearman_if_responsive};
 
 pub mod wosac;
 

@@ -44,9 +44,36 @@ pub fn spearman(x: &[f64], y: &[f64]) -> Option<f64> {
     pearson(&ranks(x), &ranks(y))
 }
 
+/// Spearman(x, y) of one group (one scene's courtesy knob) when `y` spans at least
+/// `min_range`, else `None`: a group whose `y` does not respond to `x` has no rank order to
+/// follow, and ties of float noise would give it an arbitrary one.
+pub fn spearman_if_responsive(x: &[f64], y: &[f64], min_range: f64) -> Option<f64> {
+    let (lo, hi) = y
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            (lo.min(v), hi.max(v))
+        });
+    (hi - lo >= min_range).then(|| spearman(x, y)).flatten()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn spearman_of_a_responsive_group_only() {
+        let x = [0.1, 0.5, 0.9];
+        assert_eq!(spearman_if_responsive(&x, &[1.0, 1.005, 1.002], 0.01), None);
+        assert_eq!(
+            spearman_if_responsive(&x, &[1.0, 1.5, 2.0], 0.01),
+            Some(1.0)
+        );
+        assert_eq!(
+            spearman_if_responsive(&x, &[2.0, 1.5, 1.0], 0.01),
+            Some(-1.0)
+        );
+        assert_eq!(spearman_if_responsive(&x, &[f64::NAN; 3], 0.01), None);
+    }
 
     #[test]
     fn known_values() {

@@ -252,6 +252,10 @@ pub fn write_scatter(rows: &[LabelRow], truth: &[GroundTruth], path: &Path) -> a
     Ok(())
 }
 
+/// The smallest range of ψ_true (m/s) over one example's futures for the input quantiles that
+/// counts as B's choice changing A's reward ([`WorldKnob::spearman_within_example`]).
+pub const RESPONSIVE_PSI_MPS: f64 = 0.01;
+
 /// ψ_true of generated futures at one input quantile.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct QuantileTruth {
@@ -266,12 +270,11 @@ pub struct QuantileTruth {
 /// Control in truth: the generator's futures for the input quantiles, scored by the oracle.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct TruthControl {
-    /// Spearman(input quantile, ψ_true of the generated future), per family and pooled.
-    pub spearman_quantile_psi_true: BTreeMap<String, Option<f64>>,
-    /// Scored examples (pair roles with a ground truth) per family and pooled.
-    pub examples: BTreeMap<String, usize>,
-    /// Mean ψ_true per input quantile (pooled).
-    pub per_quantile: Vec<QuantileTruth>,
+    /// Spearman(input quantile, ψ_true of the generated future) pooled and within examples,
+    /// the scored examples (pair roles with a ground truth) and the mean ψ_true per quantile:
+    /// the same scoring as the yardsticks'.
+    #[serde(flatten)]
+    pub knob: WorldKnob,
     /// J_φ's achieved ψ against ψ_true over the same generated futures.
     pub achieved_vs_true: Agreement,
 }
@@ -307,10 +310,32 @@ fn quantile_summary(rows: &[QuantileRow]) -> WorldKnob {
             })
         })
         .collect();
+    // Within each example: Spearman over its own 9 futures, 0 where B's choice does not
+    // change A's reward (ψ_true's range below `RESPONSIVE_PSI_MPS`).
+    let mut within_by: BTreeMap<String, (Vec<f64>, usize)> = BTreeMap::new();
+    let q: Vec<f64> = EVAL_QUANTILES.iter().map(|&q| f64::from(q)).collect();
+    for (family, truths) in rows {
+        let rho = scbg_metrics::spearman_if_responsive(&q, truths, RESPONSIVE_PSI_MPS);
+        let responsive = rho.is_some();
+        let rho = rho.unwrap_or(0.0);
+        for key in [*family, POOLED] {
+            let e = within_by.entry(key.to_string()).or_default();
+            e.0.push(rho);
+            e.1 += usize::from(responsive);
+        }
+    }
     WorldKnob {
         spearman_quantile_psi_true: q_by
             .iter()
             .map(|(k, (q, t))| (k.clone(), scbg_metrics::spearman(q, t)))
+            .collect(),
+        spearman_within_example: within_by
+            .iter()
+            .map(|(k, (rhos, _))| (k.clone(), rhos.iter().sum::<f64>() / rhos.len() as f64))
+            .collect(),
+        responsive_fraction: within_by
+            .iter()
+            .map(|(k, (rhos, n))| (k.clone(), *n as f64 / rhos.len() as f64))
             .collect(),
         examples: q_by
             .iter()
@@ -354,11 +379,8 @@ pub fn truth_control(
     let (rows, achieved): (Vec<_>, Vec<_>) = scored.into_iter().unzip();
     let all_true: Vec<f64> = rows.iter().flat_map(|r| r.1.iter().copied()).collect();
     let all_achieved: Vec<f64> = achieved.into_iter().flatten().collect();
-    let summary = quantile_summary(&rows);
     Some(TruthControl {
-        spearman_quantile_psi_true: summary.spearman_quantile_psi_true,
-        examples: summary.examples,
-        per_quantile: summary.per_quantile,
+        knob: quantile_summary(&rows),
         achieved_vs_true: agreement(&all_achieved, &all_true),
     })
 }
@@ -407,6 +429,14 @@ pub fn world_future_of_b(scenario: &Scenario, b_id: i64, c: f64) -> Option<Vec<[
 pub struct WorldKnob {
     /// Spearman(q, ψ_true of the world's B at c = q), per family and pooled.
     pub spearman_quantile_psi_true: BTreeMap<String, Option<f64>>,
+    /// The knob within a scene: the mean over examples of Spearman(q, ψ_true) across the
+    /// example's own futures for the input quantiles, 0 for an example whose futures all give
+    /// A the same reward (ψ_true's range under [`RESPONSIVE_PSI_MPS`]); per family and pooled.
+    /// Free of the scene-to-scene spread of ψ_true that the pooled Spearman mixes in.
+    pub spearman_within_example: BTreeMap<String, f64>,
+    /// Share of examples whose futures for the input quantiles differ in ψ_true by at least
+    /// [`RESPONSIVE_PSI_MPS`], per family and pooled.
+    pub responsive_fraction: BTreeMap<String, f64>,
     /// Scored examples per family and pooled.
     pub examples: BTreeMap<String, usize>,
     /// Mean ψ_true per quantile (pooled).
@@ -544,6 +574,32 @@ mod tests {
     /// The world's B at the scene's own courtesy drives the logged future (so the world knob
     /// at c = the latent courtesy scores ψ_true of the log); other courtesies change it in
     /// some scenes (in others B's decision does not depend on it).
+    #[test]
+    fn within_example_spearman_removes_the_scene_level() {
+        // Two examples that each rise perfectly with q, but the second sits so far below the
+        // first that the pooled Spearman is only moderate; a third does not respond at all.
+        let rising =
+            |offset: f64| -> Vec<f64> { (0..9).map(|j| offset + 0.1 * j as f64).collect() };
+        let rows: Vec<QuantileRow> = vec![
+            ("merge", rising(10.0)),
+            ("merge", rising(-10.0)),
+            ("crossing", vec![0.5; 9]),
+        ];
+        let k = quantile_summary(&rows);
+        let pooled = k.spearman_quantile_psi_true[POOLED].unwrap();
+        assert!(pooled < 0.75, "pooled {pooled}");
+        assert!((k.spearman_within_example["merge"] - 1.0).abs() < 1e-12);
+        assert_eq!(k.spearman_within_example["crossing"], 0.0);
+        assert!((k.spearman_within_example[POOLED] - 2.0 / 3.0).abs() < 1e-12);
+        assert!((k.responsive_fraction[POOLED] - 2.0 / 3.0).abs() < 1e-12);
+        assert_eq!(k.responsive_fraction["crossing"], 0.0);
+        // A falling example counts against the knob.
+        let mut falling = rising(0.0);
+        falling.reverse();
+        let k = quantile_summary(&[("cutin", falling)]);
+        assert!((k.spearman_within_example["cutin"] + 1.0).abs() < 1e-12);
+    }
+
     #[test]
     fn the_worlds_b_at_its_own_courtesy_drives_the_logged_future() {
         use scbg_synth::{Family, generate};

@@ -2,7 +2,6 @@
 //! or more generator variants sharing one predictor, as a report that serialises to the report
 //! JSON.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -166,50 +165,41 @@ impl ScbgEval {
             ));
         }
         if !self.truth_control.is_empty() {
-            s.push_str("\nControl in truth — Spearman(input quantile, ψ_true of the generated future), oracle of the synthetic simulator:\n\n| model | all | merge | crossing | cutin | scored pair roles | Pearson(achieved ψ, ψ_true) |\n|---|---|---|---|---|---|---|\n");
-            let row = |label: &str,
-                       rho: &BTreeMap<String, Option<f64>>,
-                       examples: &BTreeMap<String, usize>,
-                       pearson: Option<f64>| {
+            s.push_str("\nControl in truth — Spearman(input quantile, ψ_true of the generated future), oracle of the synthetic simulator; pooled over examples, and within an example (the mean over examples of the Spearman across its own futures, 0 where they all give A the same reward; the share of examples where they do not):\n\n| model | all | merge | crossing | cutin | within an example: all | merge | crossing | cutin | responsive | scored pair roles | Pearson(achieved ψ, ψ_true) |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+            let row = |label: &str, w: &crate::fidelity::WorldKnob, pearson: Option<f64>| {
                 let c = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:.3}"));
-                let at = |k: &str| c(rho.get(k).copied().flatten());
+                let at = |k: &str| c(w.spearman_quantile_psi_true.get(k).copied().flatten());
+                let within = |k: &str| c(w.spearman_within_example.get(k).copied());
                 format!(
-                    "| {label} | {} | {} | {} | {} | {} | {} |\n",
+                    "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                     at(crate::fidelity::POOLED),
                     at("merge"),
                     at("crossing"),
                     at("cutin"),
-                    examples.get(crate::fidelity::POOLED).copied().unwrap_or(0),
+                    within(crate::fidelity::POOLED),
+                    within("merge"),
+                    within("crossing"),
+                    within("cutin"),
+                    c(w.responsive_fraction.get(crate::fidelity::POOLED).copied()),
+                    w.examples
+                        .get(crate::fidelity::POOLED)
+                        .copied()
+                        .unwrap_or(0),
                     c(pearson),
                 )
             };
             for (name, t) in &self.truth_control {
-                s.push_str(&row(
-                    label_of(name),
-                    &t.spearman_quantile_psi_true,
-                    &t.examples,
-                    t.achieved_vs_true.pearson,
-                ));
+                s.push_str(&row(label_of(name), &t.knob, t.achieved_vs_true.pearson));
             }
             if let Some(w) = &self.truth_control_world {
-                s.push_str(&row(
-                    "the world's own B at c = q (yardstick)",
-                    &w.spearman_quantile_psi_true,
-                    &w.examples,
-                    None,
-                ));
+                s.push_str(&row("the world's own B at c = q (yardstick)", w, None));
             }
             for (label, w) in self
                 .truth_control_selection
                 .iter()
                 .flat_map(|sel| sel.yardsticks())
             {
-                s.push_str(&row(
-                    label,
-                    &w.spearman_quantile_psi_true,
-                    &w.examples,
-                    None,
-                ));
+                s.push_str(&row(label, w, None));
             }
         }
         s.push_str(&format!(

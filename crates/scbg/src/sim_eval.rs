@@ -273,6 +273,13 @@ pub struct KnobCurve {
     /// Spearman(quantile, realised courtesy) over every (scene, quantile): the same, with
     /// each scene's own level removed.
     pub spearman_quantile_realised_courtesy: PerFamily,
+    /// The knob within a scene: the mean over scenes of Spearman(quantile, A's realised
+    /// average speed) across the scene's own quantiles, 0 for a scene in which A's speed does
+    /// not change by [`RESPONSIVE_SPEED_MPS`] over them; per family and pooled.
+    pub spearman_within_scene_a_speed: PerFamily,
+    /// Share of scenes in which A's realised speed changes by at least
+    /// [`RESPONSIVE_SPEED_MPS`] over the quantiles, per family and pooled.
+    pub responsive_fraction: PerFamily,
     /// Whether the mean of A's realised speed never falls from one quantile to the next.
     pub a_speed_curve_rises: bool,
     /// The largest B collision rate over the quantiles.
@@ -344,8 +351,11 @@ impl KnobCurve {
                 })
             })
             .collect();
+        let (spearman_within_scene_a_speed, responsive_fraction) = within_scene(done, quantiles);
         Self {
             scenes: done.len(),
+            spearman_within_scene_a_speed,
+            responsive_fraction,
             b_collisions,
             a_speed_curve_rises: per_quantile
                 .windows(2)
@@ -420,6 +430,31 @@ fn kept_counting_skips(
         }
     }
     kept
+}
+
+/// The smallest change of A's realised average speed (m/s) over a scene's quantiles that
+/// counts as the knob acting in that scene ([`KnobCurve::spearman_within_scene_a_speed`]).
+pub const RESPONSIVE_SPEED_MPS: f64 = 0.01;
+
+/// Per family and pooled: the mean over scenes of Spearman(quantile, A's realised speed)
+/// within each scene (0 where it does not respond), and the share of responsive scenes.
+fn within_scene(done: &[SceneResult], quantiles: &[f32]) -> (PerFamily, PerFamily) {
+    let q: Vec<f64> = quantiles.iter().map(|&q| f64::from(q)).collect();
+    let mut by: BTreeMap<String, (f64, usize, usize)> = BTreeMap::new();
+    for r in done {
+        let speeds: Vec<f64> = r.curve.iter().map(|c| c.0.avg_speed_mps).collect();
+        let rho = scbg_metrics::spearman_if_responsive(&q, &speeds, RESPONSIVE_SPEED_MPS);
+        for key in ["all", r.family.as_str()] {
+            let e = by.entry(key.to_string()).or_default();
+            e.0 += rho.unwrap_or(0.0);
+            e.1 += usize::from(rho.is_some());
+            e.2 += 1;
+        }
+    }
+    let of = |f: fn(&(f64, usize, usize)) -> f64| -> PerFamily {
+        by.iter().map(|(k, v)| (k.clone(), Some(f(v)))).collect()
+    };
+    (of(|v| v.0 / v.2 as f64), of(|v| v.1 as f64 / v.2 as f64))
 }
 
 fn spearman_per_family(points: &[(String, f64, f64)]) -> PerFamily {

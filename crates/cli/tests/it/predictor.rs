@@ -206,6 +206,11 @@ fn demo_writes_a_report() {
     assert!(report["checks"]["closed_loop_wosac_prior_above_baselines"].is_boolean());
     assert!(cl["wosac_scbg_prior"]["metametric"].is_number());
     assert!(cl["wosac_prior_minus_idm"]["std_error"].is_number());
+    // The knob within a scene: a mean of Spearman values, over responsive scenes only.
+    let within = cl["spearman_within_scene_a_speed"]["all"].as_f64().unwrap();
+    let responsive = cl["responsive_fraction"]["all"].as_f64().unwrap();
+    assert!(within.abs() <= responsive + 1e-9, "{cl}");
+    assert!(report["truth_control"]["full"]["spearman_within_example"]["all"].is_number());
     // Two generator seeds: seed means, their spread, each seed's numbers.
     assert_eq!(report["generator_seeds"], serde_json::json!([0, 1]));
     assert_eq!(report["variants_per_seed"].as_array().unwrap().len(), 2);
@@ -546,6 +551,13 @@ fn train_generator_saves_generator_and_range_predictor() {
     assert_eq!(means.len(), 9);
     assert!(means.windows(2).all(|w| w[0] <= w[1]), "{means:?}");
     assert!(selection["candidates_mean"].as_f64().unwrap() >= 2.0);
+    // Within each role the picks by ψ_true never fall with q: every responsive role's
+    // Spearman is positive.
+    let by_truth = &selection["by_truth"];
+    let within = by_truth["spearman_within_example"]["all"].as_f64().unwrap();
+    let responsive = by_truth["responsive_fraction"]["all"].as_f64().unwrap();
+    assert!(within >= 0.0 && within <= responsive + 1e-9, "{by_truth}");
+    assert_eq!(within > 0.0, responsive > 0.0, "{by_truth}");
     for variant in ["baseline", "full"] {
         let v = &eval["variants"][variant];
         for key in [

@@ -182,12 +182,14 @@ pub fn acceptance_checks(
             key: "closed_loop_spearman_0_6",
             passed: pooled >= 0.6,
             text: format!(
-                "closed loop: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}){}",
+                "closed loop: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}; within a scene {}){}",
                 pooled_of(&c.curve.spearman_quantile_realised_courtesy),
+                pooled_of(&c.curve.spearman_within_scene_a_speed),
                 c.world_knob.as_ref().map_or(String::new(), |w| format!(
-                    "; the world's own B at courtesy c = q on the same scenes: {} pooled, {} with each scene's level removed",
+                    "; the world's own B at courtesy c = q on the same scenes: {} pooled, {} with each scene's level removed, {} within a scene",
                     pooled_of(&w.spearman_quantile_a_speed),
-                    pooled_of(&w.spearman_quantile_realised_courtesy)
+                    pooled_of(&w.spearman_quantile_realised_courtesy),
+                    pooled_of(&w.spearman_within_scene_a_speed)
                 ))
             ),
         });

@@ -95,7 +95,7 @@ impl DemoReport {
             }
         };
         let mut out = format!(
-            "Mean ± standard deviation over {} generator seeds ({:?}):\n\n| model | CourtesyMSE *data* | CourtesyMSE *range* | CourtesyMSE *arbitrary* | TrajADE (m) | corr(q, ψ) all | corr(q, ψ) high | Spearman(q, ψ_true) all | merge | crossing | cutin |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+            "Mean ± standard deviation over {} generator seeds ({:?}):\n\n| model | CourtesyMSE *data* | CourtesyMSE *range* | CourtesyMSE *arbitrary* | TrajADE (m) | corr(q, ψ) all | corr(q, ψ) high | Spearman(q, ψ_true) all | merge | crossing | cutin | within an example |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             self.generator_seeds.len(),
             self.generator_seeds
         );
@@ -109,7 +109,7 @@ impl DemoReport {
             }
             let rho = |k: &str| cell(name, &["spearman_quantile_psi_true", k], true);
             out += &format!(
-                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 cell(name, &["courtesy_mse_data", "mean"], false),
                 cell(name, &["courtesy_mse_range", "mean"], false),
                 cell(name, &["courtesy_mse_arbitrary", "mean"], false),
@@ -120,6 +120,11 @@ impl DemoReport {
                 rho("merge"),
                 rho("crossing"),
                 rho("cutin"),
+                cell(
+                    name,
+                    &["spearman_within_example", crate::fidelity::POOLED],
+                    true
+                ),
             );
         }
         let world = self
@@ -139,11 +144,14 @@ impl DemoReport {
                     .map_or("-".into(), |x| format!("{x:.3}"))
             };
             out += &format!(
-                "| {label} | | | | | | | {} | {} | {} | {} |\n",
+                "| {label} | | | | | | | {} | {} | {} | {} | {} |\n",
                 rho(crate::fidelity::POOLED),
                 rho("merge"),
                 rho("crossing"),
                 rho("cutin"),
+                w.spearman_within_example
+                    .get(crate::fidelity::POOLED)
+                    .map_or("-".into(), |x| format!("{x:.3}")),
             );
         }
         out
@@ -232,16 +240,18 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
             .join(", ")
     };
     out += &format!(
-        "\nSpearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. scbg WOSAC over its quantiles: {}.\n\n\
+        "\nSpearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene (mean of each scene's Spearman(quantile, A's realised speed), 0 where it does not respond): {}; responsive scenes: {}. scbg WOSAC over its quantiles: {}.\n\n\
          ![closed-loop courtesy](figures/sim_courtesy.png)\n![closed-loop realism](figures/sim_realism.png)\n",
         fmt(&c.curve.spearman_quantile_a_speed),
         fmt(&c.curve.spearman_quantile_realised_courtesy),
+        fmt(&c.curve.spearman_within_scene_a_speed),
+        fmt(&c.curve.responsive_fraction),
         meta(c.wosac_scbg.as_ref())
     );
     out += &format!("\n{}.\n", c.realism_line());
     if let Some(w) = &c.world_knob {
         out += &format!(
-            "\nThe ceiling: the same {} scenes with B driven by the synthetic world's own rule at courtesy c = q (a B faithful to its courtesy). A's realised speed per quantile: {}. Spearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. B collision rate at most {:.3}.\n",
+            "\nThe ceiling: the same {} scenes with B driven by the synthetic world's own rule at courtesy c = q (a B faithful to its courtesy). A's realised speed per quantile: {}. Spearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene: {}; responsive scenes: {}. B collision rate at most {:.3}.\n",
             w.scenes,
             w.per_quantile
                 .iter()
@@ -250,6 +260,8 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
                 .join(", "),
             fmt(&w.spearman_quantile_a_speed),
             fmt(&w.spearman_quantile_realised_courtesy),
+            fmt(&w.spearman_within_scene_a_speed),
+            fmt(&w.responsive_fraction),
             w.max_b_collision_rate
         );
     }
