@@ -123,13 +123,18 @@ const CONFLICT_STEP_S: f64 = 0.5;
 const CONFLICT_WINDOW_S: f64 = 2.0;
 
 /// A crossing conflict ahead of an agent at `s_m` on `path` that follows `arrival` (the time,
-/// s from now, at which it reaches each arclength, increasing): another agent whose position
-/// extrapolated at constant velocity 0.5, 1, …, 5 s ahead lies in the corridor ahead at an
-/// arclength the agent reaches within 2 s of the same time. A follower — behind the agent and
-/// heading its way (velocity within 60° of its heading) — counts only while it is faster: one
-/// that does not catch up is left to yield, as braking in front of it would only bring it
-/// closer. The conflict point is returned as a standing leader `(bumper gap m, 0)`; the
-/// nearest one counts.
+/// s from now, at which it reaches each arclength, increasing; `None` beyond where its plan
+/// stops): another agent whose position extrapolated at constant velocity 0.5, 1, …, 5 s ahead
+/// lies in the corridor ahead at an arclength the agent's box occupies within 2 s of the same
+/// time — from when its box reaches the other's until it has left it, or for good when its plan
+/// stops there (a plan that stands in another's way is a conflict however late the other
+/// comes). A follower — behind the agent and heading its way (velocity within 60° of its
+/// heading) — counts only while it is faster: one that does not catch up is left to yield, as
+/// braking in front of it would only bring it closer. The conflict point is returned as a
+/// standing leader `(bumper gap m, 0)`; the nearest one counts. The agent never stops for a
+/// conflict inside another agent's way: when the way of a crossing agent (one heading at 45° or
+/// more to the path; its position continued along its velocity) crosses the path between the
+/// agent and the conflict, it stops before that way instead (don't block the box).
 pub(crate) fn crossing_conflict(
     path: &RefPath,
     s_m: f64,
@@ -139,12 +144,13 @@ pub(crate) fn crossing_conflict(
 ) -> Option<(f64, f64)> {
     let mut best: Option<(f64, f64)> = None;
     let (sn, cs) = f64::from(me.heading_rad).sin_cos();
-    for o in others {
+    let moving_near = |o: &&&AgentState| {
+        let v = f64::from(o.velocity_x_mps).hypot(f64::from(o.velocity_y_mps));
+        v >= 0.5 && (o.x_m - me.x_m).hypot(o.y_m - me.y_m) <= LOOKAHEAD_M + 40.0
+    };
+    for o in others.iter().filter(moving_near) {
         let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
         let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
-        if vx.hypot(vy) < 0.5 || dx.hypot(dy) > LOOKAHEAD_M + 40.0 {
-            continue;
-        }
         // A follower (behind, heading the same way) that is not catching up is no conflict
         // to brake for: braking in front of it only brings it closer.
         let along = vx * cs + vy * sn;
@@ -163,14 +169,79 @@ pub(crate) fn crossing_conflict(
             if ahead <= 0.0 || ahead > LOOKAHEAD_M || d.abs() > half {
                 continue;
             }
-            if arrival(s).is_some_and(|t| (t - tau).abs() < CONFLICT_WINDOW_S) {
+            // My box overlaps the other's (at s, crossing my path at its heading there) while
+            // my centre is within `reach` of s.
+            let (sn_p, cs_p) = path.heading_at(s).sin_cos();
+            let cos_rel = ((vx * cs_p + vy * sn_p) / vx.hypot(vy)).abs();
+            let sin_rel = (1.0 - cos_rel * cos_rel).max(0.0).sqrt();
+            let reach = 0.5 * f64::from(me.length_m)
+                + 0.5 * (f64::from(o.length_m) * cos_rel + f64::from(o.width_m) * sin_rel);
+            if occupied(&arrival, s - reach, s + reach, tau) {
                 let gap = ahead - 0.5 * f64::from(me.length_m + o.length_m);
                 best = closer(best, Some((gap, 0.0)));
                 break;
             }
         }
     }
+    // Never stop for a conflict inside another agent's way: stop before the nearest way
+    // between here and the conflict instead (one I am not already in).
+    if let Some((conflict_gap, _)) = best {
+        for o in others.iter().filter(moving_near) {
+            if let Some(gap) = crossing_way(path, s_m, me, o)
+                && gap > 0.0
+                && gap < conflict_gap
+            {
+                best = closer(best, Some((gap, 0.0)));
+            }
+        }
+    }
     best
+}
+
+/// Heading difference between two agents' ways above which one crosses the other (and below
+/// 180° minus it), rad.
+const CROSSING_MIN_ANGLE_RAD: f64 = std::f64::consts::FRAC_PI_4;
+
+/// Where the way of a crossing agent `o` (its position continued along its velocity for up to
+/// [`LOOKAHEAD_M`]) first enters the corridor of my `path` ahead of `s_m`, as a standing
+/// leader's bumper gap; `None` for an agent heading within 45° of my path's heading or its
+/// opposite there, or one whose way does not cross my path ahead.
+fn crossing_way(path: &RefPath, s_m: f64, me: &AgentState, o: &AgentState) -> Option<f64> {
+    let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
+    let v = vx.hypot(vy);
+    let (ux, uy) = (vx / v, vy / v);
+    let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
+    let mut hint = None;
+    // Steps of 2 m: the corridor is at least 3.6 m across (a car and a pedestrian), crossed at
+    // 45° or more.
+    for r in (0..=LOOKAHEAD_M as usize).step_by(2) {
+        let (x, y) = (o.x_m + ux * r as f64, o.y_m + uy * r as f64);
+        let (s, d) = path.project(x, y, hint.or(Some(s_m + 25.0)));
+        hint = Some(s);
+        let ahead = s - s_m;
+        if ahead <= 0.0 || ahead > LOOKAHEAD_M || d.abs() > half {
+            continue;
+        }
+        let (sn_p, cs_p) = path.heading_at(s).sin_cos();
+        let angle = (ux * cs_p + uy * sn_p).clamp(-1.0, 1.0).acos();
+        let crossing = CROSSING_MIN_ANGLE_RAD..=std::f64::consts::PI - CROSSING_MIN_ANGLE_RAD;
+        if !crossing.contains(&angle) {
+            return None;
+        }
+        return Some(ahead - 0.5 * f64::from(me.length_m + o.length_m));
+    }
+    None
+}
+
+/// Whether the agent that reaches each arclength at `arrival(s)` s from now (`None`: never, its
+/// plan stops before) is on `[s_in, s_out]` within [`CONFLICT_WINDOW_S`] of `tau`: from when it
+/// gets to `s_in` until it has left `s_out`, or for good when its plan stops in between.
+fn occupied(arrival: &impl Fn(f64) -> Option<f64>, s_in: f64, s_out: f64, tau: f64) -> bool {
+    let Some(enter) = arrival(s_in) else {
+        return false;
+    };
+    tau > enter - CONFLICT_WINDOW_S
+        && arrival(s_out).is_none_or(|leave| tau < leave + CONFLICT_WINDOW_S)
 }
 
 /// Lateral clearance below which an agent alongside bounds the steering, m.
@@ -392,6 +463,78 @@ mod tests {
         }
         assert_eq!(conflict(6.0), None);
         assert_eq!(conflict(0.0), None, "it is through before I get there");
+    }
+
+    #[test]
+    fn a_plan_that_stops_in_the_way_is_a_conflict_whenever_the_other_comes() {
+        // My plan stops with my centre at x = 28 m: my box (4.5 m) then reaches into the way
+        // of an agent crossing at x = 30 m, so that agent is a conflict even when it comes
+        // long after I get there; a plan that stops at x = 20 m leaves its way free.
+        let me = me_along_x();
+        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let crossing_in = |t_cross: f64| AgentState {
+            x_m: 30.0,
+            y_m: -10.0 * t_cross,
+            heading_rad: std::f32::consts::FRAC_PI_2,
+            velocity_x_mps: 0.0,
+            velocity_y_mps: 10.0,
+            ..me
+        };
+        let stops_at = |x_stop: f64| move |s: f64| (s <= x_stop).then_some(s / 10.0);
+        let other = crossing_in(5.0);
+        assert!(crossing_conflict(&path, 0.0, &me, &[&other], stops_at(28.0)).is_some());
+        assert_eq!(
+            crossing_conflict(&path, 0.0, &me, &[&other], stops_at(20.0)),
+            None
+        );
+        // Passing through at 20 m/s (never stopping), I have left its way 3.3 s before it
+        // comes.
+        assert_eq!(
+            crossing_conflict(&path, 0.0, &me, &[&other], |s: f64| Some(s / 20.0)),
+            None
+        );
+    }
+
+    #[test]
+    fn a_conflict_behind_another_way_stops_me_before_that_way() {
+        // A conflict at x = 40 m (an agent crossing there as I arrive), and the way of a second
+        // crossing agent at x = 25 m, far away yet: I stop before x = 25 m, not in its way.
+        let me = me_along_x();
+        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let crossing = |x: f64, y: f64, vy: f32| AgentState {
+            x_m: x,
+            y_m: y,
+            heading_rad: std::f32::consts::FRAC_PI_2 * vy.signum(),
+            velocity_x_mps: 0.0,
+            velocity_y_mps: vy,
+            ..me
+        };
+        let conflict = crossing(40.0, -40.0, 10.0);
+        let far_way = crossing(25.0, 55.0, -5.0);
+        let (alone, _) =
+            crossing_conflict(&path, 0.0, &me, &[&conflict], arrival_at_10_mps).unwrap();
+        assert!((alone - (40.0 - 4.5)).abs() < 1.0, "gap {alone}");
+        let (both, v) =
+            crossing_conflict(&path, 0.0, &me, &[&conflict, &far_way], arrival_at_10_mps).unwrap();
+        assert!((both - (25.0 - 4.5)).abs() < 1.0, "gap {both}");
+        assert_eq!(v, 0.0);
+        // Without a conflict the far way alone does not stop me.
+        assert_eq!(
+            crossing_conflict(&path, 0.0, &me, &[&far_way], arrival_at_10_mps),
+            None
+        );
+        // An agent driving along my path (in the next lane) has no crossing way.
+        let alongside = AgentState {
+            x_m: 20.0,
+            y_m: 2.5,
+            velocity_x_mps: 3.0,
+            ..me
+        };
+        assert_eq!(
+            crossing_conflict(&path, 0.0, &me, &[&conflict, &alongside], arrival_at_10_mps)
+                .map(|c| (c.0 - (40.0 - 4.5)).abs() < 1.0),
+            Some(true)
+        );
     }
 
     #[test]
