@@ -60,22 +60,27 @@ pub struct DemoArgs {
     /// Synthetic scenarios to generate when --data is not given.
     #[arg(long, default_value_t = 1500)]
     pub scenarios: usize,
-    /// Counterfactual siblings per synthetic scenario (B's future re-drawn, everyone else
-    /// reacting) added to the predictor's training as conditional samples of A.
-    #[arg(long, default_value_t = 0)]
+    /// Counterfactual siblings per synthetic scenario (B's future re-drawn with courtesy 1/6,
+    /// 1/2, 5/6, …, everyone else reacting) added to the predictor's training as conditional
+    /// samples of A: interventional data, which the labels need to rank B's futures like the
+    /// simulator does (BENCHMARKS.md, issue 11); 0 trains on the logged scenes only, as the
+    /// paper does. Ignored with --data.
+    #[arg(long, default_value_t = 3)]
     pub counterfactuals: usize,
     /// Tell the generators who A is (A's position, heading and velocity in B's frame after B's
     /// embedding); off by default (BENCHMARKS.md, issue 12).
     #[arg(long)]
     pub condition_on_a: bool,
     /// Train the predictor with B's future also in A's lane frame (arc length along and
-    /// offset from A's lane); off by default (BENCHMARKS.md, issue 11).
-    #[arg(long)]
+    /// offset from A's lane); `--lane-frame false` gives B's future in A's frame only, as the
+    /// paper does (BENCHMARKS.md, issue 11).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set, value_name = "BOOL")]
     pub lane_frame: bool,
     /// Train the predictor with B's future acting step by step on A's decoder (A's steps in
     /// each 0.5 s block react only to B's future up to the block's start: interventional
-    /// conditioning); off by default (BENCHMARKS.md, issue 11).
-    #[arg(long)]
+    /// conditioning); `--stepwise false` fuses B's whole future into one vector, as the paper's
+    /// conditional model does (BENCHMARKS.md, issue 11).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set, value_name = "BOOL")]
     pub stepwise: bool,
     /// Predictor training epochs.
     #[arg(long, default_value_t = 30)]
