@@ -74,13 +74,27 @@ pub struct DemoArgs {
     /// Train the predictor with B's future also in A's lane frame (arc length along and
     /// offset from A's lane); `--lane-frame false` gives B's future in A's frame only, as the
     /// paper does (BENCHMARKS.md, issue 11).
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set, value_name = "BOOL")]
+    #[arg(
+        long,
+        default_value_t = true,
+        action = clap::ArgAction::Set,
+        num_args = 0..=1,
+        default_missing_value = "true",
+        value_name = "BOOL"
+    )]
     pub lane_frame: bool,
     /// Train the predictor with B's future acting step by step on A's decoder (A's steps in
     /// each 0.5 s block react only to B's future up to the block's start: interventional
     /// conditioning); `--stepwise false` fuses B's whole future into one vector, as the paper's
     /// conditional model does (BENCHMARKS.md, issue 11).
-    #[arg(long, default_value_t = true, action = clap::ArgAction::Set, value_name = "BOOL")]
+    #[arg(
+        long,
+        default_value_t = true,
+        action = clap::ArgAction::Set,
+        num_args = 0..=1,
+        default_missing_value = "true",
+        value_name = "BOOL"
+    )]
     pub stepwise: bool,
     /// Predictor training epochs.
     #[arg(long, default_value_t = 30)]
@@ -740,4 +754,43 @@ pub struct BenchIngestArgs {
 pub struct BenchSynthArgs {
     #[arg(long, default_value_t = 4000)]
     pub scenarios: usize,
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::{CommandFactory, Parser};
+
+    use super::{Cli, Command};
+
+    #[test]
+    fn the_command_line_is_well_formed() {
+        Cli::command().debug_assert();
+    }
+
+    #[test]
+    fn the_demo_predictor_switches_default_on_and_turn_off_by_value() {
+        let demo =
+            |args: &[&str]| match Cli::try_parse_from(["scbg", "demo"].iter().chain(args).copied())
+                .unwrap()
+                .command
+            {
+                Command::Demo(d) => (d.stepwise, d.lane_frame, d.counterfactuals),
+                _ => unreachable!(),
+            };
+        assert_eq!(demo(&[]), (true, true, 3));
+        assert_eq!(
+            demo(&[
+                "--stepwise",
+                "false",
+                "--lane-frame",
+                "false",
+                "--counterfactuals",
+                "0"
+            ]),
+            (false, false, 0)
+        );
+        // The bare flags of earlier versions still mean "on".
+        assert_eq!(demo(&["--stepwise", "--lane-frame"]), (true, true, 3));
+        assert!(Cli::try_parse_from(["scbg", "demo", "--stepwise", "maybe"]).is_err());
+    }
 }

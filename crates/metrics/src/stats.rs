@@ -46,8 +46,12 @@ pub fn spearman(x: &[f64], y: &[f64]) -> Option<f64> {
 
 /// Spearman(x, y) of one group (one scene's courtesy knob) when `y` spans at least
 /// `min_range`, else `None`: a group whose `y` does not respond to `x` has no rank order to
-/// follow, and ties of float noise would give it an arbitrary one.
+/// follow, and ties of float noise would give it an arbitrary one. `None` too when any `y` is
+/// not finite.
 pub fn spearman_if_responsive(x: &[f64], y: &[f64], min_range: f64) -> Option<f64> {
+    if !y.iter().all(|v| v.is_finite()) {
+        return None;
+    }
     let (lo, hi) = y
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
@@ -73,6 +77,10 @@ mod tests {
             Some(-1.0)
         );
         assert_eq!(spearman_if_responsive(&x, &[f64::NAN; 3], 0.01), None);
+        assert_eq!(
+            spearman_if_responsive(&x, &[1.0, f64::NAN, 2.0], 0.01),
+            None
+        );
     }
 
     #[test]

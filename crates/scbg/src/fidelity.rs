@@ -282,9 +282,10 @@ pub struct TruthControl {
 /// A scored example: its family and ψ_true of B's future at each of `EVAL_QUANTILES`.
 type QuantileRow = (&'static str, Vec<f64>);
 
-/// Spearman(input quantile, ψ_true) per family and pooled, the examples per family and the
-/// mean ψ_true per quantile of `rows` (the fields of a [`WorldKnob`], and of a
-/// [`TruthControl`] beside J_φ's agreement).
+/// Spearman(input quantile, ψ_true) per family and pooled, over all examples and within each
+/// one (with the share of examples that respond), the examples per family and the mean ψ_true
+/// per quantile of `rows` (the fields of a [`WorldKnob`], and of a [`TruthControl`] beside
+/// J_φ's agreement).
 fn quantile_summary(rows: &[QuantileRow]) -> WorldKnob {
     use scbg_generator::eval::EVAL_QUANTILES;
     let mut q_by: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
@@ -429,9 +430,10 @@ pub fn world_future_of_b(scenario: &Scenario, b_id: i64, c: f64) -> Option<Vec<[
 pub struct WorldKnob {
     /// Spearman(q, ψ_true of the world's B at c = q), per family and pooled.
     pub spearman_quantile_psi_true: BTreeMap<String, Option<f64>>,
-    /// The knob within a scene: the mean over examples of Spearman(q, ψ_true) across the
-    /// example's own futures for the input quantiles, 0 for an example whose futures all give
-    /// A the same reward (ψ_true's range under [`RESPONSIVE_PSI_MPS`]); per family and pooled.
+    /// The knob within an example (a pair role): the mean over examples of Spearman(q, ψ_true)
+    /// across the example's own futures for the input quantiles, 0 for an example whose
+    /// futures all give A the same reward (ψ_true's range under [`RESPONSIVE_PSI_MPS`]); per
+    /// family and pooled.
     /// Free of the scene-to-scene spread of ψ_true that the pooled Spearman mixes in.
     pub spearman_within_example: BTreeMap<String, f64>,
     /// Share of examples whose futures for the input quantiles differ in ψ_true by at least
@@ -571,9 +573,6 @@ mod tests {
         assert_eq!((flat.slope, flat.spread_ratio), (None, None));
     }
 
-    /// The world's B at the scene's own courtesy drives the logged future (so the world knob
-    /// at c = the latent courtesy scores ψ_true of the log); other courtesies change it in
-    /// some scenes (in others B's decision does not depend on it).
     #[test]
     fn within_example_spearman_removes_the_scene_level() {
         // Two examples that each rise perfectly with q, but the second sits so far below the
@@ -600,6 +599,9 @@ mod tests {
         assert!((k.spearman_within_example["cutin"] + 1.0).abs() < 1e-12);
     }
 
+    /// The world's B at the scene's own courtesy drives the logged future (so the world knob
+    /// at c = the latent courtesy scores ψ_true of the log); other courtesies change it in
+    /// some scenes (in others B's decision does not depend on it).
     #[test]
     fn the_worlds_b_at_its_own_courtesy_drives_the_logged_future() {
         use scbg_synth::{Family, generate};

@@ -134,7 +134,8 @@ const CONFLICT_WINDOW_S: f64 = 2.0;
 /// standing leader `(bumper gap m, 0)`; the nearest one counts. The agent never stops for a
 /// conflict inside another agent's way: when the way of a crossing agent (one heading at 45° or
 /// more to the path; its position continued along its velocity) crosses the path between the
-/// agent and the conflict, it stops before that way instead (don't block the box).
+/// agent and the conflict, it stops before that way instead if it can at 3 m/s² (don't block
+/// the box).
 pub(crate) fn crossing_conflict(
     path: &RefPath,
     s_m: f64,
@@ -184,10 +185,14 @@ pub(crate) fn crossing_conflict(
         }
     }
     // Never stop for a conflict inside another agent's way: stop before the nearest way
-    // between here and the conflict instead (one I am not already in).
+    // between here and the conflict instead — one I can still stop before at a comfortable
+    // deceleration (braking harder for it would only leave me standing in it).
     if let Some((conflict_gap, _)) = best {
+        let v = f64::from(me.speed_mps());
+        let stopping_m = v * v / (2.0 * WAY_STOP_DECEL_MPS2);
         for o in others.iter().filter(moving_near) {
             if let Some(gap) = crossing_way(path, s_m, me, o)
+                && gap >= stopping_m
                 && gap > 0.0
                 && gap < conflict_gap
             {
@@ -202,16 +207,23 @@ pub(crate) fn crossing_conflict(
 /// 180° minus it), rad.
 const CROSSING_MIN_ANGLE_RAD: f64 = std::f64::consts::FRAC_PI_4;
 
+/// The deceleration at which the guard still stops before a crossing agent's way rather than
+/// at the conflict beyond it (the guard IDM's comfortable braking), m/s².
+const WAY_STOP_DECEL_MPS2: f64 = 3.0;
+
 /// Where the way of a crossing agent `o` (its position continued along its velocity for up to
-/// [`LOOKAHEAD_M`]) first enters the corridor of my `path` ahead of `s_m`, as a standing
-/// leader's bumper gap; `None` for an agent heading within 45° of my path's heading or its
-/// opposite there, or one whose way does not cross my path ahead.
+/// [`LOOKAHEAD_M`]) crosses the corridor of my `path` ahead of `s_m`, as a standing leader's
+/// bumper gap to the nearest arclength of the crossing (the near edge of the way, whichever
+/// side the agent comes from); `None` for an agent heading within 45° of my path's heading or
+/// its opposite there, or one whose way does not cross my path ahead.
 fn crossing_way(path: &RefPath, s_m: f64, me: &AgentState, o: &AgentState) -> Option<f64> {
     let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
     let v = vx.hypot(vy);
     let (ux, uy) = (vx / v, vy / v);
     let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
+    let crossing = CROSSING_MIN_ANGLE_RAD..=std::f64::consts::PI - CROSSING_MIN_ANGLE_RAD;
     let mut hint = None;
+    let mut nearest: Option<f64> = None;
     // Steps of 2 m: the corridor is at least 3.6 m across (a car and a pedestrian), crossed at
     // 45° or more.
     for r in (0..=LOOKAHEAD_M as usize).step_by(2) {
@@ -219,18 +231,23 @@ fn crossing_way(path: &RefPath, s_m: f64, me: &AgentState, o: &AgentState) -> Op
         let (s, d) = path.project(x, y, hint.or(Some(s_m + 25.0)));
         hint = Some(s);
         let ahead = s - s_m;
-        if ahead <= 0.0 || ahead > LOOKAHEAD_M || d.abs() > half {
+        let inside = ahead > 0.0 && ahead <= LOOKAHEAD_M && d.abs() <= half;
+        if !inside {
+            if nearest.is_some() {
+                break; // through the corridor
+            }
             continue;
         }
-        let (sn_p, cs_p) = path.heading_at(s).sin_cos();
-        let angle = (ux * cs_p + uy * sn_p).clamp(-1.0, 1.0).acos();
-        let crossing = CROSSING_MIN_ANGLE_RAD..=std::f64::consts::PI - CROSSING_MIN_ANGLE_RAD;
-        if !crossing.contains(&angle) {
-            return None;
+        if nearest.is_none() {
+            let (sn_p, cs_p) = path.heading_at(s).sin_cos();
+            let angle = (ux * cs_p + uy * sn_p).clamp(-1.0, 1.0).acos();
+            if !crossing.contains(&angle) {
+                return None;
+            }
         }
-        return Some(ahead - 0.5 * f64::from(me.length_m + o.length_m));
+        nearest = Some(nearest.map_or(ahead, |n: f64| n.min(ahead)));
     }
-    None
+    nearest.map(|ahead| ahead - 0.5 * f64::from(me.length_m + o.length_m))
 }
 
 /// Whether the agent that reaches each arclength at `arrival(s)` s from now (`None`: never, its
@@ -523,18 +540,72 @@ mod tests {
             crossing_conflict(&path, 0.0, &me, &[&far_way], arrival_at_10_mps),
             None
         );
-        // An agent driving along my path (in the next lane) has no crossing way.
+        // An agent driving along my path (in the next lane, inside my corridor) has no
+        // crossing way.
         let alongside = AgentState {
             x_m: 20.0,
-            y_m: 2.5,
+            y_m: 2.0,
             velocity_x_mps: 3.0,
             ..me
         };
-        assert_eq!(
-            crossing_conflict(&path, 0.0, &me, &[&conflict, &alongside], arrival_at_10_mps)
-                .map(|c| (c.0 - (40.0 - 4.5)).abs() < 1.0),
-            Some(true)
-        );
+        assert_eq!(crossing_way(&path, 0.0, &me, &alongside), None);
+    }
+
+    #[test]
+    fn a_crossing_way_is_measured_to_its_near_edge_from_either_side() {
+        // Rays crossing my path (along x) at x = 30 m at 90°, 60° and 135°, each from 40 m
+        // away; at 30° to my path a way is not a crossing one.
+        let me = me_along_x();
+        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let ray = |deg: f64| {
+            let (sn, cs) = deg.to_radians().sin_cos();
+            AgentState {
+                x_m: 30.0 - 40.0 * cs,
+                y_m: -40.0 * sn,
+                heading_rad: deg.to_radians() as f32,
+                velocity_x_mps: (5.0 * cs) as f32,
+                velocity_y_mps: (5.0 * sn) as f32,
+                ..me
+            }
+        };
+        let gap = |deg: f64| crossing_way(&path, 0.0, &me, &ray(deg));
+        let half = 0.5 * (1.9 + 1.9) + 0.5;
+        let bumpers = 4.5;
+        // Perpendicular: the crossing point itself (within the 2 m sampling).
+        let g90 = gap(90.0).unwrap();
+        assert!((g90 - (30.0 - bumpers)).abs() <= 2.0, "{g90}");
+        // Oblique, coming toward me (135°): the near edge is half / tan 45° = 2.4 m closer
+        // than the centre crossing.
+        let g135 = gap(135.0).unwrap();
+        assert!(g135 <= 30.0 - half - bumpers + 2.0, "{g135}");
+        assert!(g135 >= 30.0 - half - bumpers - 2.0, "{g135}");
+        // Oblique, going my way (60°): the near edge too.
+        let g60 = gap(60.0).unwrap();
+        let near = 30.0 - half / 60f64.to_radians().tan();
+        assert!((g60 - (near - bumpers)).abs() <= 2.0, "{g60}");
+        assert_eq!(gap(30.0), None);
+        assert_eq!(gap(150.0), None);
+    }
+
+    #[test]
+    fn a_way_too_close_to_stop_before_leaves_the_conflict() {
+        // At 10 m/s I need 16.7 m to stop at 3 m/s²: a way 10 m ahead is passed, and I stop
+        // for the conflict at 40 m.
+        let me = me_along_x();
+        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let crossing = |x: f64, y: f64, vy: f32| AgentState {
+            x_m: x,
+            y_m: y,
+            heading_rad: std::f32::consts::FRAC_PI_2 * vy.signum(),
+            velocity_x_mps: 0.0,
+            velocity_y_mps: vy,
+            ..me
+        };
+        let conflict = crossing(40.0, -40.0, 10.0);
+        let near_way = crossing(14.5, 55.0, -5.0);
+        let (gap, _) =
+            crossing_conflict(&path, 0.0, &me, &[&conflict, &near_way], arrival_at_10_mps).unwrap();
+        assert!((gap - (40.0 - 4.5)).abs() < 1.0, "gap {gap}");
     }
 
     #[test]
