@@ -446,6 +446,19 @@ mod tests {
         }
     }
 
+    /// An agent like [`me_along_x`] at `(x, y)` driving along y at `vy` m/s, across a path
+    /// along x.
+    fn crossing_y(x: f64, y: f64, vy: f32) -> AgentState {
+        AgentState {
+            x_m: x,
+            y_m: y,
+            heading_rad: std::f32::consts::FRAC_PI_2 * vy.signum(),
+            velocity_x_mps: 0.0,
+            velocity_y_mps: vy,
+            ..me_along_x()
+        }
+    }
+
     /// When [`me_along_x`] reaches arclength `s_m` of a straight path along x.
     fn arrival_at_10_mps(s_m: f64) -> Option<f64> {
         Some(s_m / 10.0)
@@ -518,16 +531,8 @@ mod tests {
         // crossing agent at x = 25 m, far away yet: I stop before x = 25 m, not in its way.
         let me = me_along_x();
         let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
-        let crossing = |x: f64, y: f64, vy: f32| AgentState {
-            x_m: x,
-            y_m: y,
-            heading_rad: std::f32::consts::FRAC_PI_2 * vy.signum(),
-            velocity_x_mps: 0.0,
-            velocity_y_mps: vy,
-            ..me
-        };
-        let conflict = crossing(40.0, -40.0, 10.0);
-        let far_way = crossing(25.0, 55.0, -5.0);
+        let conflict = crossing_y(40.0, -40.0, 10.0);
+        let far_way = crossing_y(25.0, 55.0, -5.0);
         let (alone, _) =
             crossing_conflict(&path, 0.0, &me, &[&conflict], arrival_at_10_mps).unwrap();
         assert!((alone - (40.0 - 4.5)).abs() < 1.0, "gap {alone}");
@@ -593,16 +598,8 @@ mod tests {
         // for the conflict at 40 m.
         let me = me_along_x();
         let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
-        let crossing = |x: f64, y: f64, vy: f32| AgentState {
-            x_m: x,
-            y_m: y,
-            heading_rad: std::f32::consts::FRAC_PI_2 * vy.signum(),
-            velocity_x_mps: 0.0,
-            velocity_y_mps: vy,
-            ..me
-        };
-        let conflict = crossing(40.0, -40.0, 10.0);
-        let near_way = crossing(14.5, 55.0, -5.0);
+        let conflict = crossing_y(40.0, -40.0, 10.0);
+        let near_way = crossing_y(14.5, 55.0, -5.0);
         let (gap, _) =
             crossing_conflict(&path, 0.0, &me, &[&conflict, &near_way], arrival_at_10_mps).unwrap();
         assert!((gap - (40.0 - 4.5)).abs() < 1.0, "gap {gap}");
