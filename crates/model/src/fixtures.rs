@@ -8,6 +8,15 @@ use scbg_features::{AGENT_FEATURES, AgentSample, DIFF_FEATURES, FeatureConfig, W
 use crate::loss::gmm_nll;
 use crate::{Batch, BatchAugment, MultipathConfig};
 
+/// The small feature setting of the fixtures (4 other agents, 8 road segments).
+pub fn small_features() -> FeatureConfig {
+    FeatureConfig {
+        max_other_agents: 4,
+        max_road_segments: 8,
+        ..Default::default()
+    }
+}
+
 /// A sample of a target driving straight at 10 m/s along +x (features as `scbg-features`
 /// makes them, unstandardised), conditioned on an agent 3.5 m to its left when
 /// `with_condition`.
@@ -78,11 +87,7 @@ pub struct PassCheck {
 pub fn forward_backward(device: &Device) -> PassCheck {
     use burn::module::Module;
     use burn::optim::{AdamConfig, GradientsParams};
-    let features = FeatureConfig {
-        max_other_agents: 4,
-        max_road_segments: 8,
-        ..Default::default()
-    };
+    let features = small_features();
     let cpu = Device::flex().autodiff();
     cpu.seed(7);
     let model = MultipathConfig::cpu_small().init(&cpu);

@@ -393,9 +393,9 @@ mod tests {
     use crate::loss::gmm_nll;
     use burn::optim::{AdamConfig, GradientsParams};
     use rand::SeedableRng;
-    use scbg_features::{AgentSample, FeatureConfig};
+    use scbg_features::AgentSample;
 
-    use crate::fixtures::straight_sample;
+    use crate::fixtures::{small_features, straight_sample};
 
     /// The step-wise corrections' last layer starts at zero; these tests need it as after some
     /// training.
@@ -411,11 +411,7 @@ mod tests {
         let device = Device::flex().autodiff();
         device.seed(1);
         let config = MultipathConfig::cpu_small();
-        let features = FeatureConfig {
-            max_other_agents: 4,
-            max_road_segments: 8,
-            ..Default::default()
-        };
+        let features = small_features();
         let model = config.init(&device);
         let samples = [
             straight_sample(&features, true),
@@ -464,11 +460,7 @@ mod tests {
     #[test]
     fn stepwise_conditioning_is_temporally_causal() {
         let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
-        let features = FeatureConfig {
-            max_other_agents: 4,
-            max_road_segments: 8,
-            ..Default::default()
-        };
+        let features = small_features();
         let device = Device::flex();
         let base = straight_sample(&features, true);
         let mut late = base.clone();
@@ -529,11 +521,7 @@ mod tests {
     #[test]
     fn forward_shared_matches_forward_of_the_repeated_rows() {
         let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
-        let features = FeatureConfig {
-            max_other_agents: 4,
-            max_road_segments: 8,
-            ..Default::default()
-        };
+        let features = small_features();
         let device = Device::flex();
         let first = straight_sample(&features, true);
         let mut second = first.clone();
@@ -607,11 +595,7 @@ mod tests {
     #[test]
     fn stepwise_conditioning_passes_gradients_to_the_condition() {
         let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
-        let features = FeatureConfig {
-            max_other_agents: 4,
-            max_road_segments: 8,
-            ..Default::default()
-        };
+        let features = small_features();
         let device = Device::flex().autodiff();
         device.seed(9);
         let mut model = MultipathConfig {
@@ -669,11 +653,7 @@ mod tests {
             stepwise_condition: stepwise,
             ..MultipathConfig::cpu_small()
         };
-        let features = FeatureConfig {
-            max_other_agents: 4,
-            max_road_segments: 8,
-            ..Default::default()
-        };
+        let features = small_features();
         let f = config.future_steps;
         let samples: Vec<AgentSample> = (0..32usize)
             .map(|i| {

@@ -311,39 +311,51 @@ fn quantile_summary(rows: &[QuantileRow]) -> WorldKnob {
             })
         })
         .collect();
-    // Within each example: Spearman over its own 9 futures, 0 where B's choice does not
-    // change A's reward (ψ_true's range below `RESPONSIVE_PSI_MPS`).
-    let mut within_by: BTreeMap<String, (Vec<f64>, usize)> = BTreeMap::new();
     let q: Vec<f64> = EVAL_QUANTILES.iter().map(|&q| f64::from(q)).collect();
-    for (family, truths) in rows {
-        let rho = scbg_metrics::spearman_if_responsive(&q, truths, RESPONSIVE_PSI_MPS);
-        let responsive = rho.is_some();
-        let rho = rho.unwrap_or(0.0);
-        for key in [*family, POOLED] {
-            let e = within_by.entry(key.to_string()).or_default();
-            e.0.push(rho);
-            e.1 += usize::from(responsive);
-        }
-    }
+    let (spearman_within_example, responsive_fraction) = within_group_spearman(
+        rows.iter()
+            .map(|(family, truths)| (*family, truths.as_slice())),
+        &q,
+        RESPONSIVE_PSI_MPS,
+    );
     WorldKnob {
         spearman_quantile_psi_true: q_by
             .iter()
             .map(|(k, (q, t))| (k.clone(), scbg_metrics::spearman(q, t)))
             .collect(),
-        spearman_within_example: within_by
-            .iter()
-            .map(|(k, (rhos, _))| (k.clone(), rhos.iter().sum::<f64>() / rhos.len() as f64))
-            .collect(),
-        responsive_fraction: within_by
-            .iter()
-            .map(|(k, (rhos, n))| (k.clone(), *n as f64 / rhos.len() as f64))
-            .collect(),
+        spearman_within_example,
+        responsive_fraction,
         examples: q_by
             .iter()
             .map(|(k, (q, _))| (k.clone(), q.len() / EVAL_QUANTILES.len()))
             .collect(),
         per_quantile,
     }
+}
+
+/// The knob within groups (one example's futures, one scene's rollouts), per family and
+/// pooled ([`POOLED`]): the mean over groups of Spearman(`x`, the group's values) — 0 for a
+/// group whose values span less than `min_range`, where B's choice changes nothing — and the
+/// share of groups whose values span it.
+pub(crate) fn within_group_spearman<'a>(
+    groups: impl IntoIterator<Item = (&'a str, &'a [f64])>,
+    x: &[f64],
+    min_range: f64,
+) -> (BTreeMap<String, f64>, BTreeMap<String, f64>) {
+    // Per key: (Σ Spearman, responsive groups, groups).
+    let mut by: BTreeMap<String, (f64, usize, usize)> = BTreeMap::new();
+    for (family, values) in groups {
+        let rho = scbg_metrics::spearman_if_responsive(x, values, min_range);
+        for key in [family, POOLED] {
+            let e = by.entry(key.to_string()).or_default();
+            e.0 += rho.unwrap_or(0.0);
+            e.1 += usize::from(rho.is_some());
+            e.2 += 1;
+        }
+    }
+    let of =
+        |f: fn(&(f64, usize, usize)) -> f64| by.iter().map(|(k, v)| (k.clone(), f(v))).collect();
+    (of(|v| v.0 / v.2 as f64), of(|v| v.1 as f64 / v.2 as f64))
 }
 
 /// Scores the quantile futures of an evaluation (`measured` as

@@ -440,21 +440,20 @@ pub const RESPONSIVE_SPEED_MPS: f64 = 0.01;
 /// within each scene (0 where it does not respond), and the share of responsive scenes.
 fn within_scene(done: &[SceneResult], quantiles: &[f32]) -> (PerFamily, PerFamily) {
     let q: Vec<f64> = quantiles.iter().map(|&q| f64::from(q)).collect();
-    let mut by: BTreeMap<String, (f64, usize, usize)> = BTreeMap::new();
-    for r in done {
-        let speeds: Vec<f64> = r.curve.iter().map(|c| c.0.avg_speed_mps).collect();
-        let rho = scbg_metrics::spearman_if_responsive(&q, &speeds, RESPONSIVE_SPEED_MPS);
-        for key in ["all", r.family.as_str()] {
-            let e = by.entry(key.to_string()).or_default();
-            e.0 += rho.unwrap_or(0.0);
-            e.1 += usize::from(rho.is_some());
-            e.2 += 1;
-        }
-    }
-    let of = |f: fn(&(f64, usize, usize)) -> f64| -> PerFamily {
-        by.iter().map(|(k, v)| (k.clone(), Some(f(v)))).collect()
-    };
-    (of(|v| v.0 / v.2 as f64), of(|v| v.1 as f64 / v.2 as f64))
+    let speeds: Vec<(&str, Vec<f64>)> = done
+        .iter()
+        .map(|r| {
+            let v = r.curve.iter().map(|c| c.0.avg_speed_mps).collect();
+            (r.family.as_str(), v)
+        })
+        .collect();
+    let (within, responsive) = crate::fidelity::within_group_spearman(
+        speeds.iter().map(|(family, v)| (*family, v.as_slice())),
+        &q,
+        RESPONSIVE_SPEED_MPS,
+    );
+    let some = |m: BTreeMap<String, f64>| m.into_iter().map(|(k, v)| (k, Some(v))).collect();
+    (some(within), some(responsive))
 }
 
 fn spearman_per_family(points: &[(String, f64, f64)]) -> PerFamily {
