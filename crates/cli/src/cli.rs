@@ -303,9 +303,10 @@ pub enum EvalCommand {
 /// Closed-loop settings shared by `sim` and `eval sim`.
 #[derive(Debug, Clone, Args)]
 pub struct LoopArgs {
-    /// Steps between the generator's plans (1..=80).
-    #[arg(long, default_value_t = 10)]
-    pub replan_every: usize,
+    /// Steps between the controlled agents' plans (1..=80; default 10 for the generator, 20
+    /// for `--policy ranked`).
+    #[arg(long)]
+    pub replan_every: Option<usize>,
     /// How A (the ego) moves.
     #[arg(long, value_enum, default_value_t = scbg::sim::EgoMode::Reactive)]
     pub ego: scbg::sim::EgoMode,

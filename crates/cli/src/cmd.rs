@@ -3,7 +3,7 @@
 use std::io::Write;
 
 use anyhow::Context;
-use scbg::choices::{Courtesy, LabelOptions};
+use scbg::choices::{Courtesy, LabelOptions, Policy};
 use scbg::{Progress, labels, predictor};
 
 use crate::cli::{
@@ -160,7 +160,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 wosac_scenes: a.wosac_scenes,
                 wosac_quantiles: a.wosac_quantiles.clone(),
                 spread: a.spread,
-                config: loop_config(&a.loop_args, scbg::sim::OthersMode::Reactive),
+                config: loop_config(&a.loop_args, scbg::sim::OthersMode::Reactive, a.policy),
                 ..Default::default()
             };
             let eval = scbg::sim_eval::eval_sim_files(
@@ -280,9 +280,15 @@ pub fn run(command: Command) -> anyhow::Result<()> {
 }
 
 /// The closed-loop settings of `sim` and `eval sim`.
-fn loop_config(a: &crate::cli::LoopArgs, others: scbg::sim::OthersMode) -> scbg::sim::SimConfig {
+fn loop_config(
+    a: &crate::cli::LoopArgs,
+    others: scbg::sim::OthersMode,
+    policy: Policy,
+) -> scbg::sim::SimConfig {
     scbg::sim::SimConfig {
-        replan_every: a.replan_every,
+        replan_every: a
+            .replan_every
+            .unwrap_or_else(|| scbg::sim::default_replan_every(policy)),
         ego: a.ego,
         others: a.others.unwrap_or(others),
         safety_guard: !a.no_safety_guard,
@@ -329,7 +335,7 @@ fn sim(a: &crate::cli::SimArgs, progress: &dyn Progress) -> anyhow::Result<()> {
             scenario_id: a.scenario_id.clone(),
             ego: a.a,
             controlled,
-            config: loop_config(&a.loop_args, scbg::sim::OthersMode::Log),
+            config: loop_config(&a.loop_args, scbg::sim::OthersMode::Log, a.policy),
             ground_truth: a.ground_truth.clone(),
             no_synthetic_world: a.no_synthetic_world,
             rollouts,
@@ -522,4 +528,42 @@ fn generate(args: &GenerateArgs, progress: &dyn Progress) -> anyhow::Result<()> 
         progress.note(&format!("rendered {}", png.display()));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+    use crate::cli::{Cli, Command, EvalCommand};
+
+    fn eval_sim_loop(args: &[&str]) -> (Policy, crate::cli::LoopArgs) {
+        let base = [
+            "scbg", "eval", "sim", "--model", "m", "--data", "d", "--out", "o",
+        ];
+        match Cli::try_parse_from(base.iter().chain(args).copied())
+            .unwrap()
+            .command
+        {
+            Command::Eval(EvalCommand::Sim(s)) => (s.policy, s.loop_args),
+            _ => unreachable!(),
+        }
+    }
+
+    #[test]
+    fn each_policy_replans_at_its_own_cadence_unless_told() {
+        let cadence = |args: &[&str]| {
+            let (policy, l) = eval_sim_loop(args);
+            loop_config(&l, scbg::sim::OthersMode::Reactive, policy).replan_every
+        };
+        assert_eq!(cadence(&[]), scbg::sim::DEFAULT_REPLAN_EVERY);
+        assert_eq!(cadence(&[]), 10);
+        assert_eq!(
+            cadence(&["--policy", "ranked"]),
+            scbg::sim::RANKED_REPLAN_EVERY
+        );
+        assert_eq!(cadence(&["--policy", "ranked"]), 20);
+        assert_eq!(cadence(&["--policy", "ranked", "--replan-every", "5"]), 5);
+        assert_eq!(cadence(&["--replan-every", "1"]), 1);
+    }
 }

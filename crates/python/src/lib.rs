@@ -422,7 +422,7 @@ impl Model {
         Ok(d)
     }
 
-    #[pyo3(signature = (scene, controlled, ego=None, ego_mode="external", others="log", replan_every=10))]
+    #[pyo3(signature = (scene, controlled, ego=None, ego_mode="external", others="log", replan_every=None))]
     #[allow(clippy::too_many_arguments)]
     fn simulation(
         &self,
@@ -432,7 +432,7 @@ impl Model {
         ego: Option<i64>,
         ego_mode: &str,
         others: &str,
-        replan_every: usize,
+        replan_every: Option<usize>,
     ) -> PyResult<Simulation> {
         let ego_mode: scbg::sim::EgoMode = ego_mode.parse().map_err(PyValueError::new_err)?;
         let others: scbg::sim::OthersMode = others.parse().map_err(PyValueError::new_err)?;
@@ -445,7 +445,8 @@ impl Model {
             .collect();
         controlled.sort_by_key(|c| c.id);
         let config = scbg::sim::SimConfig {
-            replan_every,
+            replan_every: replan_every
+                .unwrap_or_else(|| scbg::sim::default_replan_every(self.inner.scbg.policy)),
             ego: ego_mode,
             others,
             ..Default::default()

@@ -170,6 +170,10 @@ pub struct DemoReport {
     /// A's speed, B's collisions and off-road per quantile, WOSAC realism beside log replay,
     /// constant velocity and IDM-only agents; `null` when skipped.
     pub closed_loop: Option<crate::sim_eval::SimEval>,
+    /// The same closed-loop stage with sample and rank driving B (the ranked policy of the full
+    /// variant's first seed, re-planning at its own cadence, [`crate::sim::RANKED_REPLAN_EVERY`]
+    /// steps; without the knob-from-its-prior WOSAC score); `null` when skipped.
+    pub closed_loop_ranked: Option<crate::sim_eval::SimEval>,
     /// Acceptance checks: key → passed.
     pub checks: BTreeMap<&'static str, bool>,
     /// Training time of each generator variant of the first seed, seconds.
@@ -503,16 +507,19 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             .collect::<Vec<_>>(),
     );
 
-    let closed_loop = if options.closed_loop_scenes == 0 || !generators_trained {
-        None
+    let (closed_loop, closed_loop_ranked) = if options.closed_loop_scenes == 0
+        || !generators_trained
+    {
+        (None, None)
     } else {
         stage(
             8,
-            "closed loop: the full generator drives B among reactive agents on held-out scenes (realised courtesy, WOSAC realism)",
+            "closed loop: the full generator, then sample and rank, drive B among reactive agents on held-out scenes (realised courtesy, WOSAC realism)",
         );
-        let run = || -> anyhow::Result<crate::sim_eval::SimEval> {
+        let run = |policy: crate::choices::Policy| -> anyhow::Result<crate::sim_eval::SimEval> {
             let dir = out.join(generator_dir_name(Variant::Full, 0));
-            let model = load_scbg(&dir, None)?;
+            let mut model = load_scbg(&dir, None)?;
+            model.scbg.policy = policy;
             let (scenes, _) = crate::sim_eval::load_scenes(
                 &inputs,
                 truth.as_deref(),
@@ -526,20 +533,26 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 &crate::sim_eval::SimEvalOptions {
                     scenes: options.closed_loop_scenes,
                     wosac_scenes: options.closed_loop_scenes.min(DEMO_WOSAC_SCENES),
-                    ..Default::default()
+                    wosac_prior: policy == crate::choices::Policy::Generator,
+                    ..crate::sim_eval::SimEvalOptions::of_policy(policy)
                 },
             )?;
-            crate::sim_eval::write_figures(&eval, &out.join("figures"))?;
+            let figures = match policy {
+                crate::choices::Policy::Generator => out.join("figures"),
+                crate::choices::Policy::Ranked => out.join("figures/closed_loop_ranked"),
+            };
+            crate::sim_eval::write_figures(&eval, &figures)?;
             Ok(eval)
         };
-        match run() {
+        let run_noting = |policy: crate::choices::Policy| match run(policy) {
             Ok(eval) => {
                 progress.note(&format!(
-                    "closed loop: {} scenes in {:.0} s; Spearman(quantile, A's speed) {}",
+                    "closed loop ({}): {} scenes in {:.0} s; Spearman(quantile, realised courtesy) {}",
+                    eval.policy,
                     eval.curve.scenes,
                     eval.seconds,
                     eval.curve
-                        .spearman_quantile_a_speed
+                        .spearman_quantile_realised_courtesy
                         .get("all")
                         .copied()
                         .flatten()
@@ -548,10 +561,17 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 Some(eval)
             }
             Err(err) => {
-                progress.note(&format!("the closed-loop stage failed: {err:#}"));
+                progress.note(&format!(
+                    "the closed-loop stage ({}) failed: {err:#}",
+                    policy.name()
+                ));
                 None
             }
-        }
+        };
+        (
+            run_noting(crate::choices::Policy::Generator),
+            run_noting(crate::choices::Policy::Ranked),
+        )
     };
 
     stage(9, "writing figures and the report");
@@ -575,6 +595,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         &truth_mean,
         fidelity.as_ref(),
         closed_loop.as_ref(),
+        closed_loop_ranked.as_ref(),
     );
     let report = DemoReport {
         data: DataReport {
@@ -614,6 +635,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             figures: scbg.figures.clone(),
         },
         closed_loop,
+        closed_loop_ranked,
         checks: check_list.iter().map(|c| (c.key, c.passed)).collect(),
         generator_seconds,
         generator_stage_seconds,

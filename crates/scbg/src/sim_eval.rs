@@ -48,10 +48,24 @@ pub struct SimEvalOptions {
     /// Also score scbg with the knob drawn from its prior: rollout `r` of `n` at quantile
     /// `(r + ½)/n`, the whole range (`wosac_scbg_prior`).
     pub wosac_prior: bool,
-    /// Closed-loop settings (default: re-plan every 10 steps, A and the others reactive).
+    /// Closed-loop settings (default: re-plan every 10 steps, A and the others reactive; see
+    /// [`SimEvalOptions::of_policy`] for the policy's own cadence).
     pub config: SimConfig,
     /// The WOSAC definition.
     pub wosac: WosacConfig,
+}
+
+impl SimEvalOptions {
+    /// The defaults with `policy` and its default re-planning cadence
+    /// ([`crate::sim::default_replan_every`]).
+    pub fn of_policy(policy: scbg_generator::Policy) -> Self {
+        let mut options = Self {
+            policy,
+            ..Self::default()
+        };
+        options.config.replan_every = crate::sim::default_replan_every(policy);
+        options
+    }
 }
 
 impl Default for SimEvalOptions {

@@ -440,7 +440,9 @@ pub(crate) async fn create_session(
         ));
     }
     let config = scbg::sim::SimConfig {
-        replan_every: req.replan_every.unwrap_or(10),
+        replan_every: req
+            .replan_every
+            .unwrap_or_else(|| scbg::sim::default_replan_every(state.model.scbg.policy)),
         ego,
         others,
         ..Default::default()

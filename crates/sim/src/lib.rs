@@ -24,8 +24,8 @@ pub mod rollout;
 pub use kinematics::{Bicycle, VehicleLimits};
 pub use metrics::{AgentRolloutMetrics, Contact, agent_metrics};
 pub use rollout::{
-    AgentSnapshot, EgoMode, HISTORY_STEPS, HORIZON_STEPS, OthersMode, PlanError, Planner,
-    SimConfig, SimError, Simulation,
+    AgentSnapshot, DEFAULT_REPLAN_EVERY, EgoMode, HISTORY_STEPS, HORIZON_STEPS, OthersMode,
+    PlanError, Planner, SimConfig, SimError, Simulation,
 };
 
 #[cfg(test)]

@@ -89,7 +89,7 @@ impl std::str::FromStr for OthersMode {
 /// Settings of one closed-loop simulation.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SimConfig {
-    /// Steps between plans of a controlled agent (1 ..= 80; default 10).
+    /// Steps between plans of a controlled agent (1 ..= 80; default [`DEFAULT_REPLAN_EVERY`]).
     pub replan_every: usize,
     /// How the ego moves.
     pub ego: EgoMode,
@@ -123,10 +123,13 @@ fn default_lane_keeping_m() -> Option<f64> {
     Some(DEFAULT_LANE_KEEPING_M)
 }
 
+/// The default number of steps between a controlled agent's plans (1 s at 10 Hz).
+pub const DEFAULT_REPLAN_EVERY: usize = 10;
+
 impl Default for SimConfig {
     fn default() -> Self {
         Self {
-            replan_every: 10,
+            replan_every: DEFAULT_REPLAN_EVERY,
             ego: EgoMode::Reactive,
             others: OthersMode::Log,
             limits: VehicleLimits::default(),

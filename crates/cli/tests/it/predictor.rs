@@ -211,6 +211,24 @@ fn demo_writes_a_report() {
     let responsive = cl["responsive_fraction"]["all"].as_f64().unwrap();
     assert!(within.abs() <= responsive + 1e-9, "{cl}");
     assert!(report["truth_control"]["full"]["spearman_within_example"]["all"].is_number());
+    // Then sample and rank in the same loop, at its own cadence, without the prior's score.
+    let rk = &report["closed_loop_ranked"];
+    assert_eq!(rk["policy"], "ranked", "{rk}");
+    assert_eq!(rk["replan_every"], 20);
+    assert_eq!(cl["replan_every"], 10);
+    assert_eq!(rk["per_quantile"].as_array().unwrap().len(), 9);
+    assert!(rk["wosac_scbg"]["metametric"].is_number(), "{rk}");
+    assert!(rk["wosac_scbg_prior"].is_null());
+    assert!(report["checks"]["closed_loop_ranked_b_collision_2pct"].is_boolean());
+    assert!(
+        report["checks"]
+            .get("closed_loop_ranked_wosac_prior_above_baselines")
+            .is_none()
+    );
+    assert!(
+        out.join("figures/closed_loop_ranked/sim_courtesy.png")
+            .is_file()
+    );
     // Two generator seeds: seed means, their spread, each seed's numbers.
     assert_eq!(report["generator_seeds"], serde_json::json!([0, 1]));
     assert_eq!(report["variants_per_seed"].as_array().unwrap().len(), 2);

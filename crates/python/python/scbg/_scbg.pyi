@@ -110,10 +110,12 @@ class Model:
         ego: Optional[int] = None,
         ego_mode: str = "external",
         others: str = "log",
-        replan_every: int = 10,
+        replan_every: Optional[int] = None,
     ) -> Simulation:
         """A closed-loop simulation: ``controlled`` maps track ids to courtesy quantiles
-        toward the ego; ``ego_mode`` external | reactive | log; ``others`` log | reactive."""
+        toward the ego; ``ego_mode`` external | reactive | log; ``others`` log | reactive;
+        ``replan_every`` steps between plans (default 10 with the generator, 20 with the
+        ranked policy)."""
 
 def read_scenarios(path: str) -> list[Scene]:
     """Every scenario of a WOMD file (Scenario or tf.Example TFRecord)."""

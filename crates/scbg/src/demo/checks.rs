@@ -22,6 +22,7 @@ pub fn acceptance_checks(
     truth_control: &serde_json::Value,
     fidelity: Option<&crate::fidelity::Fidelity>,
     closed_loop: Option<&crate::sim_eval::SimEval>,
+    closed_loop_ranked: Option<&crate::sim_eval::SimEval>,
 ) -> Vec<Check> {
     use crate::fidelity::POOLED;
     // A number of the report JSON by path; NaN when missing or null.
@@ -173,72 +174,10 @@ pub fn acceptance_checks(
         }
     }
     if let Some(c) = closed_loop {
-        let pooled_value = |m: &crate::sim_eval::PerFamily| m.get("all").copied().flatten();
-        let pooled_of = |m: &crate::sim_eval::PerFamily| {
-            pooled_value(m).map_or("-".into(), |r| format!("{r:.3}"))
-        };
-        let pooled = pooled_value(&c.curve.spearman_quantile_a_speed).unwrap_or(f64::NAN);
-        out.push(Check {
-            key: "closed_loop_spearman_0_6",
-            passed: pooled >= 0.6,
-            text: format!(
-                "closed loop: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}; within a scene {}){}",
-                pooled_of(&c.curve.spearman_quantile_realised_courtesy),
-                pooled_of(&c.curve.spearman_within_scene_a_speed),
-                c.world_knob.as_ref().map_or(String::new(), |w| format!(
-                    "; the world's own B at courtesy c = q on the same scenes: {} pooled, {} with each scene's level removed, {} within a scene",
-                    pooled_of(&w.spearman_quantile_a_speed),
-                    pooled_of(&w.spearman_quantile_realised_courtesy),
-                    pooled_of(&w.spearman_within_scene_a_speed)
-                ))
-            ),
-        });
-        out.push(Check {
-            key: "closed_loop_curve_rises",
-            passed: c.curve.a_speed_curve_rises,
-            text: format!(
-                "closed loop: A's mean realised speed rises with the quantile ({})",
-                c.curve
-                    .per_quantile
-                    .iter()
-                    .map(|r| format!("{:.2}", r.a_avg_speed_mps))
-                    .collect::<Vec<_>>()
-                    .join(" → ")
-            ),
-        });
-        out.push(Check {
-            key: "closed_loop_b_collision_2pct",
-            passed: c.curve.max_b_collision_rate <= 0.02,
-            text: format!(
-                "closed loop: B's collision rate ≤ 2 % at every quantile (max {:.3})",
-                c.curve.max_b_collision_rate
-            ),
-        });
-        let meta = |w: Option<&crate::sim_eval::WosacSummary>| {
-            w.map_or("-".into(), |w| format!("{:.4}", w.metametric))
-        };
-        out.push(Check {
-            key: "closed_loop_wosac_above_baselines",
-            passed: c.wosac_above_baselines == Some(true),
-            text: format!(
-                "closed loop: WOSAC meta-metric of scbg {} above constant velocity {} and IDM-only {} (log replay {})",
-                meta(c.wosac_scbg.as_ref()),
-                meta(c.baselines.get("constant_velocity").and_then(|b| b.wosac.as_ref())),
-                meta(c.baselines.get("idm_only").and_then(|b| b.wosac.as_ref())),
-                meta(c.baselines.get("log_replay").and_then(|b| b.wosac.as_ref())),
-            ),
-        });
-        out.push(Check {
-            key: "closed_loop_wosac_prior_above_baselines",
-            passed: c.wosac_prior_above_baselines == Some(true),
-            text: format!(
-                "closed loop: WOSAC meta-metric of scbg with the knob drawn from its prior {} above constant velocity and IDM-only (minus IDM-only per scene {})",
-                meta(c.wosac_scbg_prior.as_ref()),
-                c.wosac_prior_minus_idm
-                    .as_ref()
-                    .map_or("-".into(), |d| format!("{:+.4} ± {:.4} s.e.", d.mean, d.std_error)),
-            ),
-        });
+        closed_loop_checks(c, &GENERATOR_KEYS, &mut out);
+    }
+    if let Some(c) = closed_loop_ranked {
+        closed_loop_checks(c, &RANKED_KEYS, &mut out);
     }
     out
 }
@@ -289,6 +228,113 @@ pub fn seed_mean_std(values: &[serde_json::Value]) -> (serde_json::Value, serde_
     }
 }
 
+/// The report keys of one closed-loop policy's checks.
+struct ClosedLoopKeys {
+    /// How the policy is named in the checks' texts.
+    label: &'static str,
+    spearman: &'static str,
+    curve_rises: &'static str,
+    collision: &'static str,
+    wosac: &'static str,
+    /// `None`: the policy is not scored with the knob drawn from its prior.
+    wosac_prior: Option<&'static str>,
+}
+
+/// The generator's closed-loop checks (the closed-loop issue's acceptance).
+const GENERATOR_KEYS: ClosedLoopKeys = ClosedLoopKeys {
+    label: "",
+    spearman: "closed_loop_spearman_0_6",
+    curve_rises: "closed_loop_curve_rises",
+    collision: "closed_loop_b_collision_2pct",
+    wosac: "closed_loop_wosac_above_baselines",
+    wosac_prior: Some("closed_loop_wosac_prior_above_baselines"),
+};
+
+/// The same points with sample and rank driving B.
+const RANKED_KEYS: ClosedLoopKeys = ClosedLoopKeys {
+    label: " (sample and rank)",
+    spearman: "closed_loop_ranked_spearman_0_6",
+    curve_rises: "closed_loop_ranked_curve_rises",
+    collision: "closed_loop_ranked_b_collision_2pct",
+    wosac: "closed_loop_ranked_wosac_above_baselines",
+    wosac_prior: None,
+};
+
+/// The closed-loop acceptance points of one policy's evaluation.
+fn closed_loop_checks(c: &crate::sim_eval::SimEval, keys: &ClosedLoopKeys, out: &mut Vec<Check>) {
+    let pooled_value = |m: &crate::sim_eval::PerFamily| m.get("all").copied().flatten();
+    let pooled_of =
+        |m: &crate::sim_eval::PerFamily| pooled_value(m).map_or("-".into(), |r| format!("{r:.3}"));
+    let pooled = pooled_value(&c.curve.spearman_quantile_a_speed).unwrap_or(f64::NAN);
+    out.push(Check {
+        key: keys.spearman,
+        passed: pooled >= 0.6,
+        text: format!(
+            "closed loop{}: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}; within a scene {}){}",
+            keys.label,
+            pooled_of(&c.curve.spearman_quantile_realised_courtesy),
+            pooled_of(&c.curve.spearman_within_scene_a_speed),
+            c.world_knob.as_ref().map_or(String::new(), |w| format!(
+                "; the world's own B at courtesy c = q on the same scenes: {} pooled, {} with each scene's level removed, {} within a scene",
+                pooled_of(&w.spearman_quantile_a_speed),
+                pooled_of(&w.spearman_quantile_realised_courtesy),
+                pooled_of(&w.spearman_within_scene_a_speed)
+            ))
+        ),
+    });
+    out.push(Check {
+        key: keys.curve_rises,
+        passed: c.curve.a_speed_curve_rises,
+        text: format!(
+            "closed loop{}: A's mean realised speed rises with the quantile ({})",
+            keys.label,
+            c.curve
+                .per_quantile
+                .iter()
+                .map(|r| format!("{:.2}", r.a_avg_speed_mps))
+                .collect::<Vec<_>>()
+                .join(" → ")
+        ),
+    });
+    out.push(Check {
+        key: keys.collision,
+        passed: c.curve.max_b_collision_rate <= 0.02,
+        text: format!(
+            "closed loop{}: B's collision rate ≤ 2 % at every quantile (max {:.3})",
+            keys.label, c.curve.max_b_collision_rate
+        ),
+    });
+    let meta = |w: Option<&crate::sim_eval::WosacSummary>| {
+        w.map_or("-".into(), |w| format!("{:.4}", w.metametric))
+    };
+    out.push(Check {
+        key: keys.wosac,
+        passed: c.wosac_above_baselines == Some(true),
+        text: format!(
+            "closed loop{}: WOSAC meta-metric of scbg {} above constant velocity {} and IDM-only {} (log replay {})",
+            keys.label,
+            meta(c.wosac_scbg.as_ref()),
+            meta(c.baselines.get("constant_velocity").and_then(|b| b.wosac.as_ref())),
+            meta(c.baselines.get("idm_only").and_then(|b| b.wosac.as_ref())),
+            meta(c.baselines.get("log_replay").and_then(|b| b.wosac.as_ref())),
+        ),
+    });
+    if let Some(key) = keys.wosac_prior {
+        out.push(Check {
+            key,
+            passed: c.wosac_prior_above_baselines == Some(true),
+            text: format!(
+                "closed loop{}: WOSAC meta-metric of scbg with the knob drawn from its prior {} above constant velocity and IDM-only (minus IDM-only per scene {})",
+                keys.label,
+                meta(c.wosac_scbg_prior.as_ref()),
+                c.wosac_prior_minus_idm
+                    .as_ref()
+                    .map_or("-".into(), |d| format!("{:+.4} ± {:.4} s.e.", d.mean, d.std_error)),
+            ),
+        });
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -319,7 +365,7 @@ mod tests {
             "baseline": {"courtesy_mse_data": {"mean": 2.0}, "traj_ade": {"mean": 1.0}}
         });
         let t = json!({"full": {"spearman_quantile_psi_true": {"all": 0.7, "merge": 0.5, "cutin": 0.3}}});
-        let checks: BTreeMap<&str, bool> = acceptance_checks(&v, &t, None, None)
+        let checks: BTreeMap<&str, bool> = acceptance_checks(&v, &t, None, None, None)
             .into_iter()
             .map(|c| (c.key, c.passed))
             .collect();

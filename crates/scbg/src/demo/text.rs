@@ -27,7 +27,7 @@ impl DemoReport {
              ### Fig. 4 — input quantile → courtesy of the generated trajectory\n\n![fig4](figures/fig4_quantile_courtesy.png)\n\n\
              ### Fig. 5a — B generated at quantiles 0.1…0.9 (full variant), A's logged future in red\n\n{}\n\
              ### Fig. 5b — A's expected speed vs quantile\n\n![fig5b](figures/fig5b_quantile_speed.png)\n\n\
-             ## Closed loop (beyond the paper)\n\n{}\n\
+             ## Closed loop (beyond the paper)\n\n{}{}\n\
              ![scene](figures/scene.png)\n\nRun time: {:.0} s.\n",
             self.data.scenarios,
             self.data.windows,
@@ -70,7 +70,15 @@ impl DemoReport {
             fig5a,
             self.closed_loop
                 .as_ref()
-                .map_or("(skipped)\n".to_string(), closed_loop_markdown),
+                .map_or("(skipped)\n".to_string(), |c| closed_loop_markdown(
+                    c, "figures"
+                )),
+            self.closed_loop_ranked
+                .as_ref()
+                .map_or(String::new(), |c| format!(
+                    "\n### Sample and rank in closed loop\n\n{}",
+                    closed_loop_markdown(c, "figures/closed_loop_ranked")
+                )),
             self.seconds
         )
     }
@@ -195,7 +203,7 @@ impl DemoReport {
 /// The directory of a generator variant of seed number `k` (the first seed keeps the plain
 /// `generator_<variant>` name).
 /// The closed-loop section of report.md.
-fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
+fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
     let meta = |w: Option<&crate::sim_eval::WosacSummary>| {
         w.map_or("-".into(), |w| {
             format!(
@@ -205,9 +213,15 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
         })
     };
     let mut out = format!(
-        "The full generator drives B (re-planning every {} steps from the simulated history, kinematic bicycle with a safety guard) among reactive agents (the synthetic world's rule) on {} held-out scenes.\n\n\
+        "{} drives B (re-planning every {} steps from the simulated history, kinematic bicycle with a safety guard) among reactive agents (the synthetic world's rule) on {} held-out scenes.\n\n\
          | quantile | A's realised speed (m/s) | realised courtesy (m/s) | B collision | B off-road | WOSAC meta | kinematic | interactive | map | collision rate |\n|---|---|---|---|---|---|---|---|---|---|\n",
-        c.replan_every, c.curve.scenes
+        if c.policy == crate::choices::Policy::Ranked.name() {
+            "Sample and rank (the full variant's predictor and labels: B's sampled future of the quantile's rank)"
+        } else {
+            "The full generator"
+        },
+        c.replan_every,
+        c.curve.scenes
     );
     for r in &c.curve.per_quantile {
         out += &format!(
@@ -241,7 +255,7 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval) -> String {
     };
     out += &format!(
         "\nSpearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene (mean of each scene's Spearman(quantile, A's realised speed), 0 where it does not respond): {}; responsive scenes: {}. scbg WOSAC over its quantiles: {}.\n\n\
-         ![closed-loop courtesy](figures/sim_courtesy.png)\n![closed-loop realism](figures/sim_realism.png)\n",
+         ![closed-loop courtesy]({figures}/sim_courtesy.png)\n![closed-loop realism]({figures}/sim_realism.png)\n",
         fmt(&c.curve.spearman_quantile_a_speed),
         fmt(&c.curve.spearman_quantile_realised_courtesy),
         fmt(&c.curve.spearman_within_scene_a_speed),
