@@ -586,14 +586,17 @@ impl SimBench {
     }
 }
 
-/// Times closed-loop rollouts and their WOSAC metrics with `model` on one thread.
+/// Times closed-loop rollouts and their WOSAC metrics with `model` on one thread, its policy
+/// re-planning at its default cadence ([`crate::sim::default_replan_every`]).
 pub fn sim(model: &crate::generator::LoadedScbg, scenes: usize) -> anyhow::Result<SimBench> {
     use crate::sim::{ControlledAgent, OthersMode, rollout, rollout_quantiles, wosac_rollouts};
     use scbg_generator::Courtesy;
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     pool.install(|| {
+        // Each policy at its own default cadence (the generator's is the bar's 10 steps).
         let config = scbg_sim::SimConfig {
             others: OthersMode::Reactive,
+            replan_every: crate::sim::default_replan_every(model.scbg.policy),
             ..scbg_sim::SimConfig::default()
         };
         let scenes = scenes.max(1);

@@ -101,8 +101,9 @@ pub struct SimConfig {
     /// IDM's (headway 1 s, standstill gap 2 m, comfortable braking 3 m/s²) toward the nearest
     /// agent ahead along the current plan (the leader rule of [`crate::idm`]) and toward the
     /// nearest crossing conflict (another agent that, at constant velocity, will be in the
-    /// plan's corridor, up to 5 s ahead, within 2 s of when the agent's box is there — for
-    /// good when the plan stops there — taken as a standing obstacle at that point, or before
+    /// plan's corridor, up to 5 s ahead, within 2 s of when the agent's box is there (with 2 m
+    /// to spare at either end) — for good when the plan stops there — taken as a standing
+    /// obstacle at that point, or before
     /// the way of another crossing agent in between; a follower behind counts only while it is
     /// faster),
     /// and the steering is bounded so as not to turn toward an agent alongside
