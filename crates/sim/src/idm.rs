@@ -113,7 +113,7 @@ pub(crate) fn leader_on_path(
 }
 
 /// Steps of [`crossing_conflict`]'s look-ahead: the other agent's position every 0.5 s up to
-/// 5 s ahead.
+/// 5 s ahead (and where it crosses my path between two of them).
 const CONFLICT_HORIZON_STEPS: u32 = 10;
 const CONFLICT_STEP_S: f64 = 0.5;
 /// A crossing conflict is two arrivals at the same point less than this many seconds apart.
@@ -162,13 +162,14 @@ pub(crate) fn crossing_conflict(
             continue;
         }
         let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
-        for k in 1..=CONFLICT_HORIZON_STEPS {
-            let tau = CONFLICT_STEP_S * f64::from(k);
-            let (x, y) = (o.x_m + vx * tau, o.y_m + vy * tau);
-            let (s, d) = path.project(x, y, Some(s_m + 25.0));
+        // Where the other is at `tau` s from now, as (arclength, signed offset) on my path.
+        let probe = |tau: f64| path.project(o.x_m + vx * tau, o.y_m + vy * tau, Some(s_m + 25.0));
+        // Whether the other, at `tau` s from now, is in my corridor while my box is on its way;
+        // the bumper gap to that point if so.
+        let conflict_at = |tau: f64, (s, d): (f64, f64)| -> Option<f64> {
             let ahead = s - s_m;
             if ahead <= 0.0 || ahead > LOOKAHEAD_M || d.abs() > half {
-                continue;
+                return None;
             }
             // My box overlaps the other's (at s, crossing my path at its heading there) while
             // my centre is within `reach` of s, less the margin.
@@ -178,8 +179,26 @@ pub(crate) fn crossing_conflict(
             let reach = 0.5 * f64::from(me.length_m)
                 + 0.5 * (f64::from(o.length_m) * cos_rel + f64::from(o.width_m) * sin_rel)
                 + CONFLICT_MARGIN_M;
-            if occupied(&arrival, s - reach, s + reach, tau) {
-                let gap = ahead - 0.5 * f64::from(me.length_m + o.length_m);
+            occupied(&arrival, s - reach, s + reach, tau)
+                .then(|| ahead - 0.5 * f64::from(me.length_m + o.length_m))
+        };
+        // The side of my path the other is on at each sample: a fast agent (over ~9.6 m/s at
+        // 90°) can cross my corridor between two samples 0.5 s apart, so where the side flips
+        // the crossing itself (its time interpolated) is tested too.
+        let mut previous = (0.0, probe(0.0).1);
+        for k in 1..=CONFLICT_HORIZON_STEPS {
+            let tau = CONFLICT_STEP_S * f64::from(k);
+            let at = probe(tau);
+            let (tau_0, d_0) = previous;
+            let d = at.1;
+            previous = (tau, d);
+            let crossed = (d_0 > half && d < -half) || (d_0 < -half && d > half);
+            let tau_cross = tau_0 + (tau - tau_0) * d_0.abs() / (d_0.abs() + d.abs());
+            if let Some(gap) = crossed
+                .then(|| conflict_at(tau_cross, probe(tau_cross)))
+                .flatten()
+                .or_else(|| conflict_at(tau, at))
+            {
                 best = closer(best, Some((gap, 0.0)));
                 break;
             }
@@ -530,6 +549,17 @@ mod tests {
             crossing_conflict(&path, 0.0, &me, &[&other], |s: f64| Some(s / 20.0)),
             None
         );
+    }
+
+    #[test]
+    fn a_fast_crossing_agent_is_not_missed_between_samples() {
+        // At 15 m/s across my path at x = 30 m (me there after 3 s), its centre is 3.75 m
+        // before my path at 1.5 s and 3.75 m past it at 2 s: outside my corridor (± 2.4 m) at
+        // both half-second samples, inside it in between — a conflict all the same.
+        let me = me_along_x();
+        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let fast = crossing_y(30.0, -26.25, 15.0);
+        assert!(crossing_conflict(&path, 0.0, &me, &[&fast], arrival_at_10_mps).is_some());
     }
 
     #[test]
