@@ -516,10 +516,9 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             8,
             "closed loop: the full generator, then sample and rank, drive B among reactive agents on held-out scenes (realised courtesy, WOSAC realism)",
         );
-        let run = |policy: crate::choices::Policy| -> anyhow::Result<crate::sim_eval::SimEval> {
-            let dir = out.join(generator_dir_name(Variant::Full, 0));
-            let mut model = load_scbg(&dir, None)?;
-            model.scbg.policy = policy;
+        // The full variant of the first seed and the held-out scenes, once for both policies.
+        let loaded = (|| -> anyhow::Result<_> {
+            let model = load_scbg(&out.join(generator_dir_name(Variant::Full, 0)), None)?;
             let (scenes, _) = crate::sim_eval::load_scenes(
                 &inputs,
                 truth.as_deref(),
@@ -527,51 +526,62 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 vf,
                 options.closed_loop_scenes,
             )?;
-            let eval = crate::sim_eval::evaluate_sim(
-                &model,
-                &scenes,
-                &crate::sim_eval::SimEvalOptions {
-                    scenes: options.closed_loop_scenes,
-                    wosac_scenes: options.closed_loop_scenes.min(DEMO_WOSAC_SCENES),
-                    wosac_prior: policy == crate::choices::Policy::Generator,
-                    ..crate::sim_eval::SimEvalOptions::of_policy(policy)
-                },
-            )?;
-            let figures = match policy {
-                crate::choices::Policy::Generator => out.join("figures"),
-                crate::choices::Policy::Ranked => out.join("figures/closed_loop_ranked"),
-            };
-            crate::sim_eval::write_figures(&eval, &figures)?;
-            Ok(eval)
-        };
-        let run_noting = |policy: crate::choices::Policy| match run(policy) {
-            Ok(eval) => {
-                progress.note(&format!(
-                    "closed loop ({}): {} scenes in {:.0} s; Spearman(quantile, realised courtesy) {}",
-                    eval.policy,
-                    eval.curve.scenes,
-                    eval.seconds,
-                    eval.curve
-                        .spearman_quantile_realised_courtesy
-                        .get("all")
-                        .copied()
-                        .flatten()
-                        .map_or("-".into(), |r| format!("{r:.3}"))
-                ));
-                Some(eval)
-            }
+            Ok((model, scenes))
+        })();
+        match loaded {
             Err(err) => {
-                progress.note(&format!(
-                    "the closed-loop stage ({}) failed: {err:#}",
-                    policy.name()
-                ));
-                None
+                progress.note(&format!("the closed-loop stage failed: {err:#}"));
+                (None, None)
             }
-        };
-        (
-            run_noting(crate::choices::Policy::Generator),
-            run_noting(crate::choices::Policy::Ranked),
-        )
+            Ok((mut model, scenes)) => {
+                let mut run = |policy: crate::choices::Policy| {
+                    model.scbg.policy = policy;
+                    let eval_options = crate::sim_eval::SimEvalOptions {
+                        scenes: options.closed_loop_scenes,
+                        wosac_scenes: options.closed_loop_scenes.min(DEMO_WOSAC_SCENES),
+                        wosac_prior: policy == crate::choices::Policy::Generator,
+                        ..crate::sim_eval::SimEvalOptions::of_policy(policy)
+                    };
+                    let figures = match policy {
+                        crate::choices::Policy::Generator => out.join("figures"),
+                        crate::choices::Policy::Ranked => out.join("figures/closed_loop_ranked"),
+                    };
+                    let result = crate::sim_eval::evaluate_sim(&model, &scenes, &eval_options)
+                        .and_then(|eval| {
+                            crate::sim_eval::write_figures(&eval, &figures)?;
+                            Ok(eval)
+                        });
+                    match result {
+                        Ok(eval) => {
+                            progress.note(&format!(
+                                "closed loop ({}): {} scenes in {:.0} s; Spearman(quantile, realised courtesy) {}",
+                                eval.policy,
+                                eval.curve.scenes,
+                                eval.seconds,
+                                eval.curve
+                                    .spearman_quantile_realised_courtesy
+                                    .get("all")
+                                    .copied()
+                                    .flatten()
+                                    .map_or("-".into(), |r| format!("{r:.3}"))
+                            ));
+                            Some(eval)
+                        }
+                        Err(err) => {
+                            progress.note(&format!(
+                                "the closed-loop stage ({}) failed: {err:#}",
+                                policy.name()
+                            ));
+                            None
+                        }
+                    }
+                };
+                (
+                    run(crate::choices::Policy::Generator),
+                    run(crate::choices::Policy::Ranked),
+                )
+            }
+        }
     };
 
     stage(9, "writing figures and the report");
@@ -653,6 +663,8 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     Ok(report)
 }
 
+/// The directory of a generator variant of seed number `k` (the first seed keeps the plain
+/// `generator_<variant>` name).
 fn generator_dir_name(variant: Variant, k: usize) -> String {
     if k == 0 {
         format!("generator_{}", variant.name())

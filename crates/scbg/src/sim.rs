@@ -34,7 +34,7 @@ pub use scbg_sim::{
 /// Steps between the ranked policy's plans by default (2 s). Sample and rank re-chooses among
 /// freshly sampled futures at every plan, and only the first `replan_every` steps of each
 /// choice are driven: re-chosen every second, its intent is diluted (held-out synthetic scenes,
-/// BENCHMARKS.md "Closed loop: how often to re-plan": Spearman(quantile, realised courtesy) 0.08
+/// BENCHMARKS.md "Closed loop: how often sample and rank re-chooses": Spearman(quantile, realised courtesy) 0.08
 /// at 10 steps, 0.20 at 20, 0.18 at 30, B's collisions 1.0 % → 0.3 %, WOSAC unchanged).
 pub const RANKED_REPLAN_EVERY: usize = 20;
 

@@ -490,6 +490,11 @@ mod tests {
         Some(s_m / 10.0)
     }
 
+    /// The same plan at 10 m/s, stopping at arclength `x_stop` (never reaching beyond it).
+    fn stops_at(x_stop: f64) -> impl Fn(f64) -> Option<f64> {
+        move |s: f64| (s <= x_stop).then_some(s / 10.0)
+    }
+
     #[test]
     fn crossing_conflicts_within_two_seconds_up_to_five_ahead() {
         // Me at the origin heading +x at 10 m/s, my path straight along x (arrival at
@@ -536,7 +541,6 @@ mod tests {
             velocity_y_mps: 10.0,
             ..me
         };
-        let stops_at = |x_stop: f64| move |s: f64| (s <= x_stop).then_some(s / 10.0);
         let other = crossing_in(5.0);
         assert!(crossing_conflict(&path, 0.0, &me, &[&other], stops_at(28.0)).is_some());
         assert_eq!(
@@ -570,7 +574,6 @@ mod tests {
         let me = me_along_x();
         let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
         let other = crossing_y(30.0, -50.0, 10.0);
-        let stops_at = |x_stop: f64| move |s: f64| (s <= x_stop).then_some(s / 10.0);
         assert!(crossing_conflict(&path, 0.0, &me, &[&other], stops_at(26.5)).is_some());
         assert_eq!(
             crossing_conflict(&path, 0.0, &me, &[&other], stops_at(24.0)),

@@ -200,9 +200,7 @@ impl DemoReport {
     }
 }
 
-/// The directory of a generator variant of seed number `k` (the first seed keeps the plain
-/// `generator_<variant>` name).
-/// The closed-loop section of report.md.
+/// The closed-loop section of report.md (`figures`: where its two figures are, relative to it).
 fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
     let meta = |w: Option<&crate::sim_eval::WosacSummary>| {
         w.map_or("-".into(), |w| {
