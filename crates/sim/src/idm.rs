@@ -485,6 +485,11 @@ mod tests {
         }
     }
 
+    /// My path: straight along x from the origin.
+    fn path_along_x() -> RefPath {
+        polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0)
+    }
+
     /// When [`me_along_x`] reaches arclength `s_m` of a straight path along x.
     fn arrival_at_10_mps(s_m: f64) -> Option<f64> {
         Some(s_m / 10.0)
@@ -501,7 +506,7 @@ mod tests {
         // arclength s after s / 10 s). The other drives +y at 10 m/s and crosses my path at
         // x = 30 m (I get there after 3 s) when `t_cross` s from now.
         let me = me_along_x();
-        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let path = path_along_x();
         let arrival = arrival_at_10_mps;
         let crossing_at = |t_cross: f64| AgentState {
             x_m: 30.0,
@@ -532,7 +537,7 @@ mod tests {
         // of an agent crossing at x = 30 m, so that agent is a conflict even when it comes
         // long after I get there; a plan that stops at x = 20 m leaves its way free.
         let me = me_along_x();
-        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let path = path_along_x();
         let crossing_in = |t_cross: f64| AgentState {
             x_m: 30.0,
             y_m: -10.0 * t_cross,
@@ -561,7 +566,7 @@ mod tests {
         // before my path at 1.5 s and 3.75 m past it at 2 s: outside my corridor (± 2.4 m) at
         // both half-second samples, inside it in between — a conflict all the same.
         let me = me_along_x();
-        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let path = path_along_x();
         let fast = crossing_y(30.0, -26.25, 15.0);
         assert!(crossing_conflict(&path, 0.0, &me, &[&fast], arrival_at_10_mps).is_some());
     }
@@ -572,7 +577,7 @@ mod tests {
         // (half my length plus half its width). A plan that stops at 26.5 m leaves 0.3 m: not
         // enough (the margin is 2 m); one that stops at 24 m is clear.
         let me = me_along_x();
-        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let path = path_along_x();
         let other = crossing_y(30.0, -50.0, 10.0);
         assert!(crossing_conflict(&path, 0.0, &me, &[&other], stops_at(26.5)).is_some());
         assert_eq!(
@@ -586,7 +591,7 @@ mod tests {
         // A conflict at x = 40 m (an agent crossing there as I arrive), and the way of a second
         // crossing agent at x = 25 m, far away yet: I stop before x = 25 m, not in its way.
         let me = me_along_x();
-        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let path = path_along_x();
         let conflict = crossing_y(40.0, -40.0, 10.0);
         let far_way = crossing_y(25.0, 55.0, -5.0);
         let (alone, _) =
@@ -617,7 +622,7 @@ mod tests {
         // Rays crossing my path (along x) at x = 30 m at 90°, 60° and 135°, each from 40 m
         // away; at 30° to my path a way is not a crossing one.
         let me = me_along_x();
-        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let path = path_along_x();
         let ray = |deg: f64| {
             let (sn, cs) = deg.to_radians().sin_cos();
             AgentState {
@@ -653,7 +658,7 @@ mod tests {
         // At 10 m/s I need 16.7 m to stop at 3 m/s²: a way 10 m ahead is passed, and I stop
         // for the conflict at 40 m.
         let me = me_along_x();
-        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let path = path_along_x();
         let conflict = crossing_y(40.0, -40.0, 10.0);
         let near_way = crossing_y(14.5, 55.0, -5.0);
         let (gap, _) =
@@ -666,7 +671,7 @@ mod tests {
         // Me at the origin heading +x at 10 m/s; the other 5 m behind in the next lane over
         // (2 m to the left, inside the corridor: half the widths plus 0.5 m), heading +x.
         let me = me_along_x();
-        let path = polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0);
+        let path = path_along_x();
         let arrival = arrival_at_10_mps;
         let follower = |speed_mps: f32| AgentState {
             x_m: -5.0,
