@@ -116,6 +116,13 @@ pub struct DemoArgs {
     /// How the generators form B's future.
     #[arg(long, value_enum, default_value_t = Head::Modes)]
     pub head: Head,
+    /// With `--head modes`: the generator also scores each of B's modes by its own courtesy
+    /// (J_φ of the mode toward A) against the requested ψ, so that it can tell which of this
+    /// scene's modes helps A, and commits to its likeliest mode outside training instead of
+    /// blending them; `--mode-courtesy false` gives the earlier blend of modes chosen from B's
+    /// embedding alone (BENCHMARKS.md, issues 11/12).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub mode_courtesy: bool,
     /// Held-out scenes of the closed-loop stage (0 skips it).
     #[arg(long, default_value_t = 60)]
     pub closed_loop_scenes: usize,
@@ -257,6 +264,13 @@ pub struct TrainGeneratorArgs {
     pub world_futures: usize,
     #[arg(long, value_enum, default_value_t = Head::Modes)]
     pub head: Head,
+    /// With `--head modes`: the generator also scores each of B's modes by its own courtesy
+    /// (J_φ of the mode toward A) against the requested ψ, so that it can tell which of this
+    /// scene's modes helps A, and commits to its likeliest mode outside training instead of
+    /// blending them; `--mode-courtesy false` gives the earlier blend of modes chosen from B's
+    /// embedding alone (BENCHMARKS.md, issues 11/12).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub mode_courtesy: bool,
 }
 
 /// How the generator forms B's future (`--head`).
@@ -303,8 +317,8 @@ pub enum EvalCommand {
 /// Closed-loop settings shared by `sim` and `eval sim`.
 #[derive(Debug, Clone, Args)]
 pub struct LoopArgs {
-    /// Steps between the controlled agents' plans (1..=80; default 10 for the generator, 20
-    /// for `--policy ranked`).
+    /// Steps between the controlled agents' plans (1..=80; default 20, 2 s, for either
+    /// policy: `scbg::sim::default_replan_every`).
     #[arg(long)]
     pub replan_every: Option<usize>,
     /// How A (the ego) moves.
@@ -706,6 +720,10 @@ pub struct BenchSimArgs {
     /// Synthetic scenes to time.
     #[arg(long, default_value_t = 12)]
     pub scenes: usize,
+    /// Steps between plans (default: the policy's own cadence, 20; the issue's speed bar is
+    /// set at 10).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=80))]
+    pub replan_every: Option<u64>,
 }
 
 #[derive(Debug, Clone, Args)]

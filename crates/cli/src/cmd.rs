@@ -35,6 +35,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     closed_loop_scenes: a.closed_loop_scenes,
                     beta: a.beta,
                     select_modes: a.head == crate::cli::Head::Modes,
+                    mode_courtesy: a.mode_courtesy,
                     labels,
                     seed: a.seed,
                 },
@@ -113,7 +114,10 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Sim(a)) => {
             let mut model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
             model.scbg.policy = a.policy;
-            print!("{}", scbg::bench::sim(&model, a.scenes)?.to_text());
+            print!(
+                "{}",
+                scbg::bench::sim(&model, a.scenes, a.replan_every.map(|n| n as usize))?.to_text()
+            );
             println!();
         }
         Command::Sim(a) => sim(&a, progress)?,
@@ -213,6 +217,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     oracle_labels: truth.is_some(),
                     world_futures: a.world_futures,
                     select_modes: a.head == crate::cli::Head::Modes,
+                    mode_courtesy: a.mode_courtesy,
                 },
                 a.condition_on_a,
                 truth.as_deref(),
@@ -556,8 +561,8 @@ mod tests {
             let (policy, l) = eval_sim_loop(args);
             loop_config(&l, scbg::sim::OthersMode::Reactive, policy).replan_every
         };
-        assert_eq!(cadence(&[]), scbg::sim::DEFAULT_REPLAN_EVERY);
-        assert_eq!(cadence(&[]), 10);
+        assert_eq!(cadence(&[]), scbg::sim::GENERATOR_REPLAN_EVERY);
+        assert_eq!(cadence(&[]), 20);
         assert_eq!(
             cadence(&["--policy", "ranked"]),
             scbg::sim::RANKED_REPLAN_EVERY
@@ -565,5 +570,9 @@ mod tests {
         assert_eq!(cadence(&["--policy", "ranked"]), 20);
         assert_eq!(cadence(&["--policy", "ranked", "--replan-every", "5"]), 5);
         assert_eq!(cadence(&["--replan-every", "1"]), 1);
+        assert_eq!(
+            cadence(&["--replan-every", "10"]),
+            scbg::sim::DEFAULT_REPLAN_EVERY
+        );
     }
 }

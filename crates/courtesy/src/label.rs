@@ -427,6 +427,48 @@ pub fn label_built_role(
     }
 }
 
+/// The role's samples and B's audience exactly as [`label_built_role`] builds them, without
+/// labelling any future of B: for a caller that scores its own futures of B against each
+/// other (the generator's modes of B, `scbg_generator::mode_courtesy`), which needs neither B's
+/// sampled futures nor E[r(Y_j) | x] (0 in every [`AudienceTerm`] here; `psi`, `e_cond` and
+/// `futures_in_a` are empty). No predictor forward.
+pub fn unlabelled_role(
+    builder: &mut SampleBuilder<'_>,
+    stats: &FeatureStats,
+    window: &Window,
+    (ia, a): (usize, AgentSample),
+    (ib, b): (usize, AgentSample),
+    audience: Audience,
+) -> LabelledRole {
+    let scene = builder.scene();
+    let others = audience_members(builder, scene, stats, window, ia, ib, audience);
+    let a_weight = audience.weight(Audience::distance_between(scene, window, ia, ib));
+    let terms = std::iter::once(a_weight)
+        .chain(others.iter().map(|m| m.weight))
+        .map(|weight| AudienceTerm {
+            weight,
+            e_marg: 0.0,
+        })
+        .collect();
+    LabelledRole {
+        window_step: window.current_step,
+        a_index: ia,
+        b_index: ib,
+        a_id: scene.tracks[ia].id,
+        b_id: scene.tracks[ib].id,
+        a,
+        b,
+        others,
+        labels: PairLabels {
+            psi: Vec::new(),
+            e_cond: Vec::new(),
+            e_marg: 0.0,
+            futures_in_a: Vec::new(),
+            terms,
+        },
+    }
+}
+
 /// The labelling stream of scene `index` under `seed` (the project's one seed mixer): every
 /// front end labels scene `i` with a generator seeded by this, so its labels do not depend on
 /// which command labels it, or which other scenes it labels.

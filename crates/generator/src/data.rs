@@ -41,6 +41,10 @@ pub struct Example {
     /// trained before it was). The generator and range predictor read
     /// `b_embedding ‖ a_context` ([`crate::stored_embeddings`]).
     pub a_context: Vec<f32>,
+    /// `[K]` the courtesy ψ_k of each of B's marginal modes ([`mode_courtesy`]), stored by
+    /// [`fill_mode_courtesy`] for a generator that scores them; empty when not computed
+    /// ([`b_modes_for`] then computes it on the fly).
+    pub mode_psi: Vec<f32>,
 }
 
 impl Example {
@@ -70,6 +74,7 @@ impl Example {
             a_from_b: a_from_b(&a, &b),
             b_embedding: marginal_embedding(predictor, &b, device),
             a_context: a_context_of(&a, &b).to_vec(),
+            mode_psi: Vec::new(),
             futures_b,
             psi: labels.psi,
             e_marg: labels.e_marg,
@@ -186,6 +191,7 @@ pub fn b_modes_of(predictor: &Multipath, b_embedding: burn::tensor::Tensor<2>) -
     crate::BModes {
         xy: out.xy.detach(),
         log_prob: burn::tensor::activation::log_softmax(out.logits, 1).detach(),
+        psi: None,
     }
 }
 
@@ -196,4 +202,83 @@ pub fn b_modes(predictor: &Multipath, examples: &[&Example], device: &Device) ->
         predictor,
         crate::stored_embeddings(examples, device).narrow(1, 0, b_width),
     )
+}
+
+/// Each of B's modes' courtesy toward the example's audience: `ψ_k = E[r | x, μ_k] −
+/// Σ_j π_j E[r | x, μ_j]`, J_φ of the mode mean `μ_k` against the modes' own
+/// probability-weighted mean (the law of total expectation over the mixture's means, the
+/// same estimator in training and inference, and independent of how the labels estimated
+/// E[r | x]). Detached; run it on any device.
+///
+/// # Shapes
+/// `modes.xy: [n, K, T, 2]` (B's frame), `modes.log_prob: [n, K]` → `[n, K]`
+pub fn mode_courtesy(
+    predictor: &Multipath,
+    examples: &[&Example],
+    modes: &crate::BModes,
+    reward: scbg_courtesy::Reward,
+    device: &Device,
+) -> burn::tensor::Tensor<2> {
+    let [n, k, t, _] = modes.xy.dims();
+    // Row j·n + i is example i's mode j (the layout J_φ's shared-encoder forward takes).
+    let rows = modes.xy.clone().swap_dims(0, 1).reshape([k * n, t, 2]);
+    let (_, e_cond) = crate::train::audience_courtesy(predictor, rows, examples, k, reward, device);
+    let e_cond = e_cond.reshape([k, n]).swap_dims(0, 1);
+    let mean = (e_cond.clone() * modes.log_prob.clone().exp()).sum_dim(1);
+    (e_cond - mean).detach()
+}
+
+/// B's modes for `generator` (`None` when it does not select modes), with each mode's
+/// courtesy when it scores them: the examples' stored [`Example::mode_psi`] when every one
+/// has it, else [`mode_courtesy`] computed here.
+pub fn b_modes_for(
+    generator: &crate::Generator,
+    predictor: &Multipath,
+    examples: &[&Example],
+    reward: scbg_courtesy::Reward,
+    device: &Device,
+) -> Option<crate::BModes> {
+    if !generator.selects_modes() {
+        return None;
+    }
+    let mut modes = b_modes(predictor, examples, device);
+    if generator.scores_mode_courtesy() {
+        let [n, k, _, _] = modes.xy.dims();
+        let stored = examples.iter().all(|e| e.mode_psi.len() == k);
+        modes.psi = Some(if stored {
+            burn::tensor::Tensor::from_data(
+                burn::tensor::TensorData::new(
+                    examples
+                        .iter()
+                        .flat_map(|e| e.mode_psi.iter().copied())
+                        .collect(),
+                    [n, k],
+                ),
+                device,
+            )
+        } else {
+            mode_courtesy(predictor, examples, &modes, reward, device)
+        });
+    }
+    Some(modes)
+}
+
+/// Stores every example's [`Example::mode_psi`] (in chunks of 64 pair roles), so that
+/// training does not recompute J_φ of B's modes at every step. Run it on a plain device.
+pub fn fill_mode_courtesy(
+    predictor: &Multipath,
+    examples: &mut [Example],
+    reward: scbg_courtesy::Reward,
+    device: &Device,
+) {
+    for chunk in examples.chunks_mut(64) {
+        let refs: Vec<&Example> = chunk.iter().collect();
+        let modes = b_modes(predictor, &refs, device);
+        let [n, k] = modes.log_prob.dims();
+        let psi = crate::eval::to_vec(mode_courtesy(predictor, &refs, &modes, reward, device));
+        for (i, e) in chunk.iter_mut().enumerate() {
+            e.mode_psi = psi[i * k..(i + 1) * k].to_vec();
+        }
+        debug_assert_eq!(psi.len(), n * k);
+    }
 }

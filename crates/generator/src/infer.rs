@@ -216,6 +216,36 @@ impl Scbg {
         ))
     }
 
+    /// A's and B's standardised samples and B's audience for `plan`, without labels
+    /// ([`scbg_courtesy::label::unlabelled_role`]).
+    fn unlabelled_role(
+        &self,
+        scene: &PreparedScene,
+        window: &Window,
+        ia: usize,
+        ib: usize,
+        a_id: i64,
+        b_id: i64,
+    ) -> Result<LabelledRole, GenerateError> {
+        let mut builder = SampleBuilder::new(scene, &self.features);
+        let mut a = builder
+            .sample(window, ia, Some(ib))
+            .map_err(|error| GenerateError::Sample { id: a_id, error })?;
+        let mut b = builder
+            .sample(window, ib, None)
+            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
+        self.stats.normalize(&mut a);
+        self.stats.normalize(&mut b);
+        Ok(scbg_courtesy::label::unlabelled_role(
+            &mut builder,
+            &self.stats,
+            window,
+            (ia, a),
+            (ib, b),
+            self.labels.audience,
+        ))
+    }
+
     /// What every generation for one pair shares (its samples, B's frozen embedding,
     /// E[r(Y_A) | x] and the predicted range of ψ): computed once, a front end can keep it
     /// and generate at many courtesies for the cost of the generator and J_φ alone.
@@ -404,33 +434,57 @@ impl Scbg {
                 })
                 .collect());
         }
-        let mut b = SampleBuilder::new(scene, &self.features)
-            .sample(window, ib, None)
-            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
-        self.stats.normalize(&mut b);
-        let mut embedding = marginal_embedding(&self.predictor, &b, device);
-        let b_width = embedding.len();
-        if self.generator.a_context_width > 0 {
-            // A's pose and velocity at the current step, from its track (no sample needed).
-            let t = &scene.tracks[ia];
-            let o = scene.origin_xy_m;
-            let a_pose = scbg_scene::Pose2::new(
-                f64::from(t.x_m[now]) + o[0],
-                f64::from(t.y_m[now]) + o[1],
-                f64::from(t.heading_rad[now]),
+        // B's embedding (and A's context when the generator is told who A is), B's pose,
+        // and, for a generator scoring its modes' courtesy, the pair's example that J_φ needs.
+        let (embedding, pose, example) = if self.generator.scores_mode_courtesy() {
+            // A's and B's samples and B's audience, no label: the modes' courtesy is measured
+            // against their own mean, so no E[r(Y_A) | x] from B's samples is needed.
+            let role = self.unlabelled_role(scene, window, ia, ib, a_id, b_id)?;
+            let mut example =
+                Example::from_role(scene.scenario_id.clone(), role, &self.predictor, device);
+            if self.generator.a_context_width == 0 {
+                example.a_context.clear();
+            }
+            let embedding = crate::stored_embeddings(&[&example], device);
+            (embedding, example.b.world_from_agent, Some(example))
+        } else {
+            let mut b = SampleBuilder::new(scene, &self.features)
+                .sample(window, ib, None)
+                .map_err(|error| GenerateError::Sample { id: b_id, error })?;
+            self.stats.normalize(&mut b);
+            let mut embedding = marginal_embedding(&self.predictor, &b, device);
+            if self.generator.a_context_width > 0 {
+                // A's pose and velocity at the current step, from its track (no sample needed).
+                let t = &scene.tracks[ia];
+                let o = scene.origin_xy_m;
+                let a_pose = scbg_scene::Pose2::new(
+                    f64::from(t.x_m[now]) + o[0],
+                    f64::from(t.y_m[now]) + o[1],
+                    f64::from(t.heading_rad[now]),
+                );
+                let v = [f64::from(t.vx_mps[now]), f64::from(t.vy_mps[now])];
+                embedding.extend(a_context(a_pose, v, b.world_from_agent));
+            }
+            let e = embedding.len();
+            let embedding = burn::tensor::Tensor::from_data(
+                burn::tensor::TensorData::new(embedding, [1, e]),
+                device,
             );
-            let v = [f64::from(t.vx_mps[now]), f64::from(t.vy_mps[now])];
-            embedding.extend(a_context(a_pose, v, b.world_from_agent));
-        }
-        let e = embedding.len();
-        let embedding = burn::tensor::Tensor::from_data(
-            burn::tensor::TensorData::new(embedding, [1, e]),
-            device,
-        );
-        let modes = self
-            .generator
-            .selects_modes()
-            .then(|| crate::b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width)));
+            (embedding, b.world_from_agent, None)
+        };
+        let modes = match &example {
+            Some(example) => crate::b_modes_for(
+                &self.generator,
+                &self.predictor,
+                &[example],
+                self.labels.reward,
+                device,
+            ),
+            None => self.generator.selects_modes().then(|| {
+                let b_width = embedding.dims()[1] - self.generator.a_context_width;
+                crate::b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width))
+            }),
+        };
         let psi = match courtesy {
             Courtesy::Psi(p) => p,
             Courtesy::Quantile(q) => {
@@ -446,7 +500,6 @@ impl Scbg {
             modes,
         );
         let xy = crate::eval::to_vec(future);
-        let pose = b.world_from_agent;
         Ok(xy
             .chunks_exact(2)
             .map(|p| {

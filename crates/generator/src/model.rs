@@ -37,7 +37,30 @@ pub struct GeneratorConfig {
     /// displacement `Δ` on top ([`Generator::forward`]). `K` must be the predictor's mode count.
     #[serde(default)]
     pub modes: usize,
+    /// With `modes > 0`: the selector also scores each mode by its own courtesy ψ_k (J_φ of
+    /// the mode mean toward the audience, [`crate::mode_courtesy`]) against the requested ψ:
+    /// a shared MLP of `[ψ, ψ_k]` (both ÷ `psi_scale`) adds one logit per mode. Without it
+    /// the selector sees B's embedding only and can learn "courteous" only as B's average
+    /// behaviour, not which of *this* scene's modes helps A. false for every generator
+    /// trained before the option.
+    #[serde(default)]
+    pub mode_courtesy: bool,
+    /// With `modes > 0`: outside training, B's future is the selector's likeliest mode plus
+    /// the displacement ([`Generator::forward`]), not the softmax blend of the modes, which
+    /// training needs to be differentiable ([`Generator::forward_blend`]). A blend of a
+    /// yielding and a going future is neither: half a lane change, creeping into a crossing,
+    /// which the other drivers read as a cut-in or a claim on the conflict zone. false (the
+    /// blend) for every generator trained before the option.
+    #[serde(default)]
+    pub likeliest_mode: bool,
 }
+
+/// Hidden width of the per-mode courtesy scorer ([`GeneratorConfig::mode_courtesy`]).
+const MODE_SCORER_HIDDEN: usize = 32;
+
+/// The generator's ψ inputs, in units of the labels' spread (`psi_scale`), are clamped to
+/// ± this many spreads (the demo's labels span about ±5.4).
+const PSI_INPUT_RANGE: f32 = 10.0;
 
 fn one() -> f32 {
     1.0
@@ -60,6 +83,8 @@ impl GeneratorConfig {
             knot_stride: 5,
             a_context_width: 0,
             modes: 0,
+            mode_courtesy: false,
+            likeliest_mode: false,
         }
     }
 
@@ -98,7 +123,10 @@ impl GeneratorConfig {
                 weights[s * knots + hi - 2] = 1.0 - frac;
             }
         }
+        let mode_scorer = (self.modes > 0 && self.mode_courtesy)
+            .then(|| Mlp::init(&[2, MODE_SCORER_HIDDEN, MODE_SCORER_HIDDEN, 1], device));
         Generator {
+            mode_scorer,
             psi_mlp: Mlp::init(&[1, self.psi_width, self.psi_width], device),
             decoder: Mlp::init(&dims, device),
             selector,
@@ -111,6 +139,7 @@ impl GeneratorConfig {
             knot_stride: stride,
             psi_scale: self.psi_scale,
             a_context_width: self.a_context_width,
+            likeliest_mode: self.modes > 0 && self.likeliest_mode,
         }
     }
 }
@@ -124,6 +153,9 @@ pub struct Generator {
     pub decoder: Mlp,
     /// MLP of `[embedding ‖ ψ embedding]` → `K` mode logits (see [`GeneratorConfig::modes`]).
     pub selector: Option<Mlp>,
+    /// MLP of `[ψ, ψ_k]` (÷ `psi_scale`) → one more logit for mode `k` (see
+    /// [`GeneratorConfig::mode_courtesy`]).
+    pub mode_scorer: Option<Mlp>,
     /// `[T, knots]` fixed linear interpolation from knots to steps (not trained).
     pub interpolation: burn::module::Param<Tensor<2>>,
     /// Generated future steps `T`.
@@ -134,6 +166,18 @@ pub struct Generator {
     pub psi_scale: f32,
     /// See [`GeneratorConfig::a_context_width`].
     pub a_context_width: usize,
+    /// See [`GeneratorConfig::likeliest_mode`].
+    pub likeliest_mode: bool,
+}
+
+/// How a mode-selecting generator combines B's modes ([`Generator::forward`] and
+/// [`Generator::forward_blend`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ModeChoice {
+    /// The softmax-weighted blend.
+    Blend,
+    /// The likeliest mode alone.
+    Likeliest,
 }
 
 /// B's predicted marginal modes, the choices of a mode-selecting generator
@@ -144,6 +188,9 @@ pub struct BModes {
     pub xy: Tensor<4>,
     /// `[batch, K]` log-probabilities of the modes.
     pub log_prob: Tensor<2>,
+    /// `[batch, K]` each mode's courtesy ψ_k ([`crate::mode_courtesy`]); required by a
+    /// generator that scores them ([`Generator::scores_mode_courtesy`]).
+    pub psi: Option<Tensor<2>>,
 }
 
 impl BModes {
@@ -155,6 +202,7 @@ impl BModes {
         Self {
             xy: Tensor::cat(vec![self.xy; times], 0),
             log_prob: Tensor::cat(vec![self.log_prob; times], 0),
+            psi: self.psi.map(|p| Tensor::cat(vec![p; times], 0)),
         }
     }
 }
@@ -165,7 +213,35 @@ impl Generator {
         self.selector.is_some()
     }
 
-    /// `y_B = g(x, ψ)` (paper eq. 1): B's future for the requested courtesy ψ. The knot
+    /// Whether [`Self::forward`] needs each mode's courtesy ([`BModes::psi`]).
+    pub fn scores_mode_courtesy(&self) -> bool {
+        self.mode_scorer.is_some()
+    }
+
+    /// `y_B = g(x, ψ)` (paper eq. 1): B's future for the requested courtesy ψ, as used
+    /// outside training: a generator with [`GeneratorConfig::likeliest_mode`] takes its
+    /// likeliest mode of B, every other one is [`Self::forward_blend`].
+    ///
+    /// # Shapes
+    /// As [`Self::forward_blend`].
+    ///
+    /// # Panics
+    /// As [`Self::forward_blend`].
+    pub fn forward(
+        &self,
+        embedding: Tensor<2>,
+        psi: Tensor<1>,
+        modes: Option<BModes>,
+    ) -> Tensor<3> {
+        let choice = if self.likeliest_mode {
+            ModeChoice::Likeliest
+        } else {
+            ModeChoice::Blend
+        };
+        self.forward_with(embedding, psi, modes, choice)
+    }
+
+    /// `y_B = g(x, ψ)` as trained (differentiable in every weight). The knot
     /// displacements are summed into knot positions and interpolated to every step; a
     /// mode-selecting generator adds the knot positions to its softmax-weighted mixture of B's
     /// modes taken at the knots' steps, before the interpolation.
@@ -176,17 +252,32 @@ impl Generator {
     /// `-> [batch, T, 2]` positions in B's frame (metres)
     ///
     /// # Panics
-    /// When the generator selects modes and `modes` is `None`.
-    pub fn forward(
+    /// When the generator selects modes and `modes` is `None`, or scores the modes' courtesy
+    /// and `modes.psi` is `None`.
+    pub fn forward_blend(
         &self,
         embedding: Tensor<2>,
         psi: Tensor<1>,
         modes: Option<BModes>,
     ) -> Tensor<3> {
+        self.forward_with(embedding, psi, modes, ModeChoice::Blend)
+    }
+
+    /// [`Self::forward_blend`] with the selector's weights as `choice` says.
+    fn forward_with(
+        &self,
+        embedding: Tensor<2>,
+        psi: Tensor<1>,
+        modes: Option<BModes>,
+        choice: ModeChoice,
+    ) -> Tensor<3> {
         let [b, _] = embedding.dims();
-        let psi = self
-            .psi_mlp
-            .forward(psi.reshape([b, 1]) / self.psi_scale.max(1e-12));
+        // In units of the labels' spread, clamped: a ψ far outside every label (a range
+        // predictor's extrapolation on a tiny model, a typo) must not drive the MLPs into
+        // metres-per-step displacements or saturate the modes' softmax by its value alone.
+        let psi_scaled = (psi.reshape([b, 1]) / self.psi_scale.max(1e-12))
+            .clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
+        let psi = self.psi_mlp.forward(psi_scaled.clone());
         let input = Tensor::cat(vec![embedding, psi], 1);
         let out = self.decoder.forward(input.clone());
         let [t, knots] = self.interpolation.dims();
@@ -207,8 +298,38 @@ impl Generator {
                     &knot_xy.device(),
                 ),
             );
-            let weights =
-                burn::tensor::activation::softmax(selector.forward(input) + modes.log_prob, 1);
+            let mut logits = selector.forward(input) + modes.log_prob;
+            if let Some(scorer) = &self.mode_scorer {
+                let mode_psi = modes
+                    .psi
+                    .expect("a generator scoring the modes' courtesy needs their ψ")
+                    / self.psi_scale.max(1e-12);
+                // Clamped like ψ: a mode J_φ scores far outside the labels (an off-data
+                // mode of a weak predictor) must not saturate the softmax by its value alone.
+                let pair = Tensor::cat(
+                    vec![
+                        psi_scaled.expand([b, k]).reshape([b, k, 1]),
+                        mode_psi.reshape([b, k, 1]),
+                    ],
+                    2,
+                )
+                .clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
+                logits = logits + scorer.forward(pair).reshape([b, k]);
+            }
+            let soft = || burn::tensor::activation::softmax(logits.clone(), 1);
+            let hard = || {
+                let device = logits.device();
+                Tensor::<2>::zeros([b, k], &device).scatter(
+                    1,
+                    logits.clone().argmax(1),
+                    Tensor::ones([b, 1], &device),
+                    burn::tensor::IndexingUpdateOp::Add,
+                )
+            };
+            let weights = match choice {
+                ModeChoice::Blend => soft(),
+                ModeChoice::Likeliest => hard(),
+            };
             let mixed = weights
                 .reshape([b, 1, k])
                 .matmul(at_knots.reshape([b, k, knots * 2]))
@@ -295,6 +416,7 @@ mod tests {
                 ]],
                 &device,
             ),
+            psi: None,
         };
         let want: Vec<f32> = two_modes(&device).into_data().try_to_vec().unwrap();
         for favoured in [0, 1] {
@@ -342,6 +464,7 @@ mod tests {
         let modes = || BModes {
             xy: two_modes(&device).reshape([1, 2, 80, 2]).repeat_dim(0, n),
             log_prob: Tensor::from_data([[0.0f32, 0.0]], &device).repeat_dim(0, n),
+            psi: None,
         };
         let all = two_modes(&device);
         let target = Tensor::cat((0..n).map(|i| all.clone().narrow(0, i % 2, 1)).collect(), 0);
@@ -370,6 +493,125 @@ mod tests {
             after < 0.5 && after < 0.1 * before,
             "max error {before} m → {after} m"
         );
+    }
+
+    /// The same request (ψ +1) and the same embedding in every example, but which of B's two
+    /// modes is the courteous one (ψ_k +1 against −1) alternates between examples: a selector
+    /// that sees the embedding alone cannot tell them apart and ends between the modes (its
+    /// error stays metres), one that scores the modes' courtesy picks the right one.
+    #[test]
+    fn scoring_the_modes_courtesy_tells_which_mode_helps() {
+        use burn::optim::GradientsParams;
+        let device = scbg_model::device::training_device("flex").unwrap();
+        let _lock = crate::tests::SEED_LOCK
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let n = 16;
+        let mode_psi: Vec<f32> = (0..n)
+            .flat_map(|i| {
+                if i % 2 == 0 {
+                    [1.0f32, -1.0]
+                } else {
+                    [-1.0, 1.0]
+                }
+            })
+            .collect();
+        let all = two_modes(&device);
+        let target = Tensor::cat((0..n).map(|i| all.clone().narrow(0, i % 2, 1)).collect(), 0);
+        let embedding = Tensor::<2>::ones([n, 8], &device);
+        let psi = || Tensor::<1>::ones([n], &device);
+        let train = |mode_courtesy: bool| -> f32 {
+            device.seed(5);
+            let mut config = GeneratorConfig::new(8);
+            config.modes = 2;
+            config.mode_courtesy = mode_courtesy;
+            config.hidden = vec![32, 32];
+            let mut g = config.init(&device);
+            assert_eq!(g.scores_mode_courtesy(), mode_courtesy);
+            let modes = || BModes {
+                xy: two_modes(&device).reshape([1, 2, 80, 2]).repeat_dim(0, n),
+                log_prob: Tensor::from_data([[0.0f32, 0.0]], &device).repeat_dim(0, n),
+                psi: Some(Tensor::from_data(
+                    burn::tensor::TensorData::new(mode_psi.clone(), [n, 2]),
+                    &device,
+                )),
+            };
+            let mut optim = AdamConfig::new().init();
+            for _ in 0..200 {
+                let out = g.forward(embedding.clone(), psi(), Some(modes()));
+                let loss = (out - target.clone()).powi_scalar(2).mean();
+                let grads = GradientsParams::from_grads(loss.backward(), &g);
+                g = optim.step(1e-2, g, grads);
+            }
+            let out = g.forward(embedding.clone(), psi(), Some(modes()));
+            (out - target.clone()).abs().max().into_scalar()
+        };
+        let (blind, scored) = (train(false), train(true));
+        assert!(
+            blind > 2.0,
+            "the embedding alone cannot tell: max error {blind} m"
+        );
+        assert!(scored < 0.5, "scored by courtesy: max error {scored} m");
+    }
+
+    /// Outside training a generator with `likeliest_mode` gives exactly one of B's modes (the
+    /// displacement zeroed), where the blend it trains with lies between them.
+    #[test]
+    fn the_likeliest_mode_is_one_mode_not_a_blend() {
+        let device = Device::flex();
+        let mut config = GeneratorConfig::new(24);
+        config.modes = 2;
+        config.likeliest_mode = true;
+        let mut g = config.init(&device);
+        let last = g.decoder.layers.last_mut().unwrap();
+        last.weight = last.weight.clone().map(|w| w.zeros_like());
+        if let Some(bias) = &mut last.bias {
+            *bias = bias.clone().map(|b| b.zeros_like());
+        }
+        let modes = || BModes {
+            xy: two_modes(&device).reshape([1, 2, 80, 2]),
+            log_prob: Tensor::from_data([[0.0f32, 0.0]], &device),
+            psi: None,
+        };
+        let end_y = |out: Tensor<3>| -> f32 {
+            let v: Vec<f32> = out.into_data().try_to_vec().unwrap();
+            v[159]
+        };
+        let (embedding, psi) = (
+            Tensor::ones([1, 24], &device),
+            Tensor::from_data([0.5f32], &device),
+        );
+        // The modes end at y = 0 (straight) and y = 8 (turning).
+        let likeliest = end_y(g.forward(embedding.clone(), psi.clone(), Some(modes())));
+        assert!(
+            likeliest.abs() < 1e-4 || (likeliest - 8.0).abs() < 1e-4,
+            "{likeliest}"
+        );
+        let blend = end_y(g.forward_blend(embedding, psi, Some(modes())));
+        assert!(blend > 1e-3 && blend < 8.0 - 1e-3, "{blend}");
+    }
+
+    /// A ψ far outside the labels (here 1000 spreads) is read as the clamp's 10 spreads, so a
+    /// wild request or range extrapolation cannot drive the decoder into metres per step.
+    #[test]
+    fn a_psi_far_outside_the_labels_is_clamped() {
+        let device = Device::flex();
+        let mut config = GeneratorConfig::new(24);
+        config.psi_scale = 0.5;
+        let g = config.init(&device);
+        let future = |psi: f32| -> Vec<f32> {
+            g.forward(
+                Tensor::ones([1, 24], &device),
+                Tensor::from_data([psi], &device),
+                None,
+            )
+            .into_data()
+            .try_to_vec()
+            .unwrap()
+        };
+        assert_eq!(future(500.0), future(0.5 * PSI_INPUT_RANGE));
+        assert_eq!(future(-500.0), future(-0.5 * PSI_INPUT_RANGE));
+        assert_ne!(future(0.5 * PSI_INPUT_RANGE), future(0.0));
     }
 
     #[test]

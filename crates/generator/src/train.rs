@@ -266,10 +266,9 @@ pub fn step_loss(
         ),
         device,
     );
-    let modes = generator
-        .selects_modes()
-        .then(|| crate::b_modes(predictor, examples, device).repeat_rows(m_count));
-    let pred = generator.forward(embedding, psi.clone(), modes);
+    let modes = crate::b_modes_for(generator, predictor, examples, options.reward, device)
+        .map(|m| m.repeat_rows(m_count));
+    let pred = generator.forward_blend(embedding, psi.clone(), modes);
     let mut traj = huber_trajectory(
         pred.clone().narrow(0, 0, n),
         target.clone().narrow(0, 0, n),

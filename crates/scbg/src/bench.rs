@@ -565,7 +565,7 @@ impl SimBench {
     pub fn to_text(&self) -> String {
         format!(
             "closed loop, 1 thread, {} synthetic scenes, re-plan every {} steps\n\
-             one 80-step rollout, 1 agent driven by the {}: best {:.2} ms, mean {:.2} ms (target ≤ 20 ms for the generator)\n\
+             one 80-step rollout, 1 agent driven by the {}: best {:.2} ms, mean {:.2} ms (target ≤ 20 ms for the generator re-planning every 10 steps)\n\
              world only (B replays its log):        mean {:.2} ms\n\
              WOSAC metrics, 1 scenario × 32 rollouts: best {:.1} ms, mean {:.1} ms (target ≤ 1000 ms){}",
             self.scenes,
@@ -587,16 +587,21 @@ impl SimBench {
 }
 
 /// Times closed-loop rollouts and their WOSAC metrics with `model` on one thread, its policy
-/// re-planning at its default cadence ([`crate::sim::default_replan_every`]).
-pub fn sim(model: &crate::generator::LoadedScbg, scenes: usize) -> anyhow::Result<SimBench> {
+/// re-planning every `replan_every` steps (`None`: its default cadence,
+/// [`crate::sim::default_replan_every`]; the issue's bar is set at 10).
+pub fn sim(
+    model: &crate::generator::LoadedScbg,
+    scenes: usize,
+    replan_every: Option<usize>,
+) -> anyhow::Result<SimBench> {
     use crate::sim::{ControlledAgent, OthersMode, rollout, rollout_quantiles, wosac_rollouts};
     use scbg_generator::Courtesy;
     let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     pool.install(|| {
-        // Each policy at its own default cadence (the generator's is the bar's 10 steps).
         let config = scbg_sim::SimConfig {
             others: OthersMode::Reactive,
-            replan_every: crate::sim::default_replan_every(model.scbg.policy),
+            replan_every: replan_every
+                .unwrap_or_else(|| crate::sim::default_replan_every(model.scbg.policy)),
             ..scbg_sim::SimConfig::default()
         };
         let scenes = scenes.max(1);

@@ -67,6 +67,9 @@ pub struct DemoOptions {
     /// Generators that choose among B's predicted modes
     /// ([`crate::generator::VariantSettings::select_modes`]).
     pub select_modes: bool,
+    /// With `select_modes`: generators that also score B's modes by their own courtesy
+    /// ([`crate::generator::VariantSettings::mode_courtesy`]).
+    pub mode_courtesy: bool,
     /// How courtesy is labelled (8 sampled futures per pair role by default).
     pub labels: LabelOptions,
     /// Held-out scenes of the closed-loop stage (0 skips it); WOSAC realism is scored on up
@@ -368,12 +371,21 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     let (train, validation): (Vec<_>, Vec<_>) = labelled
         .into_iter()
         .partition(|s| split_of(&s.scenario_id, vf) == Split::Train);
-    let examples = examples_of(
+    let mut examples = examples_of(
         &predictors.plain,
         &predictors.plain_device,
         train,
         options.condition_on_a,
     );
+    if options.select_modes && options.mode_courtesy {
+        // Once for every variant and seed (train_variant would measure them for each).
+        scbg_generator::fill_mode_courtesy(
+            &predictors.plain,
+            &mut examples,
+            options.labels.reward,
+            &predictors.plain_device,
+        );
+    }
     let held_out = examples_of(
         &predictors.plain,
         &predictors.plain_device,
@@ -422,6 +434,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                                         threshold: Threshold::Quantile(0.8),
                                         seed,
                                         select_modes: options.select_modes,
+                                        mode_courtesy: options.mode_courtesy,
                                         ..VariantSettings::new(variant, options.labels)
                                     },
                                     &dir,

@@ -273,6 +273,10 @@ pub struct VariantSettings {
     /// Train a mode-selecting generator ([`GeneratorConfig::modes`] = the predictor's modes;
     /// the default), else a plain regression.
     pub select_modes: bool,
+    /// With `select_modes`: the selector also scores each of B's modes by its own courtesy
+    /// ([`GeneratorConfig::mode_courtesy`]), and B's future is its likeliest mode rather than
+    /// the blend outside training ([`GeneratorConfig::likeliest_mode`]).
+    pub mode_courtesy: bool,
 }
 
 impl VariantSettings {
@@ -292,6 +296,7 @@ impl VariantSettings {
             oracle_labels: false,
             world_futures: 0,
             select_modes: true,
+            mode_courtesy: true,
         }
     }
 }
@@ -328,7 +333,25 @@ pub fn train_variant(
     gen_config.psi_scale = psi_spread(examples);
     if s.select_modes {
         gen_config.modes = p.ckpt.model_config.num_modes;
+        gen_config.mode_courtesy = s.mode_courtesy;
+        gen_config.likeliest_mode = s.mode_courtesy;
     }
+    // A generator scoring its modes' courtesy reads them at every step: measure them once
+    // (callers that train several variants fill their examples first, see
+    // `scbg_generator::fill_mode_courtesy`).
+    let filled: Vec<Example>;
+    let examples = if gen_config.mode_courtesy
+        && examples
+            .iter()
+            .any(|e| e.mode_psi.len() != gen_config.modes)
+    {
+        let mut owned = examples.to_vec();
+        scbg_generator::fill_mode_courtesy(&p.plain, &mut owned, s.labels.reward, &p.plain_device);
+        filled = owned;
+        &filled[..]
+    } else {
+        examples
+    };
     let range_hidden = 64;
     // The backend's random stream is the device's, shared by every thread: seed and draw the
     // initial weights of both models under one lock, so that variants trained side by side
@@ -519,7 +542,15 @@ pub fn train_generator(
         ));
         labelled = kept;
     }
-    let examples = examples_of(&p.plain, &p.plain_device, labelled, condition_on_a);
+    let mut examples = examples_of(&p.plain, &p.plain_device, labelled, condition_on_a);
+    if settings.select_modes && settings.mode_courtesy {
+        scbg_generator::fill_mode_courtesy(
+            &p.plain,
+            &mut examples,
+            settings.labels.reward,
+            &p.plain_device,
+        );
+    }
     ensure_request!(
         !examples.is_empty(),
         "no interacting pairs in the training split of {}",

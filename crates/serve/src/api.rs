@@ -211,7 +211,7 @@ pub struct CreateSession {
     pub ego: Option<i64>,
     /// The agents the generator drives, each with its courtesy toward the ego.
     pub controlled: Vec<ControlledAsk>,
-    /// Steps between plans (1..=80; default 10 with the generator, 20 with the ranked policy).
+    /// Steps between plans (1..=80; default 20, 2 s, with either policy).
     #[serde(default)]
     pub replan_every: Option<usize>,
     /// `external` (default: the caller sends the ego's state with every step), `reactive` or

@@ -114,8 +114,7 @@ class Model:
     ) -> Simulation:
         """A closed-loop simulation: ``controlled`` maps track ids to courtesy quantiles
         toward the ego; ``ego_mode`` external | reactive | log; ``others`` log | reactive;
-        ``replan_every`` steps between plans (default 10 with the generator, 20 with the
-        ranked policy)."""
+        ``replan_every`` steps between plans (default 20, 2 s, with either policy)."""
 
 def read_scenarios(path: str) -> list[Scene]:
     """Every scenario of a WOMD file (Scenario or tf.Example TFRecord)."""
