@@ -398,33 +398,20 @@ pub fn label_built_role(
     rng: &mut impl Rng,
     device: &Device,
 ) -> LabelledRole {
-    let scene = builder.scene();
     let mixture = marginal_mixtures(model, &[&b], device).remove(0);
-    let others = audience_members(builder, scene, stats, window, ia, ib, options.audience);
-    let a_weight = options
-        .audience
-        .weight(Audience::distance_between(scene, window, ia, ib));
-    let labels = label_role(
+    let mut role = unlabelled_role(builder, stats, window, (ia, a), (ib, b), options.audience);
+    let a_weight = role.labels.terms[0].weight;
+    role.labels = label_role(
         model,
-        (&a, a_weight),
-        &others,
-        &b,
+        (&role.a, a_weight),
+        &role.others,
+        &role.b,
         &mixture,
         options,
         rng,
         device,
     );
-    LabelledRole {
-        window_step: window.current_step,
-        a_index: ia,
-        b_index: ib,
-        a_id: scene.tracks[ia].id,
-        b_id: scene.tracks[ib].id,
-        a,
-        b,
-        others,
-        labels,
-    }
+    role
 }
 
 /// The role's samples and B's audience exactly as [`label_built_role`] builds them, without

@@ -183,13 +183,15 @@ impl Scbg {
 
     /// The pair's samples and the labels of B's logged and sampled futures, as training
     /// labelled them (E[r(Y_A) | x] from B's sampled futures with a fixed seed, toward the
-    /// audience the generator was trained for).
+    /// audience the generator was trained for); without `label`, the same samples and audience
+    /// and no label at all ([`scbg_courtesy::label::unlabelled_role`], no forward).
     fn labelled_role(
         &self,
         scene: &PreparedScene,
         window: &Window,
         a_id: i64,
         b_id: i64,
+        label: bool,
         device: &Device,
     ) -> Result<LabelledRole, GenerateError> {
         let (ia, ib) = check_request(scene, a_id, b_id, &[])?;
@@ -202,6 +204,16 @@ impl Scbg {
             .map_err(|error| GenerateError::Sample { id: b_id, error })?;
         self.stats.normalize(&mut a);
         self.stats.normalize(&mut b);
+        if !label {
+            return Ok(scbg_courtesy::label::unlabelled_role(
+                &mut builder,
+                &self.stats,
+                window,
+                (ia, a),
+                (ib, b),
+                self.labels.audience,
+            ));
+        }
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0x5cb6);
         Ok(label_built_role(
             &self.predictor,
@@ -216,36 +228,6 @@ impl Scbg {
         ))
     }
 
-    /// A's and B's standardised samples and B's audience for `plan`, without labels
-    /// ([`scbg_courtesy::label::unlabelled_role`]).
-    fn unlabelled_role(
-        &self,
-        scene: &PreparedScene,
-        window: &Window,
-        ia: usize,
-        ib: usize,
-        a_id: i64,
-        b_id: i64,
-    ) -> Result<LabelledRole, GenerateError> {
-        let mut builder = SampleBuilder::new(scene, &self.features);
-        let mut a = builder
-            .sample(window, ia, Some(ib))
-            .map_err(|error| GenerateError::Sample { id: a_id, error })?;
-        let mut b = builder
-            .sample(window, ib, None)
-            .map_err(|error| GenerateError::Sample { id: b_id, error })?;
-        self.stats.normalize(&mut a);
-        self.stats.normalize(&mut b);
-        Ok(scbg_courtesy::label::unlabelled_role(
-            &mut builder,
-            &self.stats,
-            window,
-            (ia, a),
-            (ib, b),
-            self.labels.audience,
-        ))
-    }
-
     /// What every generation for one pair shares (its samples, B's frozen embedding,
     /// E[r(Y_A) | x] and the predicted range of ψ): computed once, a front end can keep it
     /// and generate at many courtesies for the cost of the generator and J_φ alone.
@@ -257,7 +239,7 @@ impl Scbg {
         b_id: i64,
         device: &Device,
     ) -> Result<PairContext, GenerateError> {
-        let role = self.labelled_role(scene, window, a_id, b_id, device)?;
+        let role = self.labelled_role(scene, window, a_id, b_id, true, device)?;
         let mut example =
             Example::from_role(scene.scenario_id.clone(), role, &self.predictor, device);
         // Index 0 is B's logged future (whatever the scene holds after its current step):
@@ -415,7 +397,7 @@ impl Scbg {
         if self.policy == Policy::Ranked {
             // The labels alone, no embedding of B and no range: the choice `generate_in` makes
             // (its candidates are these futures, in B's frame).
-            let role = self.labelled_role(scene, window, a_id, b_id, device)?;
+            let role = self.labelled_role(scene, window, a_id, b_id, true, device)?;
             let sampled = role.labels.psi.get(1..).unwrap_or_default();
             let k = ranked_choice(sampled, courtesy)
                 .ok_or(GenerateError::NoCandidates(self.labels.samples))?;
@@ -439,7 +421,7 @@ impl Scbg {
         let (embedding, pose, example) = if self.generator.scores_mode_courtesy() {
             // A's and B's samples and B's audience, no label: the modes' courtesy is measured
             // against their own mean, so no E[r(Y_A) | x] from B's samples is needed.
-            let role = self.unlabelled_role(scene, window, ia, ib, a_id, b_id)?;
+            let role = self.labelled_role(scene, window, a_id, b_id, false, device)?;
             let mut example =
                 Example::from_role(scene.scenario_id.clone(), role, &self.predictor, device);
             if self.generator.a_context_width == 0 {

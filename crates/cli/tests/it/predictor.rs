@@ -211,11 +211,12 @@ fn demo_writes_a_report() {
     let responsive = cl["responsive_fraction"]["all"].as_f64().unwrap();
     assert!(within.abs() <= responsive + 1e-9, "{cl}");
     assert!(report["truth_control"]["full"]["spearman_within_example"]["all"].is_number());
-    // Then sample and rank in the same loop, at its own cadence, without the prior's score.
+    // Then sample and rank in the same loop, at its own cadence (both 2 s), without the
+    // prior's score.
     let rk = &report["closed_loop_ranked"];
     assert_eq!(rk["policy"], "ranked", "{rk}");
     assert_eq!(rk["replan_every"], 20);
-    assert_eq!(cl["replan_every"], 10);
+    assert_eq!(cl["replan_every"], 20);
     assert_eq!(rk["per_quantile"].as_array().unwrap().len(), 9);
     assert!(rk["wosac_scbg"]["metametric"].is_number(), "{rk}");
     assert!(rk["wosac_scbg_prior"].is_null());
