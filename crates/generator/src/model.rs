@@ -59,8 +59,8 @@ pub struct GeneratorConfig {
 const MODE_SCORER_HIDDEN: usize = 32;
 
 /// The generator's ψ inputs, in units of the labels' spread (`psi_scale`), are clamped to
-/// ± this many spreads (the demo's labels span about ±5.4).
-const PSI_INPUT_RANGE: f32 = 10.0;
+/// ± this many spreads (the demo's labels span about ±5.4; a label beyond is rare).
+const PSI_INPUT_RANGE: f32 = 20.0;
 
 fn one() -> f32 {
     1.0
@@ -591,7 +591,7 @@ mod tests {
         assert!(blend > 1e-3 && blend < 8.0 - 1e-3, "{blend}");
     }
 
-    /// A ψ far outside the labels (here 1000 spreads) is read as the clamp's 10 spreads, so a
+    /// A ψ far outside the labels (here 1000 spreads) is read as the clamp's 20 spreads, so a
     /// wild request or range extrapolation cannot drive the decoder into metres per step.
     #[test]
     fn a_psi_far_outside_the_labels_is_clamped() {

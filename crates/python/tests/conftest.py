@@ -22,7 +22,7 @@ def trained_dirs(tmp_path_factory):
     _scbg("train", "predictor", "--config", os.environ["SCBG_TINY_CONFIG"], "--data", cache,
           "--out", model)
     _scbg("train", "generator", "--predictor", model, "--data", cache, "--out", gen,
-          "--epochs", "1", "--samples", "2", "--batch-size", "8", "--range-steps", "5")
+          "--epochs", "1", "--samples", "2", "--batch-size", "8", "--range-steps", "100")
     return gen, os.path.join(data, "synth-00000.tfrecord")
 
 

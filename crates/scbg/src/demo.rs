@@ -377,21 +377,24 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         train,
         options.condition_on_a,
     );
-    if options.select_modes && options.mode_courtesy {
-        // Once for every variant and seed (train_variant would measure them for each).
-        scbg_generator::fill_mode_courtesy(
-            &predictors.plain,
-            &mut examples,
-            options.labels.reward,
-            &predictors.plain_device,
-        );
-    }
-    let held_out = examples_of(
+    let mut held_out = examples_of(
         &predictors.plain,
         &predictors.plain_device,
         validation,
         options.condition_on_a,
     );
+    if options.select_modes && options.mode_courtesy {
+        // Once for every variant and seed (training and each evaluation would measure them
+        // again).
+        for set in [&mut examples, &mut held_out] {
+            scbg_generator::fill_mode_courtesy(
+                &predictors.plain,
+                set,
+                options.labels.reward,
+                &predictors.plain_device,
+            );
+        }
+    }
 
     stage(
         6,

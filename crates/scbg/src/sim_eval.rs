@@ -48,8 +48,8 @@ pub struct SimEvalOptions {
     /// Also score scbg with the knob drawn from its prior: rollout `r` of `n` at quantile
     /// `(r + ½)/n`, the whole range (`wosac_scbg_prior`).
     pub wosac_prior: bool,
-    /// Closed-loop settings (default: re-plan every 10 steps, A and the others reactive; see
-    /// [`SimEvalOptions::of_policy`] for the policy's own cadence).
+    /// Closed-loop settings (default: the generator's cadence, every 20 steps, A and the
+    /// others reactive; [`SimEvalOptions::of_policy`] sets a policy's own cadence).
     pub config: SimConfig,
     /// The WOSAC definition.
     pub wosac: WosacConfig,
@@ -81,6 +81,7 @@ impl Default for SimEvalOptions {
             wosac_prior: true,
             config: SimConfig {
                 others: OthersMode::Reactive,
+                replan_every: crate::sim::default_replan_every(scbg_generator::Policy::Generator),
                 ..SimConfig::default()
             },
             wosac: WosacConfig::V2025,
