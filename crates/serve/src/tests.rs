@@ -65,7 +65,10 @@ fn fixture() -> &'static (tempfile::TempDir, Vec<u8>, scbg::synth::GroundTruth) 
             &generator::VariantSettings {
                 epochs: 1,
                 batch_size: 8,
-                range_steps: 5,
+                // Enough for a range on the labels' scale: the generator reads ψ clamped to
+                // ±20 label spreads, and a range 5 steps from its initial weights puts both ends
+                // of the slider beyond that (the viewer test then sees no change).
+                range_steps: 100,
                 ..generator::VariantSettings::new(Variant::Full, options)
             },
             &p("gen"),
