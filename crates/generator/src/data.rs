@@ -274,11 +274,10 @@ pub fn fill_mode_courtesy(
     for chunk in examples.chunks_mut(64) {
         let refs: Vec<&Example> = chunk.iter().collect();
         let modes = b_modes(predictor, &refs, device);
-        let [n, k] = modes.log_prob.dims();
+        let k = modes.log_prob.dims()[1];
         let psi = crate::eval::to_vec(mode_courtesy(predictor, &refs, &modes, reward, device));
-        for (i, e) in chunk.iter_mut().enumerate() {
-            e.mode_psi = psi[i * k..(i + 1) * k].to_vec();
+        for (e, psi) in chunk.iter_mut().zip(psi.chunks_exact(k)) {
+            e.mode_psi = psi.to_vec();
         }
-        debug_assert_eq!(psi.len(), n * k);
     }
 }

@@ -170,16 +170,6 @@ pub struct Generator {
     pub likeliest_mode: bool,
 }
 
-/// How a mode-selecting generator combines B's modes ([`Generator::forward`] and
-/// [`Generator::forward_blend`]).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum ModeChoice {
-    /// The softmax-weighted blend.
-    Blend,
-    /// The likeliest mode alone.
-    Likeliest,
-}
-
 /// B's predicted marginal modes, the choices of a mode-selecting generator
 /// ([`GeneratorConfig::modes`]); see [`crate::b_modes`].
 #[derive(Debug, Clone)]
@@ -233,12 +223,7 @@ impl Generator {
         psi: Tensor<1>,
         modes: Option<BModes>,
     ) -> Tensor<3> {
-        let choice = if self.likeliest_mode {
-            ModeChoice::Likeliest
-        } else {
-            ModeChoice::Blend
-        };
-        self.forward_with(embedding, psi, modes, choice)
+        self.forward_with(embedding, psi, modes, self.likeliest_mode)
     }
 
     /// `y_B = g(x, ψ)` as trained (differentiable in every weight). The knot
@@ -260,16 +245,17 @@ impl Generator {
         psi: Tensor<1>,
         modes: Option<BModes>,
     ) -> Tensor<3> {
-        self.forward_with(embedding, psi, modes, ModeChoice::Blend)
+        self.forward_with(embedding, psi, modes, false)
     }
 
-    /// [`Self::forward_blend`] with the selector's weights as `choice` says.
+    /// [`Self::forward_blend`], or with `likeliest` the one-hot of the selector's argmax in
+    /// place of its softmax weights.
     fn forward_with(
         &self,
         embedding: Tensor<2>,
         psi: Tensor<1>,
         modes: Option<BModes>,
-        choice: ModeChoice,
+        likeliest: bool,
     ) -> Tensor<3> {
         let [b, _] = embedding.dims();
         // In units of the labels' spread, clamped: a ψ far outside every label (a range
@@ -316,19 +302,16 @@ impl Generator {
                 .clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
                 logits = logits + scorer.forward(pair).reshape([b, k]);
             }
-            let soft = || burn::tensor::activation::softmax(logits.clone(), 1);
-            let hard = || {
+            let weights = if likeliest {
                 let device = logits.device();
                 Tensor::<2>::zeros([b, k], &device).scatter(
                     1,
-                    logits.clone().argmax(1),
+                    logits.argmax(1),
                     Tensor::ones([b, 1], &device),
                     burn::tensor::IndexingUpdateOp::Add,
                 )
-            };
-            let weights = match choice {
-                ModeChoice::Blend => soft(),
-                ModeChoice::Likeliest => hard(),
+            } else {
+                burn::tensor::activation::softmax(logits, 1)
             };
             let mixed = weights
                 .reshape([b, 1, k])
