@@ -239,6 +239,8 @@ struct Controlled {
 struct Synthetic {
     world: ClosedLoop,
     b_track: usize,
+    /// B's simulated states so far, projected on its path once each.
+    b_prefix: scbg_synth::BPrefix,
 }
 
 /// One agent's state at the simulation's current step.
@@ -358,9 +360,13 @@ impl Simulation {
                 let b = scene.track_index(scbg_synth::B_ID);
                 let matches = world.scenario().scenario_id() == scene.scenario_id
                     && start == scbg_synth::CURRENT_STEP
-                    && scene.tracks.len() == world.tracks(&[]).map_or(0, |t| t.len());
+                    && scene.tracks.len() == world.next_states(&Default::default()).len();
                 match b {
-                    Some(b_track) if matches => Some(Synthetic { world, b_track }),
+                    Some(b_track) if matches => Some(Synthetic {
+                        world,
+                        b_track,
+                        b_prefix: Default::default(),
+                    }),
                     _ => return Err(SimError::WorldMismatch(id)),
                 }
             }
@@ -618,18 +624,25 @@ impl Simulation {
                 next[i] = agent.step(current[i], &others_of(i));
             }
         }
-        if let Some(syn) = &self.synthetic {
-            let b_prefix: Vec<[f64; 2]> = self.states[syn.b_track][self.start + 1..=t]
-                .iter()
-                .map(|s| [s.x_m, s.y_m])
-                .collect();
-            let tracks = syn.world.tracks(&b_prefix).map_err(|e| SimError::Plan {
-                id: scbg_synth::B_ID,
-                step: t,
-                message: e.to_string(),
-            })?;
+        if let Some(syn) = &mut self.synthetic {
+            // B's states from the step after the current one up to `t`, each added once.
+            let known = t - self.start;
+            if syn.b_prefix.len() > known {
+                syn.b_prefix = Default::default();
+            }
+            while syn.b_prefix.len() < known {
+                let s = &self.states[syn.b_track][self.start + syn.b_prefix.len() + 1];
+                syn.world
+                    .push_b(&mut syn.b_prefix, [s.x_m, s.y_m])
+                    .map_err(|e| SimError::Plan {
+                        id: scbg_synth::B_ID,
+                        step: t,
+                        message: e.to_string(),
+                    })?;
+            }
+            let world_next = syn.world.next_states(&syn.b_prefix);
             let controlled: Vec<usize> = self.controlled.iter().map(|c| c.track).collect();
-            for (i, tr) in tracks.iter().enumerate() {
+            for (i, p) in world_next.iter().enumerate() {
                 let reactive = if i == self.ego {
                     self.config.ego == EgoMode::Reactive
                 } else {
@@ -638,7 +651,7 @@ impl Simulation {
                 if !reactive || controlled.contains(&i) {
                     continue;
                 }
-                let (p, q) = (&tr.states[t + 1], &self.states[i][t]);
+                let q = &self.states[i][t];
                 let (vx, vy) = ((p.x_m - q.x_m) / STEP_SECS, (p.y_m - q.y_m) / STEP_SECS);
                 next[i] = AgentState {
                     velocity_x_mps: vx as f32,

@@ -229,10 +229,25 @@ impl Scenario {
     }
 
     fn simulate_with(&self, b: BPlan<'_>, with_map: bool) -> Run {
+        self.simulate_on(self.paths(), b, with_map)
+    }
+
+    /// The scene's reference paths (what every run of it moves along).
+    fn paths(&self) -> Vec<RefPath> {
         match &self.params {
-            Params::Merge(p) => families::simulate_merge(p, b, with_map),
-            Params::Crossing(p) => families::simulate_crossing(p, b, with_map),
-            Params::Cutin(p) => families::simulate_cutin(p, b, with_map),
+            Params::Merge(p) => families::merge_paths(p),
+            Params::Crossing(p) => families::crossing_paths(p),
+            Params::Cutin(p) => families::cutin_paths(p),
+        }
+    }
+
+    /// A run on `paths` (the scene's own, [`Self::paths`], built once by a caller that runs
+    /// the scene many times).
+    fn simulate_on(&self, paths: Vec<RefPath>, b: BPlan<'_>, with_map: bool) -> Run {
+        match &self.params {
+            Params::Merge(p) => families::simulate_merge(p, paths, b, with_map),
+            Params::Crossing(p) => families::simulate_crossing(p, paths, b, with_map),
+            Params::Cutin(p) => families::simulate_cutin(p, paths, b, with_map),
         }
     }
 
@@ -250,7 +265,7 @@ impl Scenario {
     /// A's average future speed when B, after its logged history, follows `run_b`'s states
     /// (`(s, d, v)` along B's path for every step).
     fn replayed_a_speed(&self, b_states: &[(f64, f64, f64)], paths: &[RefPath]) -> f64 {
-        let run = self.simulate(BPlan::Replayed(b_states));
+        let run = self.simulate_on(paths.to_vec(), BPlan::Replayed(b_states), false);
         a_future_speed(&sim::record_track(&run.agents[0], paths, NUM_STEPS))
     }
 
@@ -265,28 +280,11 @@ impl Scenario {
         path: &RefPath,
         future: &[[f64; 2]],
     ) -> Vec<(f64, f64, f64)> {
-        let mut states: Vec<(f64, f64, f64)> = logged_b.history[..=CURRENT_STEP].to_vec();
-        let mut hint = states[CURRENT_STEP].0;
-        for p in future {
-            let (s, d) = path.project(p[0], p[1], Some(hint));
-            hint = s;
-            states.push((s, d, 0.0));
+        let mut prefix = BPrefix::default();
+        for &p in future {
+            prefix.push(logged_b, path, p);
         }
-        let n = states.len();
-        for t in CURRENT_STEP + 1..n {
-            let (a, b) = if t + 1 < n {
-                (t - 1, t + 1)
-            } else {
-                (t - 1, t)
-            };
-            let v = (states[b].0 - states[a].0) / ((b - a) as f64 * STEP_SECS);
-            states[t].2 = v.max(0.0);
-        }
-        while states.len() < NUM_STEPS {
-            let (s, d, v) = *states.last().expect("the history is there");
-            states.push((s + v * STEP_SECS, d, v));
-        }
-        states
+        prefix.states(logged_b, NUM_STEPS)
     }
 
     /// The oracle: A's realised average future speed (m/s, over the 80 future steps) when B
@@ -341,10 +339,14 @@ impl Scenario {
         let draws = draws.max(1);
         (0..draws)
             .map(|k| {
-                let run = self.simulate(BPlan::Simulated {
-                    history: self.courtesy,
-                    future: (k as f64 + 0.5) / draws as f64,
-                });
+                let run = self.simulate_on(
+                    logged.paths.clone(),
+                    BPlan::Simulated {
+                        history: self.courtesy,
+                        future: (k as f64 + 0.5) / draws as f64,
+                    },
+                    false,
+                );
                 self.a_avg_speed_given(logged, &Self::b_future_of(&run))
                     .expect("a simulated future is complete and finite")
             })
@@ -533,27 +535,109 @@ impl ClosedLoop {
     /// agent's step `t + 1` depends on B's states up to `t` only); later steps continue B at
     /// its last speed. B's own track is its prefix projected onto its reference path.
     pub fn tracks(&self, b_prefix: &[[f64; 2]]) -> Result<Vec<scbg_scene::Track>, OracleError> {
-        let expected = NUM_STEPS - CURRENT_STEP - 1;
-        if b_prefix.len() > expected {
-            return Err(OracleError::Steps {
-                got: b_prefix.len(),
-                expected,
-            });
+        let mut prefix = BPrefix::default();
+        for &p in b_prefix {
+            self.push_b(&mut prefix, p)?;
         }
-        if let Some(t) = b_prefix
-            .iter()
-            .position(|p| !(p[0].is_finite() && p[1].is_finite()))
-        {
-            return Err(OracleError::NotFinite(t));
-        }
-        let b = &self.logged.agents[1];
-        let states = Scenario::b_states(b, &self.logged.paths[b.path], b_prefix);
-        let run = self.scenario.simulate(BPlan::Replayed(&states));
+        let run = self.replayed(&prefix, NUM_STEPS);
         Ok(run
             .agents
             .iter()
             .map(|a| sim::record_track(a, &run.paths, NUM_STEPS))
             .collect())
+    }
+
+    /// Appends B's position at the next future step (world frame) to `prefix`: the step-wise
+    /// way to build what [`Self::tracks`] takes, projecting each point onto B's path once.
+    pub fn push_b(&self, prefix: &mut BPrefix, p: [f64; 2]) -> Result<(), OracleError> {
+        let expected = NUM_STEPS - CURRENT_STEP - 1;
+        if prefix.sd.len() >= expected {
+            return Err(OracleError::Steps {
+                got: prefix.sd.len() + 1,
+                expected,
+            });
+        }
+        if !(p[0].is_finite() && p[1].is_finite()) {
+            return Err(OracleError::NotFinite(prefix.sd.len()));
+        }
+        let b = &self.logged.agents[1];
+        prefix.push(b, &self.logged.paths[b.path], p);
+        Ok(())
+    }
+
+    /// Every agent's state (track order) at the first step B's `prefix` does not fix, step
+    /// `CURRENT_STEP + prefix.len() + 1`: what [`Self::tracks`] gives there, simulating only
+    /// up to the step after it (the one its central-difference velocity needs) instead of the
+    /// whole scene, so a closed-loop rollout's step costs what the steps so far cost.
+    pub fn next_states(&self, prefix: &BPrefix) -> Vec<scbg_scene::AgentState> {
+        let step = CURRENT_STEP + prefix.sd.len() + 1;
+        let steps = (step + 2).min(NUM_STEPS);
+        let run = self.replayed(prefix, steps);
+        run.agents
+            .iter()
+            .map(|a| sim::recorded_state(a, &run.paths, steps, step))
+            .collect()
+    }
+
+    /// The scene's first `steps` steps with B replayed along `prefix`.
+    fn replayed(&self, prefix: &BPrefix, steps: usize) -> Run {
+        let states = prefix.states(&self.logged.agents[1], steps);
+        // The logged run's paths: copying them is cheaper than building them again.
+        self.scenario
+            .simulate_on(self.logged.paths.clone(), BPlan::Replayed(&states), false)
+    }
+}
+
+/// B's future so far in a closed-loop run of a [`ClosedLoop`] world, as arclength and lateral
+/// offset along B's reference path (built with [`ClosedLoop::push_b`]).
+#[derive(Debug, Clone, Default)]
+pub struct BPrefix {
+    /// `(s, d)` of each future step so far.
+    sd: Vec<(f64, f64)>,
+}
+
+impl BPrefix {
+    /// Future steps so far.
+    pub fn len(&self) -> usize {
+        self.sd.len()
+    }
+
+    /// Whether no future step is known yet.
+    pub fn is_empty(&self) -> bool {
+        self.sd.is_empty()
+    }
+
+    /// Appends `p` projected onto `path`, searching near the previous point.
+    fn push(&mut self, logged_b: &sim::Agent, path: &RefPath, p: [f64; 2]) {
+        let hint = self
+            .sd
+            .last()
+            .map_or(logged_b.history[CURRENT_STEP].0, |&(s, _)| s);
+        self.sd.push(path.project(p[0], p[1], Some(hint)));
+    }
+
+    /// B's `(s, d, v)` for the first `steps` steps (at least the history): the logged history,
+    /// the prefix (speeds by finite differences, central but at the last point), then its last
+    /// speed and offset.
+    fn states(&self, logged_b: &sim::Agent, steps: usize) -> Vec<(f64, f64, f64)> {
+        let mut states: Vec<(f64, f64, f64)> = logged_b.history[..=CURRENT_STEP].to_vec();
+        states.extend(self.sd.iter().map(|&(s, d)| (s, d, 0.0)));
+        let n = states.len();
+        for t in CURRENT_STEP + 1..n {
+            let (a, b) = if t + 1 < n {
+                (t - 1, t + 1)
+            } else {
+                (t - 1, t)
+            };
+            let v = (states[b].0 - states[a].0) / ((b - a) as f64 * STEP_SECS);
+            states[t].2 = v.max(0.0);
+        }
+        while states.len() < steps {
+            let (s, d, v) = *states.last().expect("the history is there");
+            states.push((s + v * STEP_SECS, d, v));
+        }
+        states.truncate(steps.max(CURRENT_STEP + 1));
+        states
     }
 }
 

@@ -7,7 +7,14 @@ pub struct RefPath {
     x: Vec<f64>,
     y: Vec<f64>,
     heading: Vec<f64>,
+    /// A bounding circle `(centre x, centre y, radius)` of each run of [`CHUNK`] segments
+    /// (radius infinite for the runs holding an end segment, which extends beyond the path):
+    /// [`Self::project`] skips a run that cannot hold a nearer point than one already found.
+    chunks: Vec<(f64, f64, f64)>,
 }
+
+/// Segments per bounding circle of [`RefPath::project`]'s search.
+const CHUNK: usize = 8;
 
 impl RefPath {
     /// Samples `f(s) -> (x, y)` every `ds_m` over `[0, length_m]`; `f` must be parameterised by
@@ -21,11 +28,13 @@ impl RefPath {
                 (y[b] - y[a]).atan2(x[b] - x[a])
             })
             .collect();
+        let chunks = bounding_circles(&x, &y);
         Self {
             ds_m,
             x,
             y,
             heading,
+            chunks,
         }
     }
 
@@ -72,19 +81,57 @@ impl RefPath {
     /// Frenet coordinates `(s, d)` of a world point: the nearest point of the polyline (a
     /// global scan when `s_hint` is `None`, else a search within 40 m of it, which is what a
     /// trajectory stepping along the path needs), extended linearly beyond both ends as
-    /// [`Self::pose`] does. `d` is positive to the left.
+    /// [`Self::pose`] does. `d` is positive to the left. Of equally near segments, the first
+    /// counts.
+    ///
+    /// The search is exact but skips each run of [`CHUNK`] segments whose bounding circle lies
+    /// farther than the nearest point found so far, starting from the run whose circle is
+    /// nearest: a few runs are scanned instead of the 81 segments of a 40 m window.
     pub fn project(&self, x: f64, y: f64, s_hint: Option<f64>) -> (f64, f64) {
+        let (lo, hi) = self.window(s_hint);
+        let (c_lo, c_hi) = (lo / CHUNK, hi / CHUNK);
+        // A lower bound of the distance from the point to each run (squared, slightly under).
+        let bound2 = |c: usize| {
+            let (cx, cy, r) = self.chunks[c];
+            let gap = ((x - cx).powi(2) + (y - cy).powi(2)).sqrt() - r;
+            if gap <= 0.0 {
+                0.0
+            } else {
+                (gap * (1.0 - 1e-9)).powi(2)
+            }
+        };
+        let first = (c_lo..=c_hi)
+            .map(|c| (bound2(c), c))
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .map_or(c_lo, |(_, c)| c);
+        let segments = |c: usize| (c * CHUNK).max(lo)..=((c + 1) * CHUNK - 1).min(hi);
+        let mut best = Nearest::NONE;
+        self.scan(x, y, segments(first), &mut best);
+        for c in (c_lo..=c_hi).filter(|&c| c != first) {
+            if bound2(c) <= best.dist2 {
+                self.scan(x, y, segments(c), &mut best);
+            }
+        }
+        (best.s, best.d)
+    }
+
+    /// The segments [`Self::project`] searches: every one, or those within 40 m of the hint.
+    fn window(&self, s_hint: Option<f64>) -> (usize, usize) {
         let last = self.x.len() - 2;
-        let (lo, hi) = match s_hint {
+        match s_hint {
             None => (0, last),
             Some(s) => {
                 let i = (s / self.ds_m).round().clamp(0.0, last as f64) as usize;
                 let w = (40.0 / self.ds_m).ceil() as usize;
                 (i.saturating_sub(w), (i + w).min(last))
             }
-        };
-        let mut best = (f64::INFINITY, 0.0, 0.0);
-        for i in lo..=hi {
+        }
+    }
+
+    /// Projects the point onto each of `segments`, keeping the nearest (the first of equals).
+    fn scan(&self, x: f64, y: f64, segments: std::ops::RangeInclusive<usize>, best: &mut Nearest) {
+        let last = self.x.len() - 2;
+        for i in segments {
             let (ax, ay) = (self.x[i], self.y[i]);
             let (dx, dy) = (self.x[i + 1] - ax, self.y[i + 1] - ay);
             let l2 = (dx * dx + dy * dy).max(1e-12);
@@ -98,13 +145,16 @@ impl RefPath {
             }
             let (px, py) = (ax + t * dx, ay + t * dy);
             let dist2 = (x - px).powi(2) + (y - py).powi(2);
-            if dist2 < best.0 {
+            if dist2 < best.dist2 || (dist2 == best.dist2 && i < best.segment) {
                 let l = l2.sqrt();
-                let d = (dx * (y - ay) - dy * (x - ax)) / l;
-                best = (dist2, (i as f64 + t) * self.ds_m, d);
+                *best = Nearest {
+                    dist2,
+                    segment: i,
+                    s: (i as f64 + t) * self.ds_m,
+                    d: (dx * (y - ay) - dy * (x - ax)) / l,
+                };
             }
         }
-        (best.1, best.2)
     }
 
     /// Points of the path offset by `d(s)`, every `step_m`, over `[s0, s1]`.
@@ -123,6 +173,53 @@ impl RefPath {
             })
             .collect()
     }
+}
+
+/// The nearest point found so far by [`RefPath::project`].
+struct Nearest {
+    dist2: f64,
+    segment: usize,
+    s: f64,
+    d: f64,
+}
+
+impl Nearest {
+    const NONE: Self = Self {
+        dist2: f64::INFINITY,
+        segment: usize::MAX,
+        s: 0.0,
+        d: 0.0,
+    };
+}
+
+/// The bounding circle of each run of [`CHUNK`] segments of the polyline `(x, y)` (the centre
+/// of the run's vertices' box, the farthest vertex's distance), infinite for the first and last
+/// runs, whose end segments extend beyond the path.
+fn bounding_circles(x: &[f64], y: &[f64]) -> Vec<(f64, f64, f64)> {
+    let segments = x.len() - 1;
+    let runs = segments.div_ceil(CHUNK);
+    (0..runs)
+        .map(|c| {
+            if c == 0 || c + 1 == runs {
+                return (0.0, 0.0, f64::INFINITY);
+            }
+            let v = c * CHUNK..=((c + 1) * CHUNK).min(segments);
+            let (mut x0, mut x1, mut y0, mut y1) = (
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+            );
+            for i in v.clone() {
+                (x0, x1) = (x0.min(x[i]), x1.max(x[i]));
+                (y0, y1) = (y0.min(y[i]), y1.max(y[i]));
+            }
+            let (cx, cy) = (0.5 * (x0 + x1), 0.5 * (y0 + y1));
+            let r = v.map(|i| (x[i] - cx).hypot(y[i] - cy)).fold(0.0, f64::max);
+            // Outward rounding: the bound must never exceed the true distance.
+            (cx, cy, r * (1.0 + 1e-12) + 1e-9)
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -163,6 +260,49 @@ mod tests {
                     (s2 - s).abs() < 0.02 && (d2 - d).abs() < 0.02,
                     "{s},{d} -> {s2},{d2}"
                 );
+            }
+        }
+    }
+
+    /// The plain scan of every segment in the window: what the pruned search must return.
+    fn project_every_segment(p: &RefPath, x: f64, y: f64, s_hint: Option<f64>) -> (f64, f64) {
+        let (lo, hi) = p.window(s_hint);
+        let mut best = Nearest::NONE;
+        p.scan(x, y, lo..=hi, &mut best);
+        (best.s, best.d)
+    }
+
+    #[test]
+    fn pruned_projection_equals_the_full_scan() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(7);
+        // A winding path that comes back near itself, a gentle arc, a short straight one.
+        let winding = RefPath::from_fn(300.0, 1.0, |s| {
+            (30.0 * (s / 40.0).sin() + 0.2 * s, 25.0 * (s / 23.0).cos())
+        });
+        let arc = RefPath::from_fn(700.0, 1.0, |s| {
+            let k = 1.0 / 900.0;
+            ((k * s).sin() / k, (1.0 - (k * s).cos()) / k)
+        });
+        let short = RefPath::straight(3.0, -1.0, 0.4, 5.0);
+        for path in [&winding, &arc, &short] {
+            let len = path.length_m();
+            for _ in 0..4000 {
+                let s = rng.random_range(-30.0..len + 30.0);
+                let (x, y) = path.pose(s, rng.random_range(-40.0..40.0));
+                // Vertices and segment midpoints too: ties between neighbouring segments.
+                let (x, y) = if rng.random_bool(0.1) {
+                    path.pose(s.round().clamp(0.0, len), 0.0)
+                } else {
+                    (x, y)
+                };
+                for hint in [None, Some(s + rng.random_range(-30.0..30.0))] {
+                    assert_eq!(
+                        path.project(x, y, hint),
+                        project_every_segment(path, x, y, hint),
+                        "({x}, {y}) hint {hint:?}"
+                    );
+                }
             }
         }
     }

@@ -144,59 +144,55 @@ impl Agent {
 /// Converts an agent's history into a track: positions from (path, s, d), velocity by finite
 /// differences of positions, heading along the motion (the path's heading when nearly still).
 pub fn record_track(agent: &Agent, paths: &[RefPath], num_steps: usize) -> Track {
-    let path = &paths[agent.path];
-    let pos: Vec<(f64, f64)> = agent
-        .history
-        .iter()
-        .take(num_steps)
-        .map(|&(s, d, _)| path.pose(s, d))
-        .collect();
-    let n = pos.len();
-    let dt = STEP_SECS;
-    let vel: Vec<(f64, f64)> = (0..n)
-        .map(|t| {
-            let (a, b) = if t == 0 {
-                (0, 1)
-            } else if t + 1 == n {
-                (n - 2, n - 1)
-            } else {
-                (t - 1, t + 1)
-            };
-            let k = (b - a) as f64 * dt;
-            ((pos[b].0 - pos[a].0) / k, (pos[b].1 - pos[a].1) / k)
-        })
-        .collect();
-    let mut heading = path.heading_at(agent.history[0].0);
-    let states = (0..n)
-        .map(|t| {
-            let (vx, vy) = vel[t];
-            if vx.hypot(vy) > 0.5 {
-                heading = vy.atan2(vx);
-            } else {
-                heading = path.heading_at(agent.history[t].0);
-            }
-            AgentState {
-                x_m: pos[t].0,
-                y_m: pos[t].1,
-                z_m: 0.0,
-                length_m: agent.length_m as f32,
-                width_m: agent.width_m as f32,
-                height_m: if agent.kind == ObjectType::Pedestrian {
-                    1.75
-                } else {
-                    1.6
-                },
-                heading_rad: heading as f32,
-                velocity_x_mps: vx as f32,
-                velocity_y_mps: vy as f32,
-                valid: true,
-            }
-        })
-        .collect();
+    let n = agent.history.len().min(num_steps);
     Track {
         id: agent.id,
         object_type: agent.kind,
-        states,
+        states: (0..n)
+            .map(|t| recorded_state(agent, paths, num_steps, t))
+            .collect(),
+    }
+}
+
+/// State `t` of [`record_track`]`(agent, paths, num_steps)`, computed alone.
+pub fn recorded_state(agent: &Agent, paths: &[RefPath], num_steps: usize, t: usize) -> AgentState {
+    let path = &paths[agent.path];
+    let n = agent.history.len().min(num_steps);
+    let pos = |i: usize| {
+        let (s, d, _) = agent.history[i];
+        path.pose(s, d)
+    };
+    let (a, b) = if t == 0 {
+        (0, 1)
+    } else if t + 1 == n {
+        (n - 2, n - 1)
+    } else {
+        (t - 1, t + 1)
+    };
+    let k = (b - a) as f64 * STEP_SECS;
+    let ((xa, ya), (xb, yb)) = (pos(a), pos(b));
+    let (vx, vy) = ((xb - xa) / k, (yb - ya) / k);
+    let heading = if vx.hypot(vy) > 0.5 {
+        vy.atan2(vx)
+    } else {
+        path.heading_at(agent.history[t].0)
+    };
+    let (x, y) = pos(t);
+    AgentState {
+        x_m: x,
+        y_m: y,
+        z_m: 0.0,
+        length_m: agent.length_m as f32,
+        width_m: agent.width_m as f32,
+        height_m: if agent.kind == ObjectType::Pedestrian {
+            1.75
+        } else {
+            1.6
+        },
+        heading_rad: heading as f32,
+        velocity_x_mps: vx as f32,
+        velocity_y_mps: vy as f32,
+        valid: true,
     }
 }
 

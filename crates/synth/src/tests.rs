@@ -234,6 +234,16 @@ fn closed_loop_world_is_causal_and_replays_the_log() {
         }
     }
     let world = Scenario::draw(5, 0, &Family::ALL).closed_loop();
+    let mut prefix = crate::BPrefix::default();
+    for _ in 0..80 {
+        world.push_b(&mut prefix, [0.0, 0.0]).unwrap();
+    }
+    assert!(world.push_b(&mut prefix, [0.0, 0.0]).is_err());
+    assert!(
+        world
+            .push_b(&mut crate::BPrefix::default(), [0.0, f64::INFINITY])
+            .is_err()
+    );
     assert!(world.tracks(&vec![[0.0, 0.0]; 81]).is_err());
     assert!(world.tracks(&[[f64::NAN, 0.0]]).is_err());
 }
@@ -350,5 +360,34 @@ fn the_worlds_knob_is_the_sibling_and_the_logged_courtesy_is_the_log() {
             scenario.tracks_with_courtesy(7.0)[1].states,
             scenario.tracks_with_courtesy(1.0)[1].states
         );
+    }
+}
+
+/// The step-wise world (each step simulates only the steps so far) gives, at every step of a
+/// closed loop, exactly the states the whole-scene re-simulation gives there.
+#[test]
+fn step_wise_world_equals_the_whole_scene_replay() {
+    for index in 0..12 {
+        let scenario = Scenario::draw(9, index, &Family::ALL);
+        let logged = scenario.generate();
+        let world = scenario.clone().closed_loop();
+        // B's logged future bent sideways and slowed: a future the log never had.
+        let b_future: Vec<[f64; 2]> = logged.scene.tracks[1].states[CURRENT_STEP + 1..]
+            .iter()
+            .enumerate()
+            .map(|(k, s)| [s.x_m - 0.02 * k as f64, s.y_m + 0.01 * k as f64])
+            .collect();
+        let mut prefix = crate::BPrefix::default();
+        for k in 0..b_future.len() {
+            let whole = world.tracks(&b_future[..k]).unwrap();
+            let step = CURRENT_STEP + k + 1;
+            let next = world.next_states(&prefix);
+            assert_eq!(next.len(), whole.len());
+            for (i, (n, w)) in next.iter().zip(&whole).enumerate() {
+                assert_eq!(*n, w.states[step], "scene {index}, track {i}, prefix {k}");
+            }
+            world.push_b(&mut prefix, b_future[k]).unwrap();
+            assert_eq!(prefix.len(), k + 1);
+        }
     }
 }

@@ -95,9 +95,8 @@ pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
     }
 }
 
-/// Simulates a crossing scene with B as `b` says; the map is built only when `with_map`.
-pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Run {
-    let with_b = b.present();
+/// The reference paths of a crossing scene: A's road, B's, then one per pedestrian.
+pub fn crossing_paths(p: &CrossingParams) -> Vec<RefPath> {
     let w = p.lane_width_m;
     let a_path = arc_path(0.0, 0.0, 0.0, p.curvature, 400.0);
     let (cx, cy) = a_path.pose(p.a_conflict_s, 0.0);
@@ -113,6 +112,32 @@ pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Ru
         h_b,
         300.0,
     );
+    let mut paths = vec![a_path, b_path];
+    for (k, &(s, _, side)) in p.pedestrians.iter().enumerate() {
+        // Sidewalk beside road 1, walking along it.
+        let (x, y) = paths[0].pose(s, side * (1.5 * w + 2.5));
+        let h = paths[0].heading_at(s)
+            + if k % 2 == 0 {
+                0.0
+            } else {
+                std::f64::consts::PI
+            };
+        paths.push(RefPath::straight(x, y, h, 60.0));
+    }
+    paths
+}
+
+/// Simulates a crossing scene on its `paths` ([`crossing_paths`]) with B as `b` says; the map
+/// is built only when `with_map`.
+pub fn simulate_crossing(
+    p: &CrossingParams,
+    paths: Vec<RefPath>,
+    b: BPlan<'_>,
+    with_map: bool,
+) -> Run {
+    let with_b = b.present();
+    let w = p.lane_width_m;
+    let (a_path, b_path) = (&paths[0], &paths[1]);
     // Half-width of the crossing road along each path (both roads have two lanes).
     let half_zone = w / p.crossing_angle_rad.sin().abs() + 1.0;
     let stop_s = p.b_conflict_s - half_zone - STOP_LINE_TO_ZONE_M;
@@ -131,17 +156,7 @@ pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Ru
         ));
     }
     let ped0 = agents.len();
-    let mut ped_paths = Vec::new();
-    for (k, &(s, v, side)) in p.pedestrians.iter().enumerate() {
-        // Sidewalk beside road 1, walking along it.
-        let (x, y) = a_path.pose(s, side * (1.5 * w + 2.5));
-        let h = a_path.heading_at(s)
-            + if k % 2 == 0 {
-                0.0
-            } else {
-                std::f64::consts::PI
-            };
-        ped_paths.push(RefPath::straight(x, y, h, 60.0));
+    for (k, &(_, v, _)) in p.pedestrians.iter().enumerate() {
         let ped_idm = Idm {
             desired_speed_mps: v,
             max_accel_mps2: 1.0,
@@ -161,7 +176,7 @@ pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Ru
         ));
     }
     let mut decision: Option<bool> = None;
-    for t in 0..NUM_STEPS - 1 {
+    for t in 0..b.steps() - 1 {
         let mut cmds = vec![0.0; agents.len()];
         let c = b.courtesy(t);
         // B decides from the current step on, so its courtesy shows in the future to predict.
@@ -220,8 +235,6 @@ pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Ru
         b.after_step(&mut agents, t);
     }
     if !with_map {
-        let mut paths = vec![a_path, b_path];
-        paths.extend(ped_paths);
         return Run {
             paths,
             agents,
@@ -315,7 +328,5 @@ pub fn simulate_crossing(p: &CrossingParams, b: BPlan<'_>, with_map: bool) -> Ru
         id: 51,
         polygon: cw(&a_path, p.a_conflict_s + half_zone + 0.5),
     });
-    let mut paths = vec![a_path, b_path];
-    paths.extend(ped_paths);
     Run { paths, agents, map }
 }

@@ -6,6 +6,7 @@ use scbg_scene::{Lane, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLi
 
 use super::{BPlan, NUM_STEPS, PairSetup, Run, arc_path, idm, noise_track, pts, vehicle_size};
 use crate::CURRENT_STEP;
+use crate::RefPath;
 use crate::sim::{Agent, Idm, STEP_SECS, closer};
 
 /// How far back a fully courteous B looks for a faster A to make way for.
@@ -90,11 +91,17 @@ pub fn cutin_params(rng: &mut Pcg64Mcg) -> CutinParams {
     }
 }
 
-/// Simulates a cut-in scene with B as `b` says; the map is built only when `with_map`.
-pub fn simulate_cutin(p: &CutinParams, b: BPlan<'_>, with_map: bool) -> Run {
+/// The reference path of a cutin scene (every agent moves along it).
+pub fn cutin_paths(p: &CutinParams) -> Vec<RefPath> {
+    vec![arc_path(0.0, 0.0, 0.0, p.curvature, 700.0)]
+}
+
+/// Simulates a cut-in scene on its `paths` ([`cutin_paths`]) with B as `b` says; the map is
+/// built only when `with_map`.
+pub fn simulate_cutin(p: &CutinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_map: bool) -> Run {
     let with_b = b.present();
     let w = p.lane_width_m;
-    let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);
+    let path = &paths[0];
     let b_lane = if p.cut_in { -w } else { 0.0 };
     let b_target = if p.cut_in { 0.0 } else { -w };
     let mut agents = p.pair.agents(0, b_lane, with_b);
@@ -141,7 +148,7 @@ pub fn simulate_cutin(p: &CutinParams, b: BPlan<'_>, with_map: bool) -> Run {
         }
         best
     };
-    for t in 0..NUM_STEPS - 1 {
+    for t in 0..b.steps() - 1 {
         let mut cmds = vec![0.0; agents.len()];
         let c = b.courtesy(t);
         let politeness = 2.0 * c;
@@ -238,7 +245,7 @@ pub fn simulate_cutin(p: &CutinParams, b: BPlan<'_>, with_map: bool) -> Run {
     }
     if !with_map {
         return Run {
-            paths: vec![path],
+            paths,
             agents,
             map: Map::default(),
         };
@@ -287,9 +294,5 @@ pub fn simulate_cutin(p: &CutinParams, b: BPlan<'_>, with_map: bool) -> Run {
         ],
         ..Default::default()
     };
-    Run {
-        paths: vec![path],
-        agents,
-        map,
-    }
+    Run { paths, agents, map }
 }

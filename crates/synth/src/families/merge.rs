@@ -9,6 +9,7 @@ use super::{
     vehicle_size,
 };
 use crate::CURRENT_STEP;
+use crate::RefPath;
 use crate::sim::{Agent, Idm, STEP_SECS, closer};
 
 /// Length over which the on-ramp's approach angle eases into the parallel lane.
@@ -142,10 +143,16 @@ impl MergeParams {
     }
 }
 
-/// Simulates a merge scene with B as `b` says; the map is built only when `with_map`.
-pub fn simulate_merge(p: &MergeParams, b: BPlan<'_>, with_map: bool) -> Run {
+/// The reference path of a merge scene (every agent moves along it).
+pub fn merge_paths(p: &MergeParams) -> Vec<RefPath> {
+    vec![arc_path(0.0, 0.0, 0.0, p.curvature, 700.0)]
+}
+
+/// Simulates a merge scene on its `paths` ([`merge_paths`]) with B as `b` says; the map is
+/// built only when `with_map`.
+pub fn simulate_merge(p: &MergeParams, paths: Vec<RefPath>, b: BPlan<'_>, with_map: bool) -> Run {
     let with_b = b.present();
-    let path = arc_path(0.0, 0.0, 0.0, p.curvature, 700.0);
+    let path = &paths[0];
     let mut b_idm = p.pair.b_idm;
     let mut agents = p.pair.agents(0, p.ramp_d(p.pair.b_s0), with_b);
     let bg0 = agents.len();
@@ -164,7 +171,7 @@ pub fn simulate_merge(p: &MergeParams, b: BPlan<'_>, with_map: bool) -> Run {
     let w = p.lane_width_m;
     let taper_start = p.merge_end_s - p.taper_m;
     let mut decision: Option<bool> = None; // Some(true) = B goes first
-    for t in 0..NUM_STEPS - 1 {
+    for t in 0..b.steps() - 1 {
         let mut cmds = vec![0.0; agents.len()];
         let c = b.courtesy(t);
         // B's decision, latched at the commit point.
@@ -239,7 +246,7 @@ pub fn simulate_merge(p: &MergeParams, b: BPlan<'_>, with_map: bool) -> Run {
     }
     if !with_map {
         return Run {
-            paths: vec![path],
+            paths,
             agents,
             map: Map::default(),
         };
@@ -306,9 +313,5 @@ pub fn simulate_merge(p: &MergeParams, b: BPlan<'_>, with_map: bool) -> Run {
         ],
         ..Default::default()
     };
-    Run {
-        paths: vec![path],
-        agents,
-        map,
-    }
+    Run { paths, agents, map }
 }

@@ -102,11 +102,20 @@ pub enum BPlan<'a> {
         future: f64,
     },
     /// B replayed: its `(s, d, v)` along its own reference path at every step
-    /// ([`NUM_STEPS`] entries); B's own decisions are ignored, everyone else reacts to it.
+    /// ([`NUM_STEPS`] entries, or fewer to simulate only that many steps); B's own decisions
+    /// are ignored, everyone else reacts to it.
     Replayed(&'a [(f64, f64, f64)]),
 }
 
 impl BPlan<'_> {
+    /// Steps a run simulates: [`NUM_STEPS`], or as many as a replayed B has states.
+    pub fn steps(&self) -> usize {
+        match self {
+            Self::Replayed(states) => states.len().clamp(1, NUM_STEPS),
+            _ => NUM_STEPS,
+        }
+    }
+
     /// Whether B takes part.
     pub fn present(&self) -> bool {
         !matches!(self, Self::Absent)
@@ -247,6 +256,6 @@ mod crossing;
 mod cutin;
 mod merge;
 
-pub use crossing::{CrossingParams, crossing_params, simulate_crossing};
-pub use cutin::{CutinParams, cutin_params, simulate_cutin};
-pub use merge::{MergeParams, merge_params, simulate_merge};
+pub use crossing::{CrossingParams, crossing_params, crossing_paths, simulate_crossing};
+pub use cutin::{CutinParams, cutin_params, cutin_paths, simulate_cutin};
+pub use merge::{MergeParams, merge_params, merge_paths, simulate_merge};
