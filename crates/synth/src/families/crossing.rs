@@ -258,31 +258,31 @@ pub fn simulate_crossing(
     let (a_end, b_end) = (a_path.length_m(), b_path.length_m());
     let mut map = Map {
         lanes: vec![
-            lane(1, lane_pts(&a_path, 0.0, a_end, 0.0)),
-            lane(2, rev(lane_pts(&a_path, 0.0, a_end, w))),
-            lane(3, lane_pts(&b_path, 0.0, b_end, 0.0)),
-            lane(4, rev(lane_pts(&b_path, 0.0, b_end, w))),
+            lane(1, lane_pts(a_path, 0.0, a_end, 0.0)),
+            lane(2, rev(lane_pts(a_path, 0.0, a_end, w))),
+            lane(3, lane_pts(b_path, 0.0, b_end, 0.0)),
+            lane(4, rev(lane_pts(b_path, 0.0, b_end, w))),
         ],
         road_lines: vec![
             RoadLine {
                 id: 10,
                 line_type: RoadLineType::SolidDoubleYellow,
-                polyline: lane_pts(&a_path, 0.0, p.a_conflict_s - half_zone, w / 2.0),
+                polyline: lane_pts(a_path, 0.0, p.a_conflict_s - half_zone, w / 2.0),
             },
             RoadLine {
                 id: 11,
                 line_type: RoadLineType::SolidDoubleYellow,
-                polyline: lane_pts(&a_path, p.a_conflict_s + half_zone, a_end, w / 2.0),
+                polyline: lane_pts(a_path, p.a_conflict_s + half_zone, a_end, w / 2.0),
             },
             RoadLine {
                 id: 12,
                 line_type: RoadLineType::SolidDoubleYellow,
-                polyline: lane_pts(&b_path, 0.0, p.b_conflict_s - half_zone, w / 2.0),
+                polyline: lane_pts(b_path, 0.0, p.b_conflict_s - half_zone, w / 2.0),
             },
             RoadLine {
                 id: 13,
                 line_type: RoadLineType::SolidDoubleYellow,
-                polyline: lane_pts(&b_path, p.b_conflict_s + half_zone, b_end, w / 2.0),
+                polyline: lane_pts(b_path, p.b_conflict_s + half_zone, b_end, w / 2.0),
             },
         ],
         stop_signs: vec![StopSign {
@@ -294,8 +294,8 @@ pub fn simulate_crossing(
     };
     let mut edge_id = 20;
     for (path, conflict, end) in [
-        (&a_path, p.a_conflict_s, a_end),
-        (&b_path, p.b_conflict_s, b_end),
+        (a_path, p.a_conflict_s, a_end),
+        (b_path, p.b_conflict_s, b_end),
     ] {
         for d in [-w / 2.0 - 0.3, 1.5 * w + 0.3] {
             for (s0, s1) in [
@@ -322,11 +322,11 @@ pub fn simulate_crossing(
     };
     map.crosswalks.push(Crosswalk {
         id: 50,
-        polygon: cw(&b_path, stop_s + 0.5),
+        polygon: cw(b_path, stop_s + 0.5),
     });
     map.crosswalks.push(Crosswalk {
         id: 51,
-        polygon: cw(&a_path, p.a_conflict_s + half_zone + 0.5),
+        polygon: cw(a_path, p.a_conflict_s + half_zone + 0.5),
     });
     Run { paths, agents, map }
 }
