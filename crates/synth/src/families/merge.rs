@@ -308,7 +308,7 @@ pub fn simulate_merge(p: &MergeParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
             RoadEdge {
                 id: 22,
                 edge_type: RoadEdgeType::Boundary,
-                polyline: pts(gore_island(&path, p, ramp_start)),
+                polyline: pts(gore_island(path, p, ramp_start)),
             },
         ],
         ..Default::default()
