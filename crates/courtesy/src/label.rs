@@ -19,7 +19,7 @@ pub fn marginal_mixtures(
     device: &Device,
 ) -> Vec<Mixture> {
     model
-        .forward(&Batch::for_mode(samples, Mode::Marginal, device))
+        .forward_marginal(&Batch::for_mode(samples, Mode::Marginal, device))
         .into_mixtures()
 }
 

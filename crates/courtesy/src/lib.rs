@@ -49,8 +49,12 @@ pub fn expected_reward(
     reward: Reward,
     step_secs: f32,
 ) -> Tensor<1> {
-    let b = batch.clone().with_condition(condition);
-    mixture_reward(model.forward(&b), reward, step_secs)
+    let out = match condition {
+        // The marginal prediction needs no condition (nor its encoder).
+        None => model.forward_marginal(batch),
+        Some(c) => model.forward(&batch.clone().with_condition(Some(c))),
+    };
+    mixture_reward(out, reward, step_secs)
 }
 
 /// Σ_k π_k r(μ_k) of each row's predicted mixture.

@@ -178,7 +178,7 @@ pub fn marginal_embedding(
 ) -> Vec<f32> {
     let batch = scbg_model::Batch::for_mode(&[sample], scbg_model::Mode::Marginal, device);
     predictor
-        .encode(&batch)
+        .encode_marginal(predictor.encode_scene(&batch))
         .into_data()
         .try_to_vec::<f32>()
         .expect("f32 tensor")

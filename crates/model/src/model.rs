@@ -188,6 +188,41 @@ impl Multipath {
         )
     }
 
+    /// [`Self::encode`] of rows whose condition is off (a [`crate::Mode::Marginal`] batch) from
+    /// their scene encoding ([`Self::encode_scene`]). The fused condition is the future
+    /// encoder's output times the zero flag, so the encoder is skipped and zeros take its
+    /// place: the same embedding, one future-encoder pass fewer (what a closed-loop plan
+    /// pays for each agent it encodes).
+    ///
+    /// # Shapes
+    /// `SceneEncoding` of `[batch, ·]` `-> [batch, embedding_width]`
+    pub fn encode_marginal(&self, scene: SceneEncoding) -> Tensor<2> {
+        let SceneEncoding { scene, .. } = scene;
+        let [b, w] = scene.dims();
+        let fuse_in = self.fuse.weight.dims()[0];
+        let off = Tensor::zeros([b, fuse_in - w], &scene.device());
+        scene.clone() + self.fuse.forward(Tensor::cat(vec![scene, off], 1))
+    }
+
+    /// [`Self::forward`] of a batch made with [`Batch::for_mode`]`(.., mode, ..)`: the
+    /// marginal shortcut ([`Self::forward_marginal`]) for [`crate::Mode::Marginal`].
+    pub fn forward_mode(&self, batch: &Batch, mode: crate::Mode) -> GmmOutput {
+        match mode {
+            crate::Mode::Marginal => self.forward_marginal(batch),
+            crate::Mode::Conditional => self.forward(batch),
+        }
+    }
+
+    /// [`Self::forward`] of a marginal batch ([`crate::Mode::Marginal`]: every condition off)
+    /// without the conditioning future's encoder and step-wise corrections, whose outputs the
+    /// zero flag discards ([`Self::encode_marginal`]): the same prediction for less work.
+    ///
+    /// # Shapes
+    /// batch tensors `-> GmmOutput` as [`Self::forward`]
+    pub fn forward_marginal(&self, batch: &Batch) -> GmmOutput {
+        self.decode(self.encode_marginal(self.encode_scene(batch)))
+    }
+
     /// The scene part of the encoder (the target's and the other agents' histories, their
     /// interaction and the road), without the conditioning future: what rows that differ only
     /// in their conditioning share ([`Self::forward_shared`]).
@@ -349,9 +384,31 @@ impl Multipath {
     ) -> GmmOutput {
         let [n, _, _] = condition.dims();
         debug_assert_eq!(rows.dims()[0], n, "one row index per conditioning future");
+        self.forward_encoded(
+            self.encode_scene(base),
+            base.lane_path.as_ref(),
+            rows,
+            condition,
+        )
+    }
+
+    /// [`Self::forward_shared`] from the base rows' scene encoding ([`Self::encode_scene`])
+    /// and lane paths, for a caller that encodes them with other rows.
+    ///
+    /// # Shapes
+    /// `scene`: `SceneEncoding` of `[u, ·]`, `lane_path: Option<([u, points, 4], [u, points])>`,
+    /// `rows: [n]` (each < u), `condition: [n, T, 3]` `-> GmmOutput` of `[n, ·]`
+    pub fn forward_encoded(
+        &self,
+        scene: SceneEncoding,
+        lane_path: Option<&(Tensor<3>, Tensor<2>)>,
+        rows: Tensor<1, burn::tensor::Int>,
+        condition: Tensor<3>,
+    ) -> GmmOutput {
+        let [n, _, _] = condition.dims();
         let device = condition.device();
-        let scene = self.encode_scene(base).select(rows.clone());
-        let lane_path = base.lane_path.as_ref().map(|(p, m)| {
+        let scene = scene.select(rows.clone());
+        let lane_path = lane_path.map(|(p, m)| {
             (
                 p.clone().select(0, rows.clone()),
                 m.clone().select(0, rows.clone()),
@@ -512,6 +569,52 @@ mod tests {
             } else {
                 assert!(early > 1e-7, "the fused model anticipates: {early}");
             }
+        }
+    }
+
+    /// The marginal embedding from the scene encoding, without the future encoder, is the
+    /// embedding `encode` gives a marginal batch (the zero flag discards that encoder's output),
+    /// and `forward_marginal` is `forward` of that batch, to the bit.
+    #[test]
+    fn marginal_shortcuts_equal_encode_and_forward_of_a_marginal_batch() {
+        let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+        let features = small_features();
+        let device = Device::flex();
+        let first = straight_sample(&features, true);
+        let mut second = first.clone();
+        for v in second.target_history.iter_mut().step_by(3) {
+            *v += 0.7;
+        }
+        for (stepwise, lane_frame) in [(false, false), (true, true)] {
+            device.seed(12);
+            let mut model = MultipathConfig {
+                stepwise_condition: stepwise,
+                lane_frame_condition: lane_frame,
+                ..MultipathConfig::cpu_small()
+            }
+            .init(&device);
+            if stepwise {
+                with_random_corrections(&mut model, &device);
+            }
+            let batch = Batch::for_mode(&[&first, &second], crate::Mode::Marginal, &device);
+            let expected: Vec<f32> = model.encode(&batch).into_data().to_vec().unwrap();
+            let got: Vec<f32> = model
+                .encode_marginal(model.encode_scene(&batch))
+                .into_data()
+                .to_vec()
+                .unwrap();
+            assert_eq!(got, expected, "stepwise {stepwise}");
+            let (full, fast) = (model.forward(&batch), model.forward_marginal(&batch));
+            let v = |t: Tensor<4>| -> Vec<f32> { t.into_data().to_vec().unwrap() };
+            assert_eq!(v(fast.xy), v(full.xy), "stepwise {stepwise}");
+            assert_eq!(v(fast.cov_abc), v(full.cov_abc));
+            let logits = |t: Tensor<2>| -> Vec<f32> { t.into_data().to_vec().unwrap() };
+            assert_eq!(logits(fast.logits), logits(full.logits));
+            // A conditional batch's embedding is another one: the test can tell them apart.
+            let conditional =
+                Batch::for_mode(&[&first, &second], crate::Mode::Conditional, &device);
+            let other: Vec<f32> = model.encode(&conditional).into_data().to_vec().unwrap();
+            assert_ne!(got, other);
         }
     }
 

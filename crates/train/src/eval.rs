@@ -32,7 +32,7 @@ pub fn predict(
         let batch = Batch::for_mode(chunk, mode, device);
         out.extend(
             model
-                .forward(&batch)
+                .forward_mode(&batch, mode)
                 .into_mixtures()
                 .into_iter()
                 .map(|m| Modes {
@@ -156,7 +156,7 @@ pub fn mean_nll(
     for chunk in samples.chunks(batch_size.max(1)) {
         let batch = Batch::for_mode(chunk, mode, device);
         let loss: f32 = scbg_model::gmm_nll(
-            &model.forward(&batch),
+            &model.forward_mode(&batch, mode),
             batch.future_xy.clone(),
             batch.future_valid.clone(),
         )
