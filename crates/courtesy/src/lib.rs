@@ -84,14 +84,39 @@ pub fn expected_reward_shared(
     reward: Reward,
     step_secs: f32,
 ) -> Tensor<1> {
-    let device = condition.device();
-    let index: Vec<i64> = rows.iter().map(|&r| r as i64).collect();
+    expected_reward_encoded(
+        model,
+        model.encode_scene(base),
+        base.lane_path.as_ref(),
+        rows,
+        condition,
+        reward,
+        step_secs,
+    )
+}
+
+/// [`expected_reward_shared`] from the base rows' scene encoding
+/// ([`Multipath::encode_scene`]) and lane paths, for a caller that encodes them together with
+/// other rows ([`Multipath::forward_encoded`]).
+///
+/// # Shapes
+/// `scene` of `[u, ·]`, `lane_path: Option<([u, points, 4], [u, points])>`, `rows: [n]`
+/// (each < u), `condition: [n, T, 3]` `-> [n]`
+pub fn expected_reward_encoded(
+    model: &Multipath,
+    scene: scbg_model::SceneEncoding,
+    lane_path: Option<&(Tensor<3>, Tensor<2>)>,
+    rows: &[usize],
+    condition: Tensor<3>,
+    reward: Reward,
+    step_secs: f32,
+) -> Tensor<1> {
     let index = Tensor::<1, burn::tensor::Int>::from_data(
-        burn::tensor::TensorData::new(index, [rows.len()]),
-        &device,
+        burn::tensor::TensorData::new(rows.iter().map(|&r| r as i64).collect(), [rows.len()]),
+        &condition.device(),
     );
     mixture_reward(
-        model.forward_shared(base, index, condition),
+        model.forward_encoded(scene, lane_path, index, condition),
         reward,
         step_secs,
     )

@@ -56,6 +56,16 @@ impl Example {
         predictor: &Multipath,
         device: &Device,
     ) -> Self {
+        let b_embedding = marginal_embedding(predictor, &role.b, device);
+        Self::from_role_embedded(scenario_id, role, b_embedding)
+    }
+
+    /// [`Self::from_role`] with B's marginal embedding already computed.
+    pub(crate) fn from_role_embedded(
+        scenario_id: String,
+        role: LabelledRole,
+        b_embedding: Vec<f32>,
+    ) -> Self {
         let LabelledRole {
             a,
             b,
@@ -72,7 +82,7 @@ impl Example {
             scenario_id,
             logged_valid: a.condition_future_valid.clone(),
             a_from_b: a_from_b(&a, &b),
-            b_embedding: marginal_embedding(predictor, &b, device),
+            b_embedding,
             a_context: a_context_of(&a, &b).to_vec(),
             mode_psi: Vec::new(),
             futures_b,
@@ -219,10 +229,24 @@ pub fn mode_courtesy(
     reward: scbg_courtesy::Reward,
     device: &Device,
 ) -> burn::tensor::Tensor<2> {
+    mode_courtesy_with(predictor, examples, modes, reward, None, device)
+}
+
+/// [`mode_courtesy`] with the examples' A scenes already encoded when `a_encoded` is given.
+pub(crate) fn mode_courtesy_with(
+    predictor: &Multipath,
+    examples: &[&Example],
+    modes: &crate::BModes,
+    reward: scbg_courtesy::Reward,
+    a_encoded: Option<crate::train::EncodedA>,
+    device: &Device,
+) -> burn::tensor::Tensor<2> {
     let [n, k, t, _] = modes.xy.dims();
     // Row j·n + i is example i's mode j (the layout J_φ's shared-encoder forward takes).
     let rows = modes.xy.clone().swap_dims(0, 1).reshape([k * n, t, 2]);
-    let (_, e_cond) = crate::train::audience_courtesy(predictor, rows, examples, k, reward, device);
+    let (_, e_cond) = crate::train::audience_courtesy_with(
+        predictor, rows, examples, k, reward, a_encoded, device,
+    );
     let e_cond = e_cond.reshape([k, n]).swap_dims(0, 1);
     let mean = (e_cond.clone() * modes.log_prob.clone().exp()).sum_dim(1);
     (e_cond - mean).detach()

@@ -418,16 +418,33 @@ impl Scbg {
         }
         // B's embedding (and A's context when the generator is told who A is), B's pose,
         // and, for a generator scoring its modes' courtesy, the pair's example that J_φ needs.
+        let mut a_encoded = None;
         let (embedding, pose, example) = if self.generator.scores_mode_courtesy() {
             // A's and B's samples and B's audience, no label: the modes' courtesy is measured
             // against their own mean, so no E[r(Y_A) | x] from B's samples is needed.
             let role = self.labelled_role(scene, window, a_id, b_id, false, device)?;
+            // B's and A's scenes in one encoder pass (the framework's cost per operation,
+            // most of a plan's, paid once for both): B's marginal embedding, then A's scene
+            // for J_φ of B's modes below.
+            let batch = scbg_model::Batch::for_mode(
+                &[&role.b, &role.a],
+                scbg_model::Mode::Marginal,
+                device,
+            );
+            let encoded = self.predictor.encode_scene(&batch);
+            let b_embedding =
+                crate::eval::to_vec(self.predictor.encode_marginal(encoded.clone().narrow(0, 1)));
+            let a_lane_path = batch
+                .lane_path
+                .as_ref()
+                .map(|(p, m)| (p.clone().narrow(0, 1, 1), m.clone().narrow(0, 1, 1)));
             let mut example =
-                Example::from_role(scene.scenario_id.clone(), role, &self.predictor, device);
+                Example::from_role_embedded(scene.scenario_id.clone(), role, b_embedding);
             if self.generator.a_context_width == 0 {
                 example.a_context.clear();
             }
             let embedding = crate::stored_embeddings(&[&example], device);
+            a_encoded = Some((encoded.narrow(1, 1), a_lane_path));
             (embedding, example.b.world_from_agent, Some(example))
         } else {
             let mut b = SampleBuilder::new(scene, &self.features)
@@ -455,13 +472,18 @@ impl Scbg {
             (embedding, b.world_from_agent, None)
         };
         let modes = match &example {
-            Some(example) => crate::b_modes_for(
-                &self.generator,
-                &self.predictor,
-                &[example],
-                self.labels.reward,
-                device,
-            ),
+            Some(example) => {
+                let mut modes = crate::data::b_modes(&self.predictor, &[example], device);
+                modes.psi = Some(crate::data::mode_courtesy_with(
+                    &self.predictor,
+                    &[example],
+                    &modes,
+                    self.labels.reward,
+                    a_encoded.take(),
+                    device,
+                ));
+                Some(modes)
+            }
             None => self.generator.selects_modes().then(|| {
                 let b_width = embedding.dims()[1] - self.generator.a_context_width;
                 crate::b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width))

@@ -340,6 +340,25 @@ pub(crate) fn audience_courtesy(
     reward: Reward,
     device: &Device,
 ) -> (Tensor<1>, Tensor<1>) {
+    audience_courtesy_with(predictor, pred, examples, times, reward, None, device)
+}
+
+/// A's scenes already encoded ([`Multipath::encode_scene`], one row per example, in order) with
+/// their lane paths: what a caller that encodes them together with B's passes to
+/// [`audience_courtesy_with`].
+pub(crate) type EncodedA = (scbg_model::SceneEncoding, Option<(Tensor<3>, Tensor<2>)>);
+
+/// [`audience_courtesy`], with A's scenes already encoded when `a_encoded` is given (used for
+/// the pair; an audience of several members encodes each member's scene here).
+pub(crate) fn audience_courtesy_with(
+    predictor: &Multipath,
+    pred: Tensor<3>,
+    examples: &[&Example],
+    times: usize,
+    reward: Reward,
+    a_encoded: Option<EncodedA>,
+    device: &Device,
+) -> (Tensor<1>, Tensor<1>) {
     let [rows, t, _] = pred.dims();
     let pair_only = examples
         .iter()
@@ -357,14 +376,26 @@ pub(crate) fn audience_courtesy(
         let in_a = b_to_a_frame(pred, examples, times, device);
         // A's scene is encoded once for its `times` futures of B (row k·n + i is example i).
         let example_of_row: Vec<usize> = (0..times).flat_map(|_| 0..examples.len()).collect();
-        let e_cond = expected_reward_shared(
-            predictor,
-            &a_batch(examples, device),
-            &example_of_row,
-            Tensor::cat(vec![in_a, Tensor::ones([rows, t, 1], device)], 2),
-            reward,
-            STEP_SECS,
-        );
+        let condition = Tensor::cat(vec![in_a, Tensor::ones([rows, t, 1], device)], 2);
+        let e_cond = match a_encoded {
+            Some((scene, lane_path)) => scbg_courtesy::expected_reward_encoded(
+                predictor,
+                scene,
+                lane_path.as_ref(),
+                &example_of_row,
+                condition,
+                reward,
+                STEP_SECS,
+            ),
+            None => expected_reward_shared(
+                predictor,
+                &a_batch(examples, device),
+                &example_of_row,
+                condition,
+                reward,
+                STEP_SECS,
+            ),
+        };
         return (e_cond.clone() - e_marg, e_cond);
     }
     // One row per (generated row, audience member).

@@ -25,7 +25,7 @@ pub mod output;
 pub use batch::{Batch, BatchAugment, Mode};
 pub use config::{MultipathConfig, Preset};
 pub use loss::gmm_nll;
-pub use model::{CONDITION_STRIDE, Multipath};
+pub use model::{CONDITION_STRIDE, Multipath, SceneEncoding};
 pub use output::{GmmOutput, Mixture};
 
 /// Draws every lazily initialised parameter of `module` now (burn initialises parameters at

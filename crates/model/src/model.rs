@@ -441,6 +441,17 @@ impl SceneEncoding {
             target: self.target.select(0, rows),
         }
     }
+
+    /// The encodings of rows `start..start + len`.
+    ///
+    /// # Shapes
+    /// `-> SceneEncoding` of `[len, ·]`
+    pub fn narrow(self, start: usize, len: usize) -> Self {
+        Self {
+            scene: self.scene.narrow(0, start, len),
+            target: self.target.narrow(0, start, len),
+        }
+    }
 }
 
 #[cfg(test)]
@@ -597,23 +608,31 @@ mod tests {
                 with_random_corrections(&mut model, &device);
             }
             let batch = Batch::for_mode(&[&first, &second], crate::Mode::Marginal, &device);
-            let expected: Vec<f32> = model.encode(&batch).into_data().to_vec().unwrap();
+            let expected: Vec<f32> = model
+                .encode(&batch)
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap();
             let got: Vec<f32> = model
                 .encode_marginal(model.encode_scene(&batch))
                 .into_data()
-                .to_vec()
+                .try_to_vec::<f32>()
                 .unwrap();
             assert_eq!(got, expected, "stepwise {stepwise}");
             let (full, fast) = (model.forward(&batch), model.forward_marginal(&batch));
-            let v = |t: Tensor<4>| -> Vec<f32> { t.into_data().to_vec().unwrap() };
+            let v = |t: Tensor<4>| -> Vec<f32> { t.into_data().try_to_vec::<f32>().unwrap() };
             assert_eq!(v(fast.xy), v(full.xy), "stepwise {stepwise}");
             assert_eq!(v(fast.cov_abc), v(full.cov_abc));
-            let logits = |t: Tensor<2>| -> Vec<f32> { t.into_data().to_vec().unwrap() };
+            let logits = |t: Tensor<2>| -> Vec<f32> { t.into_data().try_to_vec::<f32>().unwrap() };
             assert_eq!(logits(fast.logits), logits(full.logits));
             // A conditional batch's embedding is another one: the test can tell them apart.
             let conditional =
                 Batch::for_mode(&[&first, &second], crate::Mode::Conditional, &device);
-            let other: Vec<f32> = model.encode(&conditional).into_data().to_vec().unwrap();
+            let other: Vec<f32> = model
+                .encode(&conditional)
+                .into_data()
+                .try_to_vec::<f32>()
+                .unwrap();
             assert_ne!(got, other);
         }
     }
