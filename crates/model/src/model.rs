@@ -473,6 +473,22 @@ mod tests {
         block.out.layers[1] = LinearConfig::new(h, 5 * CONDITION_STRIDE).init(device);
     }
 
+    /// A cpu-small model with the given conditioning, seeded with `seed`, its step-wise
+    /// corrections (when it has them) as after some training.
+    fn seeded_model(stepwise: bool, lane_frame: bool, seed: u64, device: &Device) -> Multipath {
+        device.seed(seed);
+        let mut model = MultipathConfig {
+            stepwise_condition: stepwise,
+            lane_frame_condition: lane_frame,
+            ..MultipathConfig::cpu_small()
+        }
+        .init(device);
+        if stepwise {
+            with_random_corrections(&mut model, device);
+        }
+        model
+    }
+
     #[test]
     fn shapes_param_counts_and_a_learning_step() {
         let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
@@ -597,16 +613,7 @@ mod tests {
             *v += 0.7;
         }
         for (stepwise, lane_frame) in [(false, false), (true, true)] {
-            device.seed(12);
-            let mut model = MultipathConfig {
-                stepwise_condition: stepwise,
-                lane_frame_condition: lane_frame,
-                ..MultipathConfig::cpu_small()
-            }
-            .init(&device);
-            if stepwise {
-                with_random_corrections(&mut model, &device);
-            }
+            let model = seeded_model(stepwise, lane_frame, 12, &device);
             let batch = Batch::for_mode(&[&first, &second], crate::Mode::Marginal, &device);
             let expected: Vec<f32> = model
                 .encode(&batch)
@@ -676,16 +683,7 @@ mod tests {
             &device,
         );
         for (stepwise, lane_frame) in [(false, false), (false, true), (true, false), (true, true)] {
-            device.seed(11);
-            let mut model = MultipathConfig {
-                stepwise_condition: stepwise,
-                lane_frame_condition: lane_frame,
-                ..MultipathConfig::cpu_small()
-            }
-            .init(&device);
-            if stepwise {
-                with_random_corrections(&mut model, &device);
-            }
+            let model = seeded_model(stepwise, lane_frame, 11, &device);
             let expected = model.forward(&full);
             let shared = model.forward_shared(&base, index.clone(), full.condition.clone());
             let diff = |a: Tensor<4>, b: Tensor<4>| -> f32 { (a - b).abs().max().into_scalar() };
