@@ -233,7 +233,7 @@ pub fn mode_courtesy(
 }
 
 /// [`mode_courtesy`] with the examples' A scenes already encoded when `a_encoded` is given.
-pub(crate) fn mode_courtesy_with(
+fn mode_courtesy_with(
     predictor: &Multipath,
     examples: &[&Example],
     modes: &crate::BModes,
@@ -262,6 +262,19 @@ pub fn b_modes_for(
     reward: scbg_courtesy::Reward,
     device: &Device,
 ) -> Option<crate::BModes> {
+    b_modes_with(generator, predictor, examples, reward, None, device)
+}
+
+/// [`b_modes_for`], with the examples' A scenes already encoded when `a_encoded` is given (a
+/// plan that encoded them together with B's).
+pub(crate) fn b_modes_with(
+    generator: &crate::Generator,
+    predictor: &Multipath,
+    examples: &[&Example],
+    reward: scbg_courtesy::Reward,
+    a_encoded: Option<crate::train::EncodedA>,
+    device: &Device,
+) -> Option<crate::BModes> {
     if !generator.selects_modes() {
         return None;
     }
@@ -281,7 +294,7 @@ pub fn b_modes_for(
                 device,
             )
         } else {
-            mode_courtesy(predictor, examples, &modes, reward, device)
+            mode_courtesy_with(predictor, examples, &modes, reward, a_encoded, device)
         });
     }
     Some(modes)

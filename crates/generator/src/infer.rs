@@ -418,8 +418,7 @@ impl Scbg {
         }
         // B's embedding (and A's context when the generator is told who A is), B's pose,
         // and, for a generator scoring its modes' courtesy, the pair's example that J_φ needs.
-        let mut a_encoded = None;
-        let (embedding, pose, example) = if self.generator.scores_mode_courtesy() {
+        let (embedding, pose, example, a_encoded) = if self.generator.scores_mode_courtesy() {
             // A's and B's samples and B's audience, no label: the modes' courtesy is measured
             // against their own mean, so no E[r(Y_A) | x] from B's samples is needed.
             let role = self.labelled_role(scene, window, a_id, b_id, false, device)?;
@@ -444,8 +443,13 @@ impl Scbg {
                 example.a_context.clear();
             }
             let embedding = crate::stored_embeddings(&[&example], device);
-            a_encoded = Some((encoded.narrow(1, 1), a_lane_path));
-            (embedding, example.b.world_from_agent, Some(example))
+            let a_encoded = (encoded.narrow(1, 1), a_lane_path);
+            (
+                embedding,
+                example.b.world_from_agent,
+                Some(example),
+                Some(a_encoded),
+            )
         } else {
             let mut b = SampleBuilder::new(scene, &self.features)
                 .sample(window, ib, None)
@@ -469,21 +473,17 @@ impl Scbg {
                 burn::tensor::TensorData::new(embedding, [1, e]),
                 device,
             );
-            (embedding, b.world_from_agent, None)
+            (embedding, b.world_from_agent, None, None)
         };
         let modes = match &example {
-            Some(example) => {
-                let mut modes = crate::data::b_modes(&self.predictor, &[example], device);
-                modes.psi = Some(crate::data::mode_courtesy_with(
-                    &self.predictor,
-                    &[example],
-                    &modes,
-                    self.labels.reward,
-                    a_encoded.take(),
-                    device,
-                ));
-                Some(modes)
-            }
+            Some(example) => crate::data::b_modes_with(
+                &self.generator,
+                &self.predictor,
+                &[example],
+                self.labels.reward,
+                a_encoded,
+                device,
+            ),
             None => self.generator.selects_modes().then(|| {
                 let b_width = embedding.dims()[1] - self.generator.a_context_width;
                 crate::b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width))

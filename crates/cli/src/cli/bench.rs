@@ -1,0 +1,109 @@
+//! Arguments of `bench`.
+
+use clap::{Args, Subcommand};
+use scbg::choices::{Policy, Preset};
+use std::path::PathBuf;
+
+#[derive(Debug, Subcommand)]
+pub enum BenchCommand {
+    /// Decode and feature-extraction throughput on real files; cache size ratio.
+    Ingest(BenchIngestArgs),
+    /// Synthetic generator throughput.
+    Synth(BenchSynthArgs),
+    /// Predictor training step time and inference throughput.
+    Train(BenchTrainArgs),
+    /// WOSAC realism metric time for one scenario × 32 rollouts (1 thread).
+    Wosac(BenchWosacArgs),
+    /// Closed-loop rollout time with one generator agent, and WOSAC of 32 rollouts (1 thread).
+    Sim(BenchSimArgs),
+    /// Loopback load test of `POST /v1/generate` (latency percentiles, errors, peak RSS).
+    Serve(BenchServeArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchServeArgs {
+    /// Generator folder (e.g. out/demo/generator_full).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Requests per second.
+    #[arg(long, default_value_t = 200.0)]
+    pub rate: f64,
+    /// Seconds of load.
+    #[arg(long, default_value_t = 60.0)]
+    pub seconds: f64,
+    /// Inference workers of the server (default: the number of cores).
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchSimArgs {
+    /// Generator folder (e.g. a demo's `generator_full_s0`).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
+    /// How a courtesy becomes B's future.
+    #[arg(long, value_enum, default_value_t = Policy::Generator)]
+    pub policy: Policy,
+    /// Synthetic scenes to time.
+    #[arg(long, default_value_t = 12)]
+    pub scenes: usize,
+    /// Steps between plans (default: the policy's own cadence, 20; the speed bar is
+    /// set at 10).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=80))]
+    pub replan_every: Option<u64>,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchWosacArgs {
+    /// A WOMD Scenario TFRecord (default: the shared genuine one-scenario file).
+    #[arg(long)]
+    pub file: Option<PathBuf>,
+    /// Timed repetitions per baseline.
+    #[arg(long, default_value_t = 10)]
+    pub repeats: usize,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchTrainArgs {
+    /// Model presets to measure.
+    #[arg(
+        long,
+        value_enum,
+        value_delimiter = ',',
+        default_value = "cpu-small,paper"
+    )]
+    pub presets: Vec<Preset>,
+    /// Backend to measure (`flex`; `tch`, `cuda`, `vulkan` when built with them).
+    #[arg(long, default_value = "flex")]
+    pub backend: String,
+    #[arg(long, default_value_t = 32)]
+    pub batch: usize,
+    /// Timed training steps per preset (after one warm-up step).
+    #[arg(long, default_value_t = 5)]
+    pub steps: usize,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchIngestArgs {
+    /// Input files (default: every file under the shared real-data folder).
+    #[arg(long, num_args = 1..)]
+    pub input: Vec<String>,
+    /// Repeat the file list this many times, to time more than a blink.
+    #[arg(long, default_value_t = 20)]
+    pub repeat: usize,
+    /// Time only these stages (repeatable; default: all), e.g. to profile one of them.
+    #[arg(long, value_enum)]
+    pub stage: Vec<scbg::bench::IngestStage>,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchSynthArgs {
+    #[arg(long, default_value_t = 4000)]
+    pub scenarios: usize,
+}

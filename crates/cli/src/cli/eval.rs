@@ -1,0 +1,133 @@
+//! Arguments of `eval`.
+
+use clap::{Args, Subcommand};
+use scbg::choices::Policy;
+use scbg::predictor::{ModeSelection, SplitSelection};
+use std::path::PathBuf;
+
+use super::run::LoopArgs;
+
+#[derive(Debug, Subcommand)]
+pub enum EvalCommand {
+    /// Evaluate a trained predictor (and baselines) on a prepared cache: the paper's Table I.
+    Predictor(EvalPredictorArgs),
+    /// Waymo motion metrics of external predictions (JSON) against WOMD scenario files.
+    Metrics(EvalMetricsArgs),
+    /// Evaluate SCBG generator variants: CourtesyMSE, TrajADE, correlation (paper Table II,
+    /// Figs. 4 and 5).
+    Scbg(EvalScbgArgs),
+    /// The courtesy knob in closed loop: realised courtesy, A's speed, B's collisions and
+    /// off-road, WOSAC realism per quantile, beside log replay, constant velocity and IDM.
+    Sim(EvalSimArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct EvalSimArgs {
+    /// Generator folder.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
+    /// How a courtesy becomes B's future.
+    #[arg(long, value_enum, default_value_t = Policy::Generator)]
+    pub policy: Policy,
+    /// WOMD Scenario files (globs, folders or paths).
+    #[arg(long, required = true, num_args = 1..)]
+    pub data: Vec<String>,
+    /// Synthetic ground truth (ground_truth.jsonl): the synthetic rule drives A and the others.
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
+    /// Scenes on the validation split (by scenario id, as in training) or all.
+    #[arg(long, value_enum, default_value_t = SplitSelection::Validation)]
+    pub split: SplitSelection,
+    /// Scenes of the courtesy curve.
+    #[arg(long, default_value_t = 40)]
+    pub scenes: usize,
+    /// Scenes scored with WOSAC realism (32 rollouts per quantile and baseline).
+    #[arg(long, default_value_t = 8)]
+    pub wosac_scenes: usize,
+    /// Quantiles scored with WOSAC realism (32 rollouts each).
+    #[arg(long, num_args = 1.., default_values_t = [0.1f32, 0.5, 0.9])]
+    pub wosac_quantiles: Vec<f32>,
+    /// Width of the band of quantiles a quantile's 32 WOSAC rollouts spread over (1 with
+    /// quantile 0.5: the rollouts cover the whole range, the knob drawn from its prior).
+    #[arg(long, default_value_t = 0.2)]
+    pub spread: f32,
+    #[command(flatten)]
+    pub loop_args: LoopArgs,
+    /// Output folder (eval_sim.json, sim_courtesy.png, sim_realism.png).
+    #[arg(long)]
+    pub out: PathBuf,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct EvalScbgArgs {
+    /// Generator folders (`scbg train generator --out`), one per variant; they must share one
+    /// predictor.
+    #[arg(long, required = true, num_args = 1..)]
+    pub model: Vec<PathBuf>,
+    /// Prepared cache folder.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Predictor folder, overriding the one recorded in generator.json.
+    #[arg(long)]
+    pub predictor: Option<PathBuf>,
+    /// Evaluate on the validation split (by scenario id) or on every pair.
+    #[arg(long, value_enum, default_value_t = SplitSelection::Validation)]
+    pub split: SplitSelection,
+    /// Synthetic ground truth (ground_truth.jsonl): also score the generated futures with the
+    /// simulator's oracle (Spearman(quantile, ψ_true)).
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
+    /// Folder for the figures (fig4_quantile_courtesy.png, fig5a_*.png, fig5b_*.png).
+    #[arg(long)]
+    pub figures: Option<PathBuf>,
+    /// Futures of B sampled per held-out pair role (default: as many as the training labels
+    /// drew): the candidates of the `ranked` row and of the selection yardsticks. With the
+    /// conditional-average estimator E[r(Y_A) | x] is their mean, so every row's ψ moves a
+    /// little with it.
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]
+    pub samples: Option<u64>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct EvalPredictorArgs {
+    /// Checkpoint folder.
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Prepared cache folder.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Which mode to report (both by default).
+    #[arg(long, value_enum, default_value_t = ModeSelection::Both)]
+    pub mode: ModeSelection,
+    /// Evaluate on the validation split (by scenario id, as in training) or on everything.
+    #[arg(long, value_enum, default_value_t = SplitSelection::Validation)]
+    pub split: SplitSelection,
+    /// Use the current Waymo trajectory-classifier thresholds instead of the pre-2024 ones.
+    #[arg(long)]
+    pub current_thresholds: bool,
+    #[arg(long)]
+    pub json: bool,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct EvalMetricsArgs {
+    /// Scenario files (globs or paths).
+    #[arg(long, required = true, num_args = 1..)]
+    pub scenarios: Vec<String>,
+    /// Predictions JSON (schema in README).
+    #[arg(long)]
+    pub predictions: PathBuf,
+    #[arg(long)]
+    pub current_thresholds: bool,
+    #[arg(long)]
+    pub json: bool,
+}

@@ -1,0 +1,173 @@
+//! Arguments of `label` and `train` (and the estimator options `demo` shares).
+
+use clap::{Args, Subcommand};
+use scbg::choices::{MarginalEstimate, Reward, Threshold, Variant, Weighting};
+use std::path::PathBuf;
+
+/// How courtesy labels estimate E[r(Y_A) | x] and sample B's futures (shared by `label`,
+/// `train generator` and `demo`).
+#[derive(Debug, Clone, Args)]
+pub struct EstimatorArgs {
+    /// How E[r(Y_A) | x] is estimated: `conditional-average` (mean of the conditional
+    /// expectations over the sampled futures of B; removes the per-scene offset between the two
+    /// modes) or `direct` (the marginal mode, as in the paper).
+    #[arg(long, value_enum, default_value_t = MarginalEstimate::ConditionalAverage)]
+    pub marginal: MarginalEstimate,
+    /// Scale of the Gaussian part of B's sampled futures: 1 samples the predicted mixture,
+    /// 0 takes mode means drawn by their probabilities (cleaner futures from a weak predictor).
+    #[arg(long, default_value_t = 1.0)]
+    pub sample_noise: f32,
+    /// Whose reward B's courtesy counts: `pair` (A alone, the paper) or `neighbours` (A and
+    /// every vehicle within --audience-radius-m of B at the current step, at most 7 besides A).
+    #[arg(long, default_value = "pair", value_parser = ["pair", "neighbours"])]
+    pub audience: String,
+    /// Radius of the `neighbours` audience around B, metres.
+    #[arg(long, default_value_t = 30.0)]
+    pub audience_radius_m: f32,
+    /// Weights of the `neighbours` audience: `sum` (each member 1) or `proximity`
+    /// (1 / (1 + distance / radius)).
+    #[arg(long, value_enum, default_value_t = Weighting::Sum)]
+    pub audience_weighting: Weighting,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct LabelArgs {
+    /// Predictor checkpoint folder. Give it several times for an ensemble: ψ is averaged over
+    /// the predictors (B's sampled futures come from the first one's marginal, every predictor
+    /// scores the same futures).
+    #[arg(long, required = true)]
+    pub model: Vec<PathBuf>,
+    /// Prepared cache folder.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder: labels-NNNNN.parquet per cache shard, psi_histogram.png, summary.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Trajectories sampled from B's marginal prediction per pair and role (augmentation).
+    #[arg(long, default_value_t = 8)]
+    pub samples: usize,
+    /// Reward r(y_A).
+    #[arg(long, value_enum, default_value_t = Reward::AverageSpeed)]
+    pub reward: Reward,
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
+
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Synthetic ground truth (ground_truth.jsonl): the latent-courtesy check and the fidelity
+    /// report against the simulator's ψ_true (psi_fidelity.png).
+    #[arg(long)]
+    pub ground_truth: Option<PathBuf>,
+    /// Label only the cache shards with `shard % num_shards == shard_index` (several workers
+    /// sharing --out; no summary). Run again without --num-shards to merge: every table is read
+    /// back and the summary written.
+    #[arg(long, default_value_t = 0)]
+    pub shard_index: usize,
+    #[arg(long, default_value_t = 1)]
+    pub num_shards: usize,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum TrainCommand {
+    /// Train the Multipath++ predictor (marginal + conditional) on a prepared cache.
+    Predictor(TrainPredictorArgs),
+    /// Train the SCBG generator g(x, ψ) and the courtesy range predictor.
+    Generator(TrainGeneratorArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct TrainGeneratorArgs {
+    /// Trained predictor checkpoint (its encoder is frozen; it also provides J_φ).
+    #[arg(long)]
+    pub predictor: PathBuf,
+    /// Prepared cache folder (its training split by scenario id, as for the predictor).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output folder: generator.bpk, range.bpk, generator.json.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// baseline (①), aug (① + ②) or full (① + ② + ③ courtesy loss).
+    #[arg(long, value_enum, default_value_t = Variant::Full)]
+    pub variant: Variant,
+    #[arg(long, default_value_t = 10)]
+    pub epochs: usize,
+    /// Futures sampled from B's marginal prediction per pair role.
+    #[arg(long, default_value_t = 8)]
+    pub samples: usize,
+    #[command(flatten)]
+    pub estimator: EstimatorArgs,
+
+    #[arg(long, default_value_t = 32)]
+    pub batch_size: usize,
+    /// Weight α of the sampled futures' trajectory loss.
+    #[arg(long, default_value_t = 0.5)]
+    pub alpha: f32,
+    /// Weight β of the courtesy loss.
+    #[arg(long, default_value_t = 1.0)]
+    pub beta: f32,
+    /// High-courtesy threshold for 50/50 batches: a number (m/s, the paper uses 2) or `qX`
+    /// for a quantile of the logged |ψ| (default q0.8, since ψ's scale depends on the data).
+    #[arg(long, default_value = "q0.8")]
+    pub threshold: Threshold,
+    #[arg(long, default_value_t = 1e-3)]
+    pub learning_rate: f64,
+    /// Range-predictor optimisation steps (full batch).
+    #[arg(long, default_value_t = 300)]
+    pub range_steps: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Tell the generator and range predictor who A is (A's context after B's embedding).
+    #[arg(long)]
+    pub condition_on_a: bool,
+    /// Synthetic data only, an experiment: train on the simulator's ψ_true instead of the
+    /// predictor's labels (the ground-truth sidecar `ground_truth.jsonl` of `scbg synth`). Keeps
+    /// the ground truth's pair role of each scene, the one the oracle scores.
+    #[arg(long, value_name = "GROUND_TRUTH_JSONL")]
+    pub oracle_labels: Option<PathBuf>,
+    /// With --oracle-labels: replace B's sampled futures by K futures of the synthetic world's
+    /// own B, driving with courtesy (k + 0.5) / K from the current step on (everyone else
+    /// reacting), each scored by the oracle.
+    #[arg(
+        long,
+        value_name = "K",
+        default_value_t = 0,
+        requires = "oracle_labels"
+    )]
+    pub world_futures: usize,
+    #[arg(long, value_enum, default_value_t = Head::Modes)]
+    pub head: Head,
+    /// With `--head modes`: the generator also scores each of B's modes by its own courtesy
+    /// (J_φ of the mode toward A) against the requested ψ, so that it can tell which of this
+    /// scene's modes helps A, and commits to its likeliest mode outside training instead of
+    /// blending them; `--mode-courtesy false` gives the earlier blend of modes chosen from B's
+    /// embedding alone (BENCHMARKS.md, issues 11/12).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub mode_courtesy: bool,
+}
+
+/// How the generator forms B's future (`--head`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Head {
+    /// A ψ-dependent choice among the frozen predictor's marginal modes of B plus a regressed
+    /// displacement (the default since it follows the knob better in truth; BENCHMARKS.md,
+    /// *A generator that chooses among B's modes*).
+    Modes,
+    /// One regressed trajectory (generators before the option).
+    Regression,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct TrainPredictorArgs {
+    /// TOML training config (defaults are used for missing keys; no file = all defaults).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
+    /// Prepared cache folder (`scbg data prepare`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Checkpoint folder.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Continue from the checkpoint in --out.
+    #[arg(long)]
+    pub resume: bool,
+}
