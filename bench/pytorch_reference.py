@@ -4,10 +4,12 @@ scbg never needs Python at run time).
 Same structure and widths as crates/model (MultipathConfig presets), same batch shapes as
 `scbg bench train` (batch 32, 16 other agents, 64 road segments, 11 history steps, 80 future
 steps), same loss (GMM NLL with clamped covariance parameters) and optimizer (Adam, grad-norm
-clip 0.4). Prints ms per training step and inference samples/s with 2 threads.
+clip 0.4). Prints ms per training step and inference samples/s with 2 threads; on a GPU
+(`--device cuda`) each timed step ends with `torch.cuda.synchronize()`.
 
     pip install torch
     python3 bench/pytorch_reference.py --preset cpu-small --preset paper
+    python3 bench/pytorch_reference.py --preset paper --device cuda --batch 256 --steps 20
 """
 import argparse
 import time
@@ -83,7 +85,7 @@ class History(nn.Module):
         _, (h1, _) = self.l1(hist)
         _, (h2, _) = self.l2(diffs)
         x = torch.cat([hist, self.eye.expand(n, H, H)], -1)
-        _, summ = self.mcg(self.step(x), torch.ones(n, 1), hist[:, :, 6])
+        _, summ = self.mcg(self.step(x), hist.new_ones(n, 1), hist[:, :, 6])
         return torch.cat([h1[0], h2[0], summ], 1)
 
 
@@ -110,7 +112,7 @@ class Multipath(nn.Module):
     def forward(self, b):
         B, A = b["others_history"].shape[:2]
         th = self.history(b["target_history"], b["target_diffs"])
-        target, _ = self.target(th.unsqueeze(1), torch.ones(B, 1), torch.ones(B, 1))
+        target, _ = self.target(th.unsqueeze(1), th.new_ones(B, 1), th.new_ones(B, 1))
         target = target[:, 0]
         oh = self.history(b["others_history"].reshape(B * A, H, AGENT), b["others_diffs"].reshape(B * A, H - 1, DIFF))
         _, inter = self.inter(oh.reshape(B, A, -1), target, b["others_mask"])
@@ -125,7 +127,7 @@ class Multipath(nn.Module):
         flag = b["flag"]
         scene = scene + self.fuse(torch.cat([scene, cond * flag, flag], 1))
         K = self.anchors.shape[0]
-        modes, _ = self.dec(self.anchors.unsqueeze(0).expand(B, -1, -1), scene, torch.ones(B, K))
+        modes, _ = self.dec(self.anchors.unsqueeze(0).expand(B, -1, -1), scene, scene.new_ones(B, K))
         out = self.dec_mlp(torch.relu(modes))
         xy = out[..., : 2 * T].reshape(B, K, T, 2).cumsum(2)
         abc = out[..., 2 * T: 5 * T].reshape(B, K, T, 3)
@@ -142,14 +144,15 @@ def gmm_nll(xy, abc, logits, target, valid):
     return -torch.logsumexp(torch.log_softmax(logits, 1) + ll, 1).mean()
 
 
-def batch(B=32, A=16, P=64):
+def batch(B=32, A=16, P=64, device="cpu"):
     g = torch.Generator().manual_seed(0)
     r = lambda *s: torch.randn(*s, generator=g)
-    return dict(target_history=r(B, H, AGENT), target_diffs=r(B, H - 1, DIFF),
+    b = dict(target_history=r(B, H, AGENT), target_diffs=r(B, H - 1, DIFF),
                 others_history=r(B, A, H, AGENT), others_diffs=r(B, A, H - 1, DIFF),
                 others_mask=torch.ones(B, A), road=r(B, P, ROAD), road_mask=torch.ones(B, P),
                 condition=torch.cat([r(B, T, 2) * 20, torch.ones(B, T, 1)], -1), flag=torch.ones(B, 1),
                 future_xy=r(B, T, 2) * 10, future_valid=torch.ones(B, T))
+    return {k: v.to(device) for k, v in b.items()}
 
 
 def main():
@@ -157,13 +160,19 @@ def main():
     ap.add_argument("--preset", action="append")
     ap.add_argument("--steps", type=int, default=5)
     ap.add_argument("--threads", type=int, default=2)
+    ap.add_argument("--device", default="cpu", help="cpu or cuda")
+    ap.add_argument("--batch", type=int, default=32)
+    ap.add_argument("--warmup", type=int, default=1)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     torch.manual_seed(0)
-    b = batch()
-    print(f"pytorch {torch.__version__}, {args.threads} threads, batch 32, 16 other agents, 64 road segments")
+    dev = torch.device(args.device)
+    sync = torch.cuda.synchronize if dev.type == "cuda" else (lambda: None)
+    b = batch(args.batch, device=dev)
+    where = torch.cuda.get_device_name(dev) if dev.type == "cuda" else f"{args.threads} threads"
+    print(f"pytorch {torch.__version__}, {where}, batch {args.batch}, 16 other agents, 64 road segments")
     for name in args.preset or ["cpu-small", "paper"]:
-        model = Multipath(PRESETS[name])
+        model = Multipath(PRESETS[name]).to(dev)
         params = sum(p.numel() for p in model.parameters())
         opt = torch.optim.Adam(model.parameters(), lr=1e-4)
 
@@ -174,19 +183,26 @@ def main():
             torch.nn.utils.clip_grad_norm_(model.parameters(), 0.4)
             opt.step()
 
-        step()
-        t = time.perf_counter()
-        for _ in range(args.steps):
+        for _ in range(max(args.warmup, 1)):
             step()
-        ms = (time.perf_counter() - t) * 1e3 / args.steps
+        sync()
+        times = []
+        for _ in range(args.steps):
+            t = time.perf_counter()
+            step()
+            sync()
+            times.append((time.perf_counter() - t) * 1e3)
+        ms, best = sum(times) / len(times), min(times)
         with torch.no_grad():
             model(b)
+            sync()
             reps = max(args.steps, 3)
             t = time.perf_counter()
             for _ in range(reps):
                 model(b)
-            per_s = reps * 32 / (time.perf_counter() - t)
-        print(f"{name:<10} {params:>10} params   train step {ms:>9.1f} ms   inference {per_s:>8.1f} samples/s")
+            sync()
+            per_s = reps * args.batch / (time.perf_counter() - t)
+        print(f"{name:<10} {params:>10} params   train step {ms:>9.1f} ms (best {best:.1f})   inference {per_s:>8.1f} samples/s")
 
 
 if __name__ == "__main__":

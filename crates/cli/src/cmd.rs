@@ -184,7 +184,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             }
         }
         Command::Bench(BenchCommand::Train(a)) => {
-            let bench = scbg::bench::train(&a.presets, a.batch, a.steps, &a.backend)?;
+            let bench =
+                scbg::bench::train(&a.presets, a.batch, a.steps, a.warmup, a.chunks, &a.backend)?;
             print!("{}", bench.to_text());
         }
         Command::Train(TrainCommand::Predictor(a)) => {

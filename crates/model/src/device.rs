@@ -2,10 +2,11 @@
 
 use burn::tensor::Device;
 
-/// Error for an unknown or not-compiled-in backend name: `.0` is the requested name, `.1` the
-/// comma-separated list of [`available_backends`].
+/// Error for a backend that cannot be used: an unknown or not-compiled-in name, or a GPU
+/// backend whose device does not answer. `.0` is the requested name, `.1` why (for a name, the
+/// comma-separated list of [`available_backends`]).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("backend {0:?} is not available in this build (available: {1})")]
+#[error("backend {0:?} is not available: {1}")]
 pub struct UnknownBackend(pub String, pub String);
 
 /// Backends compiled into this build.
@@ -34,12 +35,38 @@ pub fn device(name: &str) -> Result<Device, UnknownBackend> {
         #[cfg(feature = "cuda")]
         "cuda" => Ok(Device::cuda(burn::tensor::DeviceIndex::Default)),
         #[cfg(feature = "vulkan")]
-        "vulkan" => Ok(Device::vulkan(Default::default())),
+        "vulkan" => {
+            let device = Device::vulkan(Default::default());
+            if answers(&device) {
+                Ok(device)
+            } else {
+                Err(UnknownBackend(
+                    "vulkan".into(),
+                    "no Vulkan adapter answered (it needs a GPU with a Vulkan driver and loader)"
+                        .into(),
+                ))
+            }
+        }
         other => Err(UnknownBackend(
             other.to_string(),
-            available_backends().join(", "),
+            format!("this build has {}", available_backends().join(", ")),
         )),
     }
+}
+
+/// Whether a GPU device runs a kernel: without an adapter wgpu panics in its own thread, which
+/// this turns into `false` (asked once per process).
+#[cfg(feature = "vulkan")]
+fn answers(device: &Device) -> bool {
+    static ANSWERS: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
+    *ANSWERS.get_or_init(|| {
+        std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            let t = burn::tensor::Tensor::<1>::from_floats([1.0, 2.0], device);
+            let sum: f32 = t.sum().into_scalar();
+            sum == 3.0
+        }))
+        .unwrap_or(false)
+    })
 }
 
 /// A CPU device on which to build a model only to count its parameters.

@@ -48,8 +48,13 @@ pub struct TrainConfig {
     /// Weight of the mode-classification cross-entropy added to the GMM NLL
     /// (`scbg_model::loss::mode_classification_loss`; 0 = NLL only).
     pub classification_weight: f32,
-    /// `flex`, `tch` or `cuda`.
+    /// `flex`, `tch`, `cuda` or `vulkan` (each when built with it).
     pub backend: String,
+    /// Data-parallel chunks per step: 1 (default) runs the batch in one graph; N > 1 splits
+    /// it into N chunks whose forward and backward passes run in parallel, each on its own
+    /// fork of the model, and sums their gradients (weighted by chunk size, so the step is the
+    /// batch mean's step up to rounding). Lets a step use many cores (BENCHMARKS.md, issue 14).
+    pub data_parallel_chunks: usize,
     /// A second prepared cache of *counterfactual siblings* (scenes whose id is a training
     /// scene's id + `~…`, sharing its history, with another future of one agent, e.g.
     /// `scbg synth --counterfactuals K` → `counterfactual/`). From each sibling of a
@@ -87,6 +92,7 @@ impl Default for TrainConfig {
             lr_schedule: "cosine".into(),
             classification_weight: 1.0,
             backend: "flex".into(),
+            data_parallel_chunks: 1,
             counterfactual_cache: None,
             lane_frame_condition: false,
             stepwise_condition: false,
@@ -120,9 +126,9 @@ impl TrainConfig {
     /// `[0, 1)`, a known `lr_schedule` and a finite, non-negative `classification_weight`.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.model_config()?;
-        if self.batch_size == 0 || self.epochs == 0 {
+        if self.batch_size == 0 || self.epochs == 0 || self.data_parallel_chunks == 0 {
             return Err(ConfigError::Invalid(
-                "batch_size and epochs must be positive".into(),
+                "batch_size, epochs and data_parallel_chunks must be positive".into(),
             ));
         }
         if !(0.0..1.0).contains(&self.validation_fraction) {

@@ -17,7 +17,7 @@ pub mod trainer;
 
 pub use checkpoint::{Checkpoint, EpochReport};
 pub use config::TrainConfig;
-pub use trainer::{NoProgress, Progress, TrainError, train};
+pub use trainer::{NoProgress, Progress, TrainError, loss_and_grads, train};
 
 #[cfg(test)]
 mod tests;

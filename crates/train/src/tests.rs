@@ -207,3 +207,66 @@ fn counterfactual_siblings_add_conditional_samples_of_the_sdc_in_the_training_sp
     assert_eq!(with.len(), without.len() + samples.len());
     assert_eq!(val_with.len(), val_without.len());
 }
+
+#[test]
+fn data_parallel_chunks_sum_to_the_whole_batch_gradient() {
+    use burn::optim::SgdConfig;
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    tiny_cache(dir.path(), 12);
+    let config = tiny_config(1);
+    let dataset = scbg_features::cache::PreparedDataset::open(dir.path()).unwrap();
+    let (train_set, _) = crate::data::load_samples(&dataset, &config).unwrap();
+    let refs: Vec<&scbg_features::AgentSample> = train_set.samples.iter().take(11).collect();
+    assert_eq!(refs.len(), 11, "a batch that 3 chunks split unevenly");
+    let device = burn::tensor::Device::flex().autodiff();
+    device.seed(5);
+    let model = config.model_config().unwrap().init(&device);
+    // No augmentation: every chunking sees the same samples.
+    let augment = scbg_model::BatchAugment {
+        condition_dropout: 0.0,
+        history_mask_prob: 0.0,
+    };
+    let step = |chunks: usize| {
+        let config = TrainConfig {
+            data_parallel_chunks: chunks,
+            ..config.clone()
+        };
+        let mut rng = <rand_pcg::Pcg64Mcg as rand::SeedableRng>::seed_from_u64(0);
+        let (value, grads) =
+            crate::trainer::loss_and_grads(&model, &refs, &augment, &mut rng, &device, &config);
+        // Plain SGD with rate 1: the new weights are the old ones minus the gradient.
+        let mut sgd = SgdConfig::new().init();
+        let stepped = sgd.step(1.0, model.clone(), grads.expect("a finite loss"));
+        let mut w = Vec::new();
+        struct Collect<'a>(&'a mut Vec<f32>);
+        impl burn::module::ModuleVisitor for Collect<'_> {
+            fn visit_float<const D: usize>(
+                &mut self,
+                p: &burn::module::Param<burn::tensor::Tensor<D>>,
+            ) {
+                self.0
+                    .extend(p.val().into_data().try_to_vec::<f32>().unwrap());
+            }
+        }
+        stepped.valid().visit(&mut Collect(&mut w));
+        (value, w)
+    };
+    let (whole, w1) = step(1);
+    assert!(whole.is_finite());
+    for chunks in [2, 3] {
+        let (value, w) = step(chunks);
+        assert!(
+            (value - whole).abs() <= 1e-4 * (1.0 + whole.abs()),
+            "{chunks} chunks: loss {value}, whole batch {whole}"
+        );
+        assert_eq!(w.len(), w1.len());
+        let worst = w
+            .iter()
+            .zip(&w1)
+            .map(|(a, b)| (a - b).abs() / (1.0 + b.abs()))
+            .fold(0.0f32, f32::max);
+        assert!(worst <= 1e-4, "{chunks} chunks: weights differ by {worst}");
+        assert!(w != w1 || chunks == 1, "the chunked path ran");
+    }
+}

@@ -5,13 +5,15 @@ use std::time::Instant;
 
 use burn::grad_clipping::GradientClippingConfig;
 use burn::module::Module;
-use burn::optim::{AdamConfig, GradientsParams, ModuleOptimizer};
+use burn::optim::{AdamConfig, GradientsAccumulator, GradientsParams, ModuleOptimizer};
+use burn::tensor::{Device, Tensor};
 use rand::SeedableRng;
 use rand::seq::SliceRandom;
+use rayon::prelude::*;
 use scbg_features::AgentSample;
 use scbg_features::cache::{CacheError, PreparedDataset};
 use scbg_model::loss::mode_classification_loss;
-use scbg_model::{Batch, BatchAugment, gmm_nll};
+use scbg_model::{Batch, BatchAugment, Multipath, gmm_nll};
 
 use crate::checkpoint::{Checkpoint, CheckpointError, EpochReport, TrainState};
 use crate::config::{ConfigError, TrainConfig};
@@ -138,28 +140,16 @@ pub fn train(
         for chunk in order.chunks(config.batch_size) {
             let refs: Vec<&AgentSample> = chunk.iter().map(|&i| &train_set.samples[i]).collect();
             let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(mix(config.seed ^ 0x5CB6, state.step));
-            let batch = Batch::from_samples(&refs, &augment, &mut rng, &device);
-            let out = model.forward(&batch);
-            let mut loss = gmm_nll(&out, batch.future_xy.clone(), batch.future_valid.clone());
-            if config.classification_weight != 0.0 {
-                loss = loss
-                    + mode_classification_loss(
-                        &out,
-                        batch.future_xy.clone(),
-                        batch.future_valid.clone(),
-                    ) * config.classification_weight;
-            }
-            let value: f32 = loss.clone().into_scalar();
+            let (value, grads) = loss_and_grads(&model, &refs, &augment, &mut rng, &device, config);
             state.step += 1;
-            if !value.is_finite() {
+            let Some(grads) = grads else {
                 tracing::warn!(
                     "epoch {epoch} step {}: non-finite loss {value}; batch skipped",
                     state.step
                 );
                 skipped += 1;
                 continue;
-            }
-            let grads = GradientsParams::from_grads(loss.backward(), &model);
+            };
             let lr = state.learning_rate * schedule_factor(config, state.step - 1, batches);
             model = optim.step(lr, model, grads);
             loss_sum += f64::from(value);
@@ -254,6 +244,88 @@ pub fn train(
         Some(c) => Ok(c),
         None => Ok(Checkpoint::read(out_dir)?),
     }
+}
+
+/// The training loss of one batch (GMM NLL plus the weighted mode classification) on `model`.
+fn batch_loss(model: &Multipath, batch: &Batch, config: &TrainConfig) -> Tensor<1> {
+    let out = model.forward(batch);
+    let mut loss = gmm_nll(&out, batch.future_xy.clone(), batch.future_valid.clone());
+    if config.classification_weight != 0.0 {
+        loss = loss
+            + mode_classification_loss(&out, batch.future_xy.clone(), batch.future_valid.clone())
+                * config.classification_weight;
+    }
+    loss
+}
+
+/// One step's loss value and gradients (`None` when the loss is not finite: the batch is
+/// skipped), as [`train`] takes them. With [`TrainConfig::data_parallel_chunks`] > 1 the batch
+/// is split into chunks whose forward and backward passes run in parallel rayon tasks, each on
+/// a fork of `model` (its own autodiff graph), their losses weighted by chunk size; the chunks'
+/// gradients are summed pairwise in a fixed tree (in parallel, and the same sum on every run).
+pub fn loss_and_grads(
+    model: &Multipath,
+    refs: &[&AgentSample],
+    augment: &BatchAugment,
+    rng: &mut rand_pcg::Pcg64Mcg,
+    device: &Device,
+    config: &TrainConfig,
+) -> (f32, Option<GradientsParams>) {
+    let chunk_len = refs.len().div_ceil(config.data_parallel_chunks.max(1));
+    if chunk_len >= refs.len() {
+        let batch = Batch::from_samples(refs, augment, rng, device);
+        let loss = batch_loss(model, &batch, config);
+        let value: f32 = loss.clone().into_scalar();
+        let grads = value
+            .is_finite()
+            .then(|| GradientsParams::from_grads(loss.backward(), model));
+        return (value, grads);
+    }
+    let work: Vec<(f32, Batch, Multipath)> = refs
+        .chunks(chunk_len)
+        .map(|c| {
+            (
+                c.len() as f32 / refs.len() as f32,
+                Batch::from_samples(c, augment, rng, device),
+                model.clone().fork(device),
+            )
+        })
+        .collect();
+    let mut parts: Vec<(f32, Option<(GradientsParams, Multipath)>)> = work
+        .into_par_iter()
+        .map(|(share, batch, local)| {
+            let loss = batch_loss(&local, &batch, config).mul_scalar(share);
+            let value: f32 = loss.clone().into_scalar();
+            let grads = value
+                .is_finite()
+                .then(|| (GradientsParams::from_grads(loss.backward(), &local), local));
+            (value, grads)
+        })
+        .collect();
+    let value: f32 = parts.iter().map(|p| p.0).sum();
+    if !value.is_finite() || parts.iter().any(|p| p.1.is_none()) {
+        return (value, None);
+    }
+    let mut level: Vec<(GradientsParams, Multipath)> =
+        parts.drain(..).filter_map(|p| p.1).collect();
+    while level.len() > 1 {
+        level = level
+            .into_par_iter()
+            .chunks(2)
+            .map(|pair| {
+                let mut pair = pair.into_iter();
+                let (a, module) = pair.next().expect("a chunk of 1 or 2");
+                let Some((b, _)) = pair.next() else {
+                    return (a, module);
+                };
+                let mut sum = GradientsAccumulator::new();
+                sum.accumulate(&module, a);
+                sum.accumulate(&module, b);
+                (sum.grads(), module)
+            })
+            .collect();
+    }
+    (value, level.pop().map(|(g, _)| g))
 }
 
 /// The learning-rate multiplier of the schedule at optimizer step `step` (0-based).

@@ -84,9 +84,17 @@ pub struct BenchTrainArgs {
     pub backend: String,
     #[arg(long, default_value_t = 32)]
     pub batch: usize,
-    /// Timed training steps per preset (after one warm-up step).
+    /// Timed training steps per preset (each ends with a device sync).
     #[arg(long, default_value_t = 5)]
     pub steps: usize,
+    /// Untimed warm-up steps before them (a GPU backend compiles and autotunes its kernels in
+    /// these).
+    #[arg(long, default_value_t = 1)]
+    pub warmup: usize,
+    /// Data-parallel chunks: each step splits the batch into this many chunks, runs their
+    /// forward and backward passes in parallel (one model fork each) and sums the gradients.
+    #[arg(long, default_value_t = 1)]
+    pub chunks: usize,
 }
 
 #[derive(Debug, Clone, Args)]

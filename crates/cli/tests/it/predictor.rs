@@ -1,4 +1,4 @@
-//! `scbg train predictor`, `scbg eval predictor` and `scbg eval metrics`.
+//! `scbg train predictor`, `scbg eval predictor`, `scbg eval metrics` and `scbg bench train`.
 
 use crate::{inspect_json, real_dir, scbg, scbg_ok};
 use serde_json::{Value, json};
@@ -722,4 +722,45 @@ fn train_generator_saves_generator_and_range_predictor() {
     ]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("--threshold"));
+}
+
+#[test]
+fn bench_train_times_the_data_parallel_step_and_its_phases() {
+    let out = scbg_ok(&[
+        "bench",
+        "train",
+        "--presets",
+        "cpu-small",
+        "--batch",
+        "6",
+        "--steps",
+        "1",
+        "--chunks",
+        "4",
+    ]);
+    assert!(out.contains("4 chunk(s), backend flex"), "{out}");
+    let step = out
+        .lines()
+        .find(|l| l.starts_with("cpu-small"))
+        .unwrap_or_else(|| panic!("no cpu-small row: {out}"));
+    assert!(
+        step.contains("train step") && step.contains("samples/s"),
+        "{step}"
+    );
+    assert!(out.contains("phases (synced): batch"), "{out}");
+    // A backend this build lacks (or a GPU that does not answer) is a clear error.
+    let missing = scbg(&[
+        "bench",
+        "train",
+        "--backend",
+        "no-such-backend",
+        "--steps",
+        "1",
+    ]);
+    assert!(!missing.status.success());
+    let err = String::from_utf8_lossy(&missing.stderr);
+    assert!(
+        err.contains("\"no-such-backend\" is not available: this build has flex"),
+        "{err}"
+    );
 }
