@@ -75,7 +75,11 @@ fn tiny_config(epochs: usize) -> TrainConfig {
 
 fn weights(dir: &Path) -> Vec<f32> {
     let ckpt = Checkpoint::read(dir).unwrap();
-    let model = ckpt.load_model(dir, &burn::tensor::Device::flex()).unwrap();
+    weights_of(&ckpt.load_model(dir, &burn::tensor::Device::flex()).unwrap())
+}
+
+/// Every weight of the model, in visiting order.
+fn weights_of(model: &scbg_model::Multipath) -> Vec<f32> {
     let mut out = Vec::new();
     struct Collect<'a>(&'a mut Vec<f32>);
     impl burn::module::ModuleVisitor for Collect<'_> {
@@ -238,19 +242,7 @@ fn data_parallel_chunks_sum_to_the_whole_batch_gradient() {
         // Plain SGD with rate 1: the new weights are the old ones minus the gradient.
         let mut sgd = SgdConfig::new().init();
         let stepped = sgd.step(1.0, model.clone(), grads.expect("a finite loss"));
-        let mut w = Vec::new();
-        struct Collect<'a>(&'a mut Vec<f32>);
-        impl burn::module::ModuleVisitor for Collect<'_> {
-            fn visit_float<const D: usize>(
-                &mut self,
-                p: &burn::module::Param<burn::tensor::Tensor<D>>,
-            ) {
-                self.0
-                    .extend(p.val().into_data().try_to_vec::<f32>().unwrap());
-            }
-        }
-        stepped.valid().visit(&mut Collect(&mut w));
-        (value, w)
+        (value, weights_of(&stepped.valid()))
     };
     let (whole, w1) = step(1);
     assert!(whole.is_finite());
