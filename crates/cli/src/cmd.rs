@@ -112,8 +112,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             );
         }
         Command::Bench(BenchCommand::Sim(a)) => {
-            let mut model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
-            model.scbg.policy = a.policy;
+            let model = load_generator(&a.model, a.predictor.as_deref(), a.policy)?;
             print!(
                 "{}",
                 scbg::bench::sim(&model, a.scenes, a.replan_every.map(|n| n as usize))?.to_text()
@@ -122,8 +121,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         }
         Command::Sim(a) => sim(&a, progress)?,
         Command::Serve(a) => {
-            let mut model = scbg::generator::load_scbg(&a.model, a.predictor.as_deref())?;
-            model.scbg.policy = a.policy;
+            let model = load_generator(&a.model, a.predictor.as_deref(), a.policy)?;
             let defaults = scbg_serve::ServeConfig::default();
             scbg_serve::run(
                 model,
@@ -496,10 +494,20 @@ fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// A generator folder with its predictor (the recorded one unless overridden), driven by `policy`.
+fn load_generator(
+    model: &std::path::Path,
+    predictor: Option<&std::path::Path>,
+    policy: Policy,
+) -> anyhow::Result<scbg::generator::LoadedScbg> {
+    let mut model = scbg::generator::load_scbg(model, predictor)?;
+    model.scbg.policy = policy;
+    Ok(model)
+}
+
 /// `scbg generate`.
 fn generate(args: &GenerateArgs, progress: &dyn Progress) -> anyhow::Result<()> {
-    let mut model = scbg::generator::load_scbg(&args.model, args.predictor.as_deref())?;
-    model.scbg.policy = args.policy;
+    let model = load_generator(&args.model, args.predictor.as_deref(), args.policy)?;
     let (index, scene) =
         scbg::generate::find_scene(&args.scenario, args.scenario_id.as_deref(), args.a, args.b)?;
     let courtesy: Vec<Courtesy> = if args.psi.is_empty() {
