@@ -107,6 +107,21 @@ pub struct DemoArgs {
     /// Predictor training epochs.
     #[arg(long, default_value_t = 30)]
     pub epochs: usize,
+    /// Reaction siblings per scene: after training, replay this many of B's sampled futures
+    /// per scene in the synthetic world (A reacting) and fine-tune the predictor on them
+    /// (--reaction-epochs): its labels then rank B's sampled futures more like the simulator
+    /// does and its logged futures less so, and the knob follows the truth far better in open
+    /// and closed loop, for 3–4 more minutes (BENCHMARKS.md, issue 11); 0 (the default) skips
+    /// it. Ignored with --data.
+    #[arg(long, default_value_t = 0)]
+    pub reaction_siblings: usize,
+    /// Fine-tuning epochs with the reaction siblings.
+    #[arg(long, default_value_t = 10)]
+    pub reaction_epochs: usize,
+    /// Data-parallel chunks of each predictor training step (the batch split into chunks whose
+    /// passes run in parallel; the same step up to rounding, ~0.8× the time on 2 cores).
+    #[arg(long, default_value_t = 1)]
+    pub data_parallel_chunks: usize,
     /// Predictors to train (seeds --seed, --seed + 1, …) and label with as an ensemble (ψ
     /// averaged; the first one is the generators' J_φ). Each adds a predictor training
     /// (~5 minutes on 2 cores); 1 by default (BENCHMARKS.md, issue 11).

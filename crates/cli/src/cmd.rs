@@ -29,6 +29,9 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     lane_frame: a.lane_frame,
                     stepwise: a.stepwise,
                     epochs: a.epochs,
+                    reaction_siblings: a.reaction_siblings,
+                    reaction_epochs: a.reaction_epochs,
+                    data_parallel_chunks: a.data_parallel_chunks,
                     predictors: a.predictors as usize,
                     generator_epochs: a.generator_epochs,
                     generator_seeds: a.generator_seeds,
@@ -55,6 +58,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     ground_truth: a.ground_truth,
                     shard_index: a.shard_index,
                     num_shards: a.num_shards,
+                    reaction_siblings: a.reaction_siblings.map(|d| (d, a.reaction_per_role)),
                 },
                 progress,
             )?;

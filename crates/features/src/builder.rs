@@ -280,6 +280,7 @@ impl<'a> SampleBuilder<'a> {
             current_velocity_mps,
             lane_path_xy_m,
             lane_path_valid,
+            condition_required: false,
         };
         Marginal {
             target,

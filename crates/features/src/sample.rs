@@ -97,6 +97,11 @@ pub struct AgentSample {
     /// `[LANE_PATH_POINTS]`: whether each point lies on a known lane; all false when the
     /// target is on no lane; empty unless [`FeatureConfig::lane_path`].
     pub lane_path_valid: Vec<bool>,
+    /// Training never drops this sample's condition: the target's future is a reaction to a
+    /// condition that was imposed (a future of the other agent replayed in a simulator), not
+    /// a draw of its own marginal behaviour, so it must not teach the marginal mode. False
+    /// for every sample the builder makes.
+    pub condition_required: bool,
 }
 
 impl AgentSample {

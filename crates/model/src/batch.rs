@@ -149,7 +149,9 @@ impl Batch {
             road.extend_from_slice(&s.road_segments);
             rm.extend(bools(&s.road_valid));
             let keep = s.has_condition()
-                && !(augment.condition_dropout > 0.0 && rng.random_bool(augment.condition_dropout));
+                && (s.condition_required
+                    || !(augment.condition_dropout > 0.0
+                        && rng.random_bool(augment.condition_dropout)));
             for f in 0..future {
                 let v = keep && s.condition_future_valid[f];
                 cond.push(if v {

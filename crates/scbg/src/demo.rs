@@ -52,6 +52,18 @@ pub struct DemoOptions {
     pub stepwise: bool,
     /// Predictor training epochs.
     pub epochs: usize,
+    /// Reaction siblings per ground-truth role (synthetic data only; 0: none, the default):
+    /// after training, the predictor labels every scene, the first this-many sampled futures of
+    /// B in each are replayed in the synthetic world with A reacting
+    /// ([`crate::fidelity::reaction_scenes`]), and the predictor is fine-tuned for
+    /// `reaction_epochs` with them as a [`scbg_train::TrainConfig::reaction_cache`]
+    /// (BENCHMARKS.md, issue 11). The first predictor stays in `predictor_stage1/`.
+    pub reaction_siblings: usize,
+    /// Fine-tuning epochs with the reaction siblings (at [`REACTION_LEARNING_RATE`]).
+    pub reaction_epochs: usize,
+    /// Data-parallel chunks of each predictor training step
+    /// ([`scbg_train::TrainConfig::data_parallel_chunks`]).
+    pub data_parallel_chunks: usize,
     /// Predictors to train (seeds `seed`, `seed + 1`, …) and label with as an ensemble (ψ
     /// averaged, [`crate::labels::label_scenes_ensemble`]); the first is the generators' J_φ
     /// and the one evaluated. 1: the paper's single predictor.
@@ -86,6 +98,10 @@ pub struct DemoOptions {
 /// within its 10-minute budget; `scbg eval sim --wosac-scenes 400` on every held-out scene
 /// does (+0.04 ± 0.008).
 pub const DEMO_WOSAC_SCENES: usize = 10;
+
+/// Learning rate of the fine-tuning on reaction siblings (a third of the first training's;
+/// cosine schedule down to 1 % of it).
+pub const REACTION_LEARNING_RATE: f64 = 3e-4;
 
 /// The report's `data` section.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -147,6 +163,9 @@ pub struct DemoReport {
     /// The same over every labelled scene (the predictor's training split included), as
     /// `labels/summary.json` has it.
     pub fidelity_all_scenes: Option<crate::fidelity::Fidelity>,
+    /// With reaction siblings: `fidelity` of the first predictor, before its fine-tuning
+    /// (held-out split); `null` otherwise.
+    pub fidelity_stage1: Option<crate::fidelity::Fidelity>,
     /// The generator stage's seeds.
     pub generator_seeds: Vec<u64>,
     /// Table II and the correlations per variant: every number is the mean over the seeds.
@@ -194,6 +213,77 @@ pub struct DemoReport {
     /// The label summary (report.md).
     #[serde(skip)]
     pub label_summary: LabelSummary,
+}
+
+/// The demo's fine-tuning on reaction siblings: labels the cache with the first predictor
+/// (`first`, writing `labels_stage1/` and the siblings to `synth/reaction/`), prepares them
+/// (`cache_reaction/`) and fine-tunes into `out` ([`DemoOptions::reaction_siblings`]).
+/// Returns the first predictor's held-out fidelity.
+fn reaction_fine_tune(
+    options: &DemoOptions,
+    cache: &Path,
+    first: &Path,
+    out: &Path,
+    config: &scbg_train::TrainConfig,
+    progress: &dyn Progress,
+) -> anyhow::Result<Option<crate::fidelity::Fidelity>> {
+    let root = &options.out;
+    let siblings = root.join("synth").join("reaction");
+    // Another run's tables and siblings in this folder belong to another first predictor.
+    let reaction_cache = root.join("cache_reaction");
+    for stale in [
+        root.join("labels_stage1"),
+        siblings.clone(),
+        reaction_cache.clone(),
+    ] {
+        if stale.is_dir() {
+            std::fs::remove_dir_all(&stale)
+                .with_context(|| format!("removing {}", stale.display()))?;
+        }
+    }
+    progress.note(&format!(
+        "replaying {} sampled futures of B per scene in the synthetic world (reaction siblings)",
+        options.reaction_siblings
+    ));
+    let (_, summary) = crate::labels::label_cache(
+        &crate::labels::LabelRun {
+            model: first.to_path_buf(),
+            ensemble: Vec::new(),
+            data: cache.to_path_buf(),
+            out: root.join("labels_stage1"),
+            options: options.labels,
+            seed: options.seed,
+            ground_truth: Some(root.join("synth").join(GROUND_TRUTH_FILE)),
+            shard_index: 0,
+            num_shards: 1,
+            reaction_siblings: Some((siblings.clone(), options.reaction_siblings)),
+        },
+        progress,
+    )?;
+    crate::data::prepare(
+        &PrepareOptions {
+            files_per_shard: 4,
+            ..PrepareOptions::new(vec![siblings.display().to_string()], reaction_cache.clone())
+        },
+        progress,
+    )?;
+    let tune = scbg_train::TrainConfig {
+        init_from: Some(first.to_path_buf()),
+        reaction_cache: Some(reaction_cache),
+        epochs: options.reaction_epochs.max(1),
+        learning_rate: REACTION_LEARNING_RATE,
+        ..config.clone()
+    };
+    scbg_base::atomic::write(
+        root.join("predictor_reaction.toml"),
+        &predictor::train_config_toml(&tune)?,
+    )?;
+    progress.note(&format!(
+        "fine-tuning the predictor on them ({} epochs)",
+        tune.epochs
+    ));
+    predictor::train_predictor(cache, out, &tune, false, progress)?;
+    Ok(summary.fidelity_held_out)
 }
 
 /// Runs the demo and writes `report.md`, `report.json` and the figures in `options.out`.
@@ -274,14 +364,33 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         counterfactual_cache,
         lane_frame_condition: options.lane_frame,
         stepwise_condition: options.stepwise,
+        data_parallel_chunks: options.data_parallel_chunks.max(1),
         ..Default::default()
     };
     let predictor_dir = out.join("predictor");
+    let reacting = options.reaction_siblings > 0 && options.data.is_empty();
+    let first_dir = if reacting {
+        out.join("predictor_stage1")
+    } else {
+        predictor_dir.clone()
+    };
     scbg_base::atomic::write(
         out.join("predictor.toml"),
         &predictor::train_config_toml(&config)?,
     )?;
-    predictor::train_predictor(&cache, &predictor_dir, &config, false, progress)?;
+    predictor::train_predictor(&cache, &first_dir, &config, false, progress)?;
+    let fidelity_stage1 = if reacting {
+        reaction_fine_tune(
+            options,
+            &cache,
+            &first_dir,
+            &predictor_dir,
+            &config,
+            progress,
+        )?
+    } else {
+        None
+    };
     // Further members of the labelling ensemble: the same training, other seeds.
     let mut ensemble_dirs = Vec::new();
     for k in 1..options.predictors.max(1) as u64 {
@@ -645,6 +754,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             .collect(),
         fidelity,
         fidelity_all_scenes: label_summary.fidelity.clone(),
+        fidelity_stage1,
         generator_seeds: seeds.clone(),
         variants: variants_mean,
         variants_seed_std: variants_std,

@@ -71,6 +71,37 @@ pub fn psi_true_of_role(truth: &GroundTruth, role: &LabelledRole) -> Vec<Option<
         .collect()
 }
 
+/// Reaction siblings of a ground-truth role: for each of B's first `per_role` *sampled*
+/// futures (the logged one is the scene itself), the scene replayed with B following that
+/// future and A and the others reacting by the synthetic world's rule
+/// ([`Scenario::replayed_scene`], id `<scene>~rx<k>`). As training data they show the
+/// conditional predictor what A does when B drives the kind of future B's marginal samples
+/// are — the futures whose labels the generators rank. Empty for a role the ground truth
+/// does not describe; a future the oracle cannot replay is skipped.
+pub fn reaction_scenes(
+    truth: &GroundTruth,
+    role: &LabelledRole,
+    per_role: usize,
+) -> Vec<scbg_scene::Scene> {
+    if per_role == 0 || !is_truth_role(truth, role.window_step, role.a_id, role.b_id) {
+        return Vec::new();
+    }
+    let Ok(scenario) = Scenario::of_truth(truth) else {
+        return Vec::new();
+    };
+    role.labels
+        .futures_in_a
+        .iter()
+        .enumerate()
+        .skip(1)
+        .take(per_role)
+        .filter_map(|(k, f)| {
+            let world = world_points(&role.a.world_from_agent, f);
+            scenario.replayed_scene(&world, &format!("rx{k}")).ok()
+        })
+        .collect()
+}
+
 /// How one set of learned values agrees with the true ones.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Agreement {

@@ -388,6 +388,10 @@ pub struct LabelSummary {
     pub spearman_latent: BTreeMap<String, FamilyRho>,
     /// Agreement with the simulator's ψ_true (synthetic data with its ground truth only).
     pub fidelity: Option<crate::fidelity::Fidelity>,
+    /// The same on the predictor's held-out (validation) scenes only, which it never trained
+    /// on (`scbg label`; absent where the split is not known).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fidelity_held_out: Option<crate::fidelity::Fidelity>,
 }
 
 impl LabelSummary {
@@ -441,6 +445,7 @@ impl LabelSummary {
             fidelity: truth
                 .filter(|_| options.audience == scbg_courtesy::Audience::Pair)
                 .and_then(|t| crate::fidelity::fidelity(rows, t)),
+            fidelity_held_out: None,
         }
     }
 
@@ -479,6 +484,10 @@ impl LabelSummary {
             s += "\nfidelity of ψ_label against the simulator's ψ_true:\n";
             s += &f.to_markdown();
         }
+        if let Some(f) = &self.fidelity_held_out {
+            s += "\nthe same on the predictor's held-out scenes:\n";
+            s += &f.to_markdown();
+        }
         s
     }
 }
@@ -508,6 +517,12 @@ pub struct LabelRun {
     pub shard_index: usize,
     /// Number of workers sharing the cache (1: everything, with the summary).
     pub num_shards: usize,
+    /// With a ground truth: also write reaction siblings
+    /// ([`crate::fidelity::reaction_scenes`]) of this many sampled futures per ground-truth
+    /// role, as `reaction-NNNNN.tfrecord` per cache shard in this folder (for a training
+    /// config's `reaction_cache`; siblings of held-out scenes are ignored by training). A
+    /// shard counts as done on a re-run only when its siblings are there too.
+    pub reaction_siblings: Option<(PathBuf, usize)>,
 }
 
 /// The labelling options, checked: `sample_noise` must be finite and ≥ 0.
@@ -561,7 +576,7 @@ pub fn write_label_outputs(
         write_label_table(&out.join(shard_table_name(si)), &shard_rows)?;
         rows.extend(shard_rows);
     }
-    let summary = finish_labels(out, &rows, options, truth, predictors)?;
+    let summary = finish_labels(out, &rows, options, truth, predictors, None)?;
     Ok((rows, summary))
 }
 
@@ -579,6 +594,39 @@ fn scored_rows(
         .concat()
 }
 
+/// Writes the reaction siblings of one cache shard's ground-truth roles
+/// (`dir/reaction-NNNNN.tfrecord`, atomically).
+fn write_reaction_siblings(
+    dir: &Path,
+    shard: usize,
+    scenes: &[&SceneLabels],
+    truth: &crate::fidelity::TruthIndex<'_>,
+    per_role: usize,
+) -> anyhow::Result<()> {
+    use rayon::prelude::*;
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let siblings: Vec<scbg_scene::Scene> = scenes
+        .par_iter()
+        .flat_map_iter(|s| {
+            let t = truth.get(&s.scenario_id);
+            s.roles
+                .iter()
+                .flat_map(move |r| {
+                    t.map(|t| crate::fidelity::reaction_scenes(t, r, per_role))
+                        .unwrap_or_default()
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    scbg_womd::write_scenes(&dir.join(reaction_file_name(shard)), siblings.iter())?;
+    Ok(())
+}
+
+/// The reaction siblings' file for cache shard `index`.
+fn reaction_file_name(index: usize) -> String {
+    format!("reaction-{index:05}.tfrecord")
+}
+
 /// The histogram and summary.json of a finished label table.
 fn finish_labels(
     out: &Path,
@@ -586,6 +634,7 @@ fn finish_labels(
     options: LabelOptions,
     truth: Option<&[GroundTruth]>,
     predictors: usize,
+    validation_fraction: Option<f64>,
 ) -> anyhow::Result<LabelSummary> {
     let logged: Vec<f64> = rows
         .iter()
@@ -598,10 +647,19 @@ fn finish_labels(
         "courtesy ψ of logged trajectories (m/s)",
         &out.join("psi_histogram.png"),
     )?;
-    let summary = LabelSummary {
+    let mut summary = LabelSummary {
         predictors,
         ..LabelSummary::of(rows, options, truth)
     };
+    if let (Some(vf), Some(truth), Some(_)) = (validation_fraction, truth, &summary.fidelity) {
+        use scbg_train::data::{Split, split_of};
+        let held_out: Vec<LabelRow> = rows
+            .iter()
+            .filter(|r| split_of(&r.scenario_id, vf) == Split::Validation)
+            .cloned()
+            .collect();
+        summary.fidelity_held_out = crate::fidelity::fidelity(&held_out, truth);
+    }
     if let (Some(truth), Some(_)) = (truth, &summary.fidelity) {
         crate::fidelity::write_scatter(rows, truth, &out.join("psi_fidelity.png"))?;
     }
@@ -665,7 +723,11 @@ pub fn label_cache(
             continue;
         }
         let path = run.out.join(shard_table_name(si));
-        if path.is_file() {
+        let siblings_done = run
+            .reaction_siblings
+            .as_ref()
+            .is_none_or(|(dir, _)| dir.join(reaction_file_name(si)).is_file());
+        if path.is_file() && siblings_done {
             rows.extend(read_label_table(&path)?);
             continue;
         }
@@ -680,6 +742,9 @@ pub fn label_cache(
             progress,
         )?;
         let scenes: Vec<&SceneLabels> = labelled.iter().collect();
+        if let (Some((dir, per_role)), Some(index)) = (&run.reaction_siblings, index.as_ref()) {
+            write_reaction_siblings(dir, si, &scenes, index, *per_role)?;
+        }
         let shard_rows = scored_rows(&scenes, index.as_ref());
         write_label_table(&path, &shard_rows)?;
         rows.extend(shard_rows);
@@ -709,6 +774,7 @@ pub fn label_cache(
         run.options,
         truth.as_deref(),
         members.len(),
+        Some(loaded[0].1.train_config.validation_fraction),
     )?;
     progress.note(&summary.to_text());
     Ok((rows, summary))

@@ -49,11 +49,31 @@ fn label_train_and_generate_through_the_library() {
             ground_truth: Some(p("synth").join(synth::GROUND_TRUTH_FILE)),
             shard_index: 0,
             num_shards: 1,
+            reaction_siblings: Some((p("reaction"), 2)),
         },
         &Quiet,
     )
     .unwrap();
     assert_eq!(rows.len(), 16 * 2 * 3);
+    // Reaction siblings: each ground-truth role's two sampled futures replayed in the world;
+    // they read back, and a cache prepared from them holds one per scene and future.
+    let t = &truth[3];
+    let sibling = format!("{}~rx2", t.scenario_id);
+    let (_, scene) = generate::find_scene(
+        &p("reaction").join("reaction-00000.tfrecord"),
+        Some(&sibling),
+        t.a_id,
+        t.b_id,
+    )
+    .unwrap();
+    assert_eq!(scene.scenario_id, sibling);
+    let siblings = data::prepare(
+        &data::PrepareOptions::new(vec![p("reaction").display().to_string()], p("rx_cache")),
+        &Quiet,
+    )
+    .unwrap();
+    assert_eq!(siblings.total.scenarios, 16 * 2);
+    assert!(summary.fidelity.is_some() && summary.fidelity_held_out.is_some());
     assert_eq!(summary.pairs_roles, 32);
     assert_eq!(
         labels::read_label_table(&p("labels").join(labels::shard_table_name(0))).unwrap(),
@@ -576,6 +596,7 @@ fn courtesy_toward_neighbours(
             ground_truth: Some(p("synth").join(synth::GROUND_TRUTH_FILE)),
             shard_index: 0,
             num_shards: 1,
+            reaction_siblings: None,
         },
         &Quiet,
     )
@@ -733,6 +754,7 @@ fn ensemble_labels(single: &[labels::LabelRow], options: LabelOptions, dir: &std
                 ground_truth: Some(p("synth").join(synth::GROUND_TRUTH_FILE)),
                 shard_index: 0,
                 num_shards: 1,
+                reaction_siblings: None,
             },
             &Quiet,
         )
@@ -763,6 +785,7 @@ fn ensemble_labels(single: &[labels::LabelRow], options: LabelOptions, dir: &std
             ground_truth: None,
             shard_index: 0,
             num_shards: 1,
+            reaction_siblings: None,
         },
         &Quiet,
     )

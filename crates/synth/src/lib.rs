@@ -296,6 +296,15 @@ impl Scenario {
     }
 
     fn a_avg_speed_given(&self, logged: &Run, b_future: &[[f64; 2]]) -> Result<f64, OracleError> {
+        let states = Self::checked_b_states(logged, b_future)?;
+        Ok(self.replayed_a_speed(&states, &logged.paths))
+    }
+
+    /// B's states for a complete world-frame future (steps 11..=90), checked: 80 finite points.
+    fn checked_b_states(
+        logged: &Run,
+        b_future: &[[f64; 2]],
+    ) -> Result<Vec<(f64, f64, f64)>, OracleError> {
         let expected = NUM_STEPS - CURRENT_STEP - 1;
         if b_future.len() != expected {
             return Err(OracleError::Steps {
@@ -310,8 +319,23 @@ impl Scenario {
             return Err(OracleError::NotFinite(t));
         }
         let b = &logged.agents[1];
-        let states = Self::b_states(b, &logged.paths[b.path], b_future);
-        Ok(self.replayed_a_speed(&states, &logged.paths))
+        Ok(Self::b_states(b, &logged.paths[b.path], b_future))
+    }
+
+    /// The scene as it would have been logged had B followed `b_future` (world frame, steps
+    /// 11..=90) after its logged history, A and everyone else reacting by the oracle's rule:
+    /// a counterfactual sibling for *any* future of B (one sampled from a predictor, say),
+    /// where [`Self::counterfactual`] re-draws B's courtesy. A's track is the one whose
+    /// average speed [`Self::a_avg_speed_mps`] scores. Its id is the scene's with `~<tag>`
+    /// appended, so it lands in the scene's split.
+    pub fn replayed_scene(&self, b_future: &[[f64; 2]], tag: &str) -> Result<Scene, OracleError> {
+        let logged = self.logged();
+        let states = Self::checked_b_states(&logged, b_future)?;
+        let mut run = self.simulate_on(logged.paths, BPlan::Replayed(&states), true);
+        Ok(self.scene_of(
+            &mut run,
+            format!("{}{COUNTERFACTUAL_MARK}{tag}", self.scenario_id()),
+        ))
     }
 
     /// B's world-frame future (steps 11..=90) in a run.

@@ -338,6 +338,45 @@ fn counterfactual_siblings_share_the_history_and_intervene_on_b_only() {
 }
 
 #[test]
+fn a_replayed_scene_is_what_the_oracle_scores() {
+    // Any future of B (here a sibling's, slowed down by a fifth): the replayed scene keeps
+    // the history and map, B follows the future, and A's track is the one the oracle scores.
+    for index in 0..12 {
+        let scenario = Scenario::draw(21, index, &Family::ALL);
+        let g = scenario.generate();
+        let sib = scenario.counterfactual(0, 3);
+        let b_now = &g.scene.tracks[1].states[CURRENT_STEP];
+        let b: Vec<[f64; 2]> = sib.tracks[1].states[CURRENT_STEP + 1..]
+            .iter()
+            .map(|s| {
+                [
+                    b_now.x_m + 0.8 * (s.x_m - b_now.x_m),
+                    b_now.y_m + 0.8 * (s.y_m - b_now.y_m),
+                ]
+            })
+            .collect();
+        let scene = scenario.replayed_scene(&b, "rx0").unwrap();
+        assert_eq!(scene.scenario_id, format!("{}~rx0", g.scene.scenario_id));
+        assert_eq!(scene.map, g.scene.map);
+        for (s, o) in scene.tracks.iter().zip(&g.scene.tracks) {
+            assert_eq!(s.states[..CURRENT_STEP], o.states[..CURRENT_STEP]);
+        }
+        for (s, p) in scene.tracks[1].states[CURRENT_STEP + 1..].iter().zip(&b) {
+            // B is projected onto its path: within a few centimetres of the future.
+            assert!((s.x_m - p[0]).hypot(s.y_m - p[1]) < 0.05, "scene {index}");
+        }
+        let a_speed = a_future_speed(&scene.tracks[0]);
+        let oracle = scenario.oracle();
+        assert!(
+            (oracle.a_avg_speed_mps(&b).unwrap() - a_speed).abs() < 1e-6,
+            "scene {index}"
+        );
+    }
+    let scenario = Scenario::draw(21, 0, &Family::ALL);
+    assert!(scenario.replayed_scene(&[[0.0, 0.0]; 3], "rx").is_err());
+}
+
+#[test]
 fn the_worlds_knob_is_the_sibling_and_the_logged_courtesy_is_the_log() {
     for index in 0..12 {
         let scenario = Scenario::draw(21, index, &Family::ALL);

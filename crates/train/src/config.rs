@@ -62,6 +62,17 @@ pub struct TrainConfig {
     /// its pairs is used: interventions on the condition, which the logged data alone cannot
     /// show. Siblings of validation scenes are left out.
     pub counterfactual_cache: Option<std::path::PathBuf>,
+    /// A prepared cache of *reaction siblings* (`scbg label --reaction-siblings`: a training
+    /// scene replayed with B following a future sampled from a predictor, A and the others
+    /// reacting by the synthetic world's rule). Used like `counterfactual_cache`, except that
+    /// training never drops their condition: A's future there is a reaction to an imposed B,
+    /// which must teach the conditional mode only, not A's marginal behaviour.
+    pub reaction_cache: Option<std::path::PathBuf>,
+    /// Start from this checkpoint's weights and feature statistics instead of a fresh
+    /// initialisation (fine-tuning, e.g. on a `counterfactual_cache` made with the first
+    /// model): a fresh optimizer and learning-rate schedule over `epochs`. Its model
+    /// configuration must be this run's.
+    pub init_from: Option<std::path::PathBuf>,
     /// Place B's future in A's lane frame in the future encoder (turns on
     /// `MultipathConfig::lane_frame_condition` of the preset or the `[model]` table).
     pub lane_frame_condition: bool,
@@ -94,6 +105,8 @@ impl Default for TrainConfig {
             backend: "flex".into(),
             data_parallel_chunks: 1,
             counterfactual_cache: None,
+            reaction_cache: None,
+            init_from: None,
             lane_frame_condition: false,
             stepwise_condition: false,
         }

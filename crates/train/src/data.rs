@@ -111,6 +111,17 @@ pub fn load_samples(
             .samples
             .extend(counterfactual_samples(&siblings, config)?);
     }
+    if let Some(dir) = &config.reaction_cache {
+        let siblings = PreparedDataset::open(dir)?;
+        train.samples.extend(
+            counterfactual_samples(&siblings, config)?
+                .into_iter()
+                .map(|s| AgentSample {
+                    condition_required: true,
+                    ..s
+                }),
+        );
+    }
     Ok((train, val))
 }
 

@@ -164,6 +164,66 @@ fn resume_refuses_a_different_config() {
 }
 
 #[test]
+fn fine_tuning_starts_from_the_checkpoint_and_keeps_its_statistics() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    tiny_cache(&data, 8);
+    let first = dir.path().join("first");
+    train(&data, &first, &tiny_config(1), false, &NoProgress).unwrap();
+    // Fine-tuned with a vanishing learning rate on other data: the first model's weights and
+    // feature statistics, whatever the new data's statistics would be.
+    let other = dir.path().join("other");
+    cache_of(
+        &other,
+        (20..30).map(|i| scbg_synth::generate(43, i, &scbg_synth::Family::ALL).scene),
+    );
+    let tuned = dir.path().join("tuned");
+    let config = TrainConfig {
+        init_from: Some(first.clone()),
+        learning_rate: 1e-30,
+        seed: 9,
+        ..tiny_config(1)
+    };
+    let ckpt = train(&other, &tuned, &config, false, &NoProgress).unwrap();
+    assert_eq!(ckpt.stats, Checkpoint::read(&first).unwrap().stats);
+    let (a, b) = (weights(&first), weights(&tuned));
+    assert_eq!(a.len(), b.len());
+    let worst = a
+        .iter()
+        .zip(&b)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f32::max);
+    assert!(worst < 1e-6, "weights moved by {worst}");
+    // A fresh run on that data fits its own statistics.
+    let fresh = train(
+        &other,
+        &dir.path().join("fresh"),
+        &tiny_config(1),
+        false,
+        &NoProgress,
+    )
+    .unwrap();
+    assert_ne!(fresh.stats, ckpt.stats);
+    // Another model configuration is refused, naming the checkpoint.
+    let mut wider = tiny_config(1);
+    wider.model.as_mut().unwrap().decoder_width = 48;
+    let err = train(
+        &other,
+        &dir.path().join("wider"),
+        &TrainConfig {
+            init_from: Some(first.clone()),
+            ..wider
+        },
+        false,
+        &NoProgress,
+    )
+    .unwrap_err();
+    assert!(matches!(err, crate::TrainError::InitMismatch(_)), "{err}");
+    assert!(err.to_string().contains("first"), "{err}");
+}
+
+#[test]
 fn counterfactual_siblings_add_conditional_samples_of_the_sdc_in_the_training_split() {
     let dir = tempfile::tempdir().unwrap();
     let cf = dir.path().join("cf");
@@ -210,6 +270,25 @@ fn counterfactual_siblings_add_conditional_samples_of_the_sdc_in_the_training_sp
     .unwrap();
     assert_eq!(with.len(), without.len() + samples.len());
     assert_eq!(val_with.len(), val_without.len());
+    assert!(with.samples.iter().all(|s| !s.condition_required));
+    // The same siblings as a reaction cache: the same samples, whose condition training keeps.
+    let (reacting, _) = crate::data::load_samples(
+        &data,
+        &TrainConfig {
+            counterfactual_cache: None,
+            reaction_cache: Some(cf.clone()),
+            ..config.clone()
+        },
+    )
+    .unwrap();
+    assert_eq!(reacting.len(), with.len());
+    let required: Vec<_> = reacting
+        .samples
+        .iter()
+        .filter(|s| s.condition_required)
+        .collect();
+    assert_eq!(required.len(), samples.len());
+    assert!(required.iter().all(|s| s.scenario_id.contains('~')));
 }
 
 #[test]

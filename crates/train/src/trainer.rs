@@ -42,6 +42,9 @@ pub enum TrainError {
     /// `--resume` found a checkpoint (folder given) whose training configuration differs.
     #[error("--resume: the checkpoint in {0} was made with a different configuration")]
     ConfigMismatch(String),
+    /// `init_from` names a checkpoint (folder given) of another model configuration.
+    #[error("init_from: the checkpoint in {0} has another model configuration than this run")]
+    InitMismatch(String),
 }
 
 /// Progress callbacks (the CLI draws a bar; tests pass [`NoProgress`]).
@@ -88,7 +91,28 @@ pub fn train(
         return Err(TrainError::NoSamples);
     }
     let raw_val: Vec<AgentSample> = val_set.samples.iter().take(512).cloned().collect();
-    let stats = standardise(&mut train_set, &mut val_set);
+    let init = config
+        .init_from
+        .as_deref()
+        .map(|dir| Checkpoint::read(dir).map(|c| (dir, c)))
+        .transpose()?;
+    let stats = match &init {
+        // Fine-tuning keeps the statistics the weights were trained with.
+        Some((dir, ckpt)) => {
+            if ckpt.model_config != model_config {
+                return Err(TrainError::InitMismatch(dir.display().to_string()));
+            }
+            for s in train_set
+                .samples
+                .iter_mut()
+                .chain(val_set.samples.iter_mut())
+            {
+                ckpt.stats.normalize(s);
+            }
+            ckpt.stats.clone()
+        }
+        None => standardise(&mut train_set, &mut val_set),
+    };
     tracing::info!(
         "training samples: {} ({} conditional); validation: {}",
         train_set.len(),
@@ -99,7 +123,10 @@ pub fn train(
     let device = scbg_model::device::training_device(&config.backend)?;
     let infer_device = scbg_model::device::device(&config.backend)?;
     device.seed(config.seed);
-    let mut model = model_config.init(&device);
+    let mut model = match &init {
+        Some((dir, ckpt)) => ckpt.load_model(dir, &device)?,
+        None => model_config.init(&device),
+    };
     let mut optim = optimizer(config);
     let mut state = TrainState {
         epoch: 0,

@@ -65,6 +65,16 @@ pub struct LabelArgs {
     pub shard_index: usize,
     #[arg(long, default_value_t = 1)]
     pub num_shards: usize,
+    /// With --ground-truth: also write reaction siblings to this folder, the scene replayed
+    /// with B following each of its first --reaction-per-role sampled futures and A and the
+    /// others reacting by the synthetic world's rule (`reaction-NNNNN.tfrecord`; prepare it
+    /// with `scbg data prepare` and give it to `scbg train predictor` as
+    /// `counterfactual_cache`).
+    #[arg(long, requires = "ground_truth")]
+    pub reaction_siblings: Option<PathBuf>,
+    /// Sampled futures per ground-truth role written as reaction siblings.
+    #[arg(long, default_value_t = 3)]
+    pub reaction_per_role: usize,
 }
 
 #[derive(Debug, Subcommand)]

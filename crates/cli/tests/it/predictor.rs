@@ -174,6 +174,11 @@ fn demo_writes_a_report() {
         "1",
         "--generator-seeds",
         "2",
+        // The opt-in fine-tuning on reaction siblings, end to end.
+        "--reaction-siblings",
+        "2",
+        "--reaction-epochs",
+        "1",
     ]);
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
@@ -243,6 +248,18 @@ fn demo_writes_a_report() {
     // The held-out split's share of the 40 scenes.
     let held_out = report["fidelity"]["logged"]["all"]["n"].as_u64().unwrap();
     assert!((1..40).contains(&held_out), "{report}");
+    // The first predictor's fidelity on the same held-out scenes, before its fine-tuning on
+    // the siblings of the training scenes' sampled futures.
+    assert_eq!(
+        report["fidelity_stage1"]["logged"]["all"]["n"], held_out,
+        "{report}"
+    );
+    assert!(out.join("predictor_stage1/checkpoint.json").is_file());
+    let tuned: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("cache_reaction/manifest.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(tuned["total"]["scenarios"], 40 * 2, "{tuned}");
     assert!(report["truth_control"]["full"]["spearman_quantile_psi_true"].is_object());
     // Its yardstick scores the same held-out roles.
     let world = &report["truth_control_world"];

@@ -389,3 +389,26 @@ fn conditional_mode_learns_the_oracle(stepwise: bool) {
         "the condition barely moves the prediction: {conditional} vs {marginal} m"
     );
 }
+
+#[test]
+fn a_required_condition_survives_condition_dropout() {
+    let features = small_features();
+    let plain = straight_sample(&features, true);
+    let required = AgentSample {
+        condition_required: true,
+        ..plain.clone()
+    };
+    let refs = [&plain, &required];
+    let augment = BatchAugment {
+        condition_dropout: 1.0,
+        history_mask_prob: 0.0,
+    };
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
+    let batch = Batch::from_samples(&refs, &augment, &mut rng, &Device::flex());
+    let flags = batch
+        .condition_flag
+        .into_data()
+        .try_to_vec::<f32>()
+        .unwrap();
+    assert_eq!(flags, vec![0.0, 1.0]);
+}

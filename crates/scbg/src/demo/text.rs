@@ -56,8 +56,12 @@ impl DemoReport {
             self.fidelity.as_ref().map_or(
                 "(no synthetic ground truth for this data)\n".to_string(),
                 |f| format!(
-                    "{}\n![fidelity](figures/psi_fidelity.png)\n",
-                    f.to_markdown()
+                    "{}\n![fidelity](figures/psi_fidelity.png)\n{}",
+                    f.to_markdown(),
+                    self.fidelity_stage1.as_ref().map_or(String::new(), |f| format!(
+                        "\nThe first predictor, before its fine-tuning on reaction siblings:\n\n{}",
+                        f.to_markdown()
+                    ))
                 )
             ),
             self.seed_mean_markdown(),
@@ -189,6 +193,10 @@ impl DemoReport {
         }
         if let Some(f) = &self.fidelity {
             s += "fidelity of ψ_label against the simulator's ψ_true (held-out scenes):\n";
+            s += &f.to_markdown();
+        }
+        if let Some(f) = &self.fidelity_stage1 {
+            s += "the first predictor's, before its fine-tuning on reaction siblings:\n";
             s += &f.to_markdown();
         }
         s += &self.seed_mean_markdown();
