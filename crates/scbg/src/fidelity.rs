@@ -74,7 +74,7 @@ pub fn psi_true_of_role(truth: &GroundTruth, role: &LabelledRole) -> Vec<Option<
 /// Reaction siblings of a ground-truth role: for each of B's first `per_role` *sampled*
 /// futures (the logged one is the scene itself), the scene replayed with B following that
 /// future and A and the others reacting by the synthetic world's rule
-/// ([`Scenario::replayed_scene`], id `<scene>~rx<k>`). As training data they show the
+/// ([`scbg_synth::ClosedLoop::replayed_scene`], id `<scene>~rx<k>`). As training data they show the
 /// conditional predictor what A does when B drives the kind of future B's marginal samples
 /// are — the futures whose labels the generators rank. Empty for a role the ground truth
 /// does not describe; a future the oracle cannot replay is skipped.
@@ -89,6 +89,7 @@ pub fn reaction_scenes(
     let Ok(scenario) = Scenario::of_truth(truth) else {
         return Vec::new();
     };
+    let world = scenario.closed_loop();
     role.labels
         .futures_in_a
         .iter()
@@ -96,8 +97,8 @@ pub fn reaction_scenes(
         .skip(1)
         .take(per_role)
         .filter_map(|(k, f)| {
-            let world = world_points(&role.a.world_from_agent, f);
-            scenario.replayed_scene(&world, &format!("rx{k}")).ok()
+            let future = world_points(&role.a.world_from_agent, f);
+            world.replayed_scene(&future, &format!("rx{k}")).ok()
         })
         .collect()
 }

@@ -322,22 +322,6 @@ impl Scenario {
         Ok(Self::b_states(b, &logged.paths[b.path], b_future))
     }
 
-    /// The scene as it would have been logged had B followed `b_future` (world frame, steps
-    /// 11..=90) after its logged history, A and everyone else reacting by the oracle's rule:
-    /// a counterfactual sibling for *any* future of B (one sampled from a predictor, say),
-    /// where [`Self::counterfactual`] re-draws B's courtesy. A's track is the one whose
-    /// average speed [`Self::a_avg_speed_mps`] scores. Its id is the scene's with `~<tag>`
-    /// appended, so it lands in the scene's split.
-    pub fn replayed_scene(&self, b_future: &[[f64; 2]], tag: &str) -> Result<Scene, OracleError> {
-        let logged = self.logged();
-        let states = Self::checked_b_states(&logged, b_future)?;
-        let mut run = self.simulate_on(logged.paths, BPlan::Replayed(&states), true);
-        Ok(self.scene_of(
-            &mut run,
-            format!("{}{COUNTERFACTUAL_MARK}{tag}", self.scenario_id()),
-        ))
-    }
-
     /// B's world-frame future (steps 11..=90) in a run.
     fn b_future_of(run: &Run) -> Vec<[f64; 2]> {
         let b = &run.agents[1];
@@ -569,6 +553,24 @@ impl ClosedLoop {
             .iter()
             .map(|a| sim::record_track(a, &run.paths, NUM_STEPS))
             .collect())
+    }
+
+    /// The scene as it would have been logged had B followed `b_future` (world frame, steps
+    /// 11..=90) after its logged history, A and everyone else reacting by the oracle's rule:
+    /// a counterfactual sibling for *any* future of B (one sampled from a predictor, say),
+    /// where [`Scenario::counterfactual`] re-draws B's courtesy. A's track is the one whose
+    /// average speed [`Scenario::a_avg_speed_mps`] scores. Its id is the scene's with
+    /// `~<tag>` appended, so it lands in the scene's split. The logged run is the world's
+    /// own, computed once for any number of futures.
+    pub fn replayed_scene(&self, b_future: &[[f64; 2]], tag: &str) -> Result<Scene, OracleError> {
+        let states = Scenario::checked_b_states(&self.logged, b_future)?;
+        let mut run =
+            self.scenario
+                .simulate_on(self.logged.paths.clone(), BPlan::Replayed(&states), true);
+        Ok(self.scenario.scene_of(
+            &mut run,
+            format!("{}{COUNTERFACTUAL_MARK}{tag}", self.scenario.scenario_id()),
+        ))
     }
 
     /// Appends B's position at the next future step (world frame) to `prefix`: the step-wise

@@ -355,7 +355,11 @@ fn a_replayed_scene_is_what_the_oracle_scores() {
                 ]
             })
             .collect();
-        let scene = scenario.replayed_scene(&b, "rx0").unwrap();
+        let scene = scenario
+            .clone()
+            .closed_loop()
+            .replayed_scene(&b, "rx0")
+            .unwrap();
         assert_eq!(scene.scenario_id, format!("{}~rx0", g.scene.scenario_id));
         assert_eq!(scene.map, g.scene.map);
         for (s, o) in scene.tracks.iter().zip(&g.scene.tracks) {
@@ -372,8 +376,8 @@ fn a_replayed_scene_is_what_the_oracle_scores() {
             "scene {index}"
         );
     }
-    let scenario = Scenario::draw(21, 0, &Family::ALL);
-    assert!(scenario.replayed_scene(&[[0.0, 0.0]; 3], "rx").is_err());
+    let world = Scenario::draw(21, 0, &Family::ALL).closed_loop();
+    assert!(world.replayed_scene(&[[0.0, 0.0]; 3], "rx").is_err());
 }
 
 #[test]
