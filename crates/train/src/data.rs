@@ -183,10 +183,15 @@ fn conditional_sample(
 pub fn standardise(train: &mut SampleSet, val: &mut SampleSet) -> FeatureStats {
     let step = (train.len() / 4000).max(1);
     let stats = FeatureStats::fit(train.samples.iter().step_by(step));
+    normalise(&stats, train, val);
+    stats
+}
+
+/// Applies standardisation statistics (fitted here or a checkpoint's) to both sets.
+pub fn normalise(stats: &FeatureStats, train: &mut SampleSet, val: &mut SampleSet) {
     for s in train.samples.iter_mut().chain(val.samples.iter_mut()) {
         stats.normalize(s);
     }
-    stats
 }
 
 #[cfg(test)]

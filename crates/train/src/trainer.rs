@@ -17,7 +17,7 @@ use scbg_model::{Batch, BatchAugment, Multipath, gmm_nll};
 
 use crate::checkpoint::{Checkpoint, CheckpointError, EpochReport, TrainState};
 use crate::config::{ConfigError, TrainConfig};
-use crate::data::{load_samples, standardise};
+use crate::data::{load_samples, normalise, standardise};
 use crate::eval::{Mode, mean_nll, predict, score};
 use scbg_base::seed::mix;
 
@@ -102,13 +102,7 @@ pub fn train(
             if ckpt.model_config != model_config {
                 return Err(TrainError::InitMismatch(dir.display().to_string()));
             }
-            for s in train_set
-                .samples
-                .iter_mut()
-                .chain(val_set.samples.iter_mut())
-            {
-                ckpt.stats.normalize(s);
-            }
+            normalise(&ckpt.stats, &mut train_set, &mut val_set);
             ckpt.stats.clone()
         }
         None => standardise(&mut train_set, &mut val_set),
