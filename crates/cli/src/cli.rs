@@ -105,17 +105,17 @@ pub struct DemoArgs {
     )]
     pub stepwise: bool,
     /// Predictor training epochs.
-    #[arg(long, default_value_t = 30)]
+    #[arg(long, default_value_t = 26)]
     pub epochs: usize,
-    /// Reaction siblings per scene: after training, replay this many of B's sampled futures
-    /// per scene in the synthetic world (A reacting) and fine-tune the predictor on them
-    /// (--reaction-epochs): its labels then rank B's sampled futures more like the simulator
-    /// does and its logged futures less so, and the knob follows the truth far better in open
-    /// and closed loop, for 3–4 more minutes (BENCHMARKS.md, issue 11); 0 (the default) skips
-    /// it. Ignored with --data.
-    #[arg(long, default_value_t = 0)]
+    /// Reaction siblings per scene: before the last --reaction-epochs epochs, replay this many
+    /// of B's sampled futures (from the predictor's checkpoint there) per scene in the
+    /// synthetic world, A reacting, and train those epochs on them too: the labels then rank
+    /// B's sampled futures more like the simulator does and its logged futures less so, and
+    /// the knob follows the truth far better in open and closed loop (BENCHMARKS.md, issue
+    /// 11); 0 skips it. Ignored with --data.
+    #[arg(long, default_value_t = 3)]
     pub reaction_siblings: usize,
-    /// Fine-tuning epochs with the reaction siblings.
+    /// The last this-many of --epochs train with the reaction siblings.
     #[arg(long, default_value_t = 10)]
     pub reaction_epochs: usize,
     /// Data-parallel chunks of each predictor training step (the batch split into chunks whose

@@ -52,14 +52,13 @@ pub struct DemoOptions {
     pub stepwise: bool,
     /// Predictor training epochs.
     pub epochs: usize,
-    /// Reaction siblings per ground-truth role (synthetic data only; 0: none, the default):
-    /// after training, the predictor labels every scene, the first this-many sampled futures of
-    /// B in each are replayed in the synthetic world with A reacting
-    /// ([`crate::fidelity::reaction_scenes`]), and the predictor is fine-tuned for
-    /// `reaction_epochs` with them as a [`scbg_train::TrainConfig::reaction_cache`]
-    /// (BENCHMARKS.md, issue 11). The first predictor stays in `predictor_stage1/`.
+    /// Reaction siblings per ground-truth role (synthetic data only; 0: none): before the last
+    /// `reaction_epochs` epochs, the predictor's checkpoint labels every scene, the first
+    /// this-many sampled futures of B in each are replayed in the synthetic world with A
+    /// reacting ([`crate::fidelity::reaction_scenes`]), and they join the training for those
+    /// epochs ([`scbg_train::TrainConfig::reaction_from_epoch`]; BENCHMARKS.md, issue 11).
     pub reaction_siblings: usize,
-    /// Fine-tuning epochs with the reaction siblings (at [`REACTION_LEARNING_RATE`]).
+    /// The last this-many of the predictor's `epochs` train with the reaction siblings.
     pub reaction_epochs: usize,
     /// Data-parallel chunks of each predictor training step
     /// ([`scbg_train::TrainConfig::data_parallel_chunks`]).
@@ -98,10 +97,6 @@ pub struct DemoOptions {
 /// within its 10-minute budget; `scbg eval sim --wosac-scenes 400` on every held-out scene
 /// does (+0.04 ± 0.008).
 pub const DEMO_WOSAC_SCENES: usize = 10;
-
-/// Learning rate of the fine-tuning on reaction siblings (a third of the first training's;
-/// cosine schedule down to 1 % of it).
-pub const REACTION_LEARNING_RATE: f64 = 3e-4;
 
 /// The report's `data` section.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -163,8 +158,8 @@ pub struct DemoReport {
     /// The same over every labelled scene (the predictor's training split included), as
     /// `labels/summary.json` has it.
     pub fidelity_all_scenes: Option<crate::fidelity::Fidelity>,
-    /// With reaction siblings: `fidelity` of the first predictor, before its fine-tuning
-    /// (held-out split); `null` otherwise.
+    /// With reaction siblings: `fidelity` of the predictor's checkpoint they were made with,
+    /// before they joined (held-out split); `null` otherwise.
     pub fidelity_stage1: Option<crate::fidelity::Fidelity>,
     /// The generator stage's seeds.
     pub generator_seeds: Vec<u64>,
@@ -202,6 +197,8 @@ pub struct DemoReport {
     pub generator_seconds: BTreeMap<String, f64>,
     /// Wall time of the whole generator stage (every seed, side by side), seconds.
     pub generator_stage_seconds: f64,
+    /// Wall time of each stage that ran, seconds, by [`STAGE_NAMES`].
+    pub stage_seconds: BTreeMap<&'static str, f64>,
     /// Wall time of the demo, seconds.
     pub seconds: f64,
     /// The checks with their texts (report.md).
@@ -215,39 +212,26 @@ pub struct DemoReport {
     pub label_summary: LabelSummary,
 }
 
-/// The demo's fine-tuning on reaction siblings: labels the cache with the first predictor
-/// (`first`, writing `labels_stage1/` and the siblings to `synth/reaction/`), prepares them
-/// (`cache_reaction/`) and fine-tunes into `out` ([`DemoOptions::reaction_siblings`]).
-/// Returns the first predictor's held-out fidelity.
-fn reaction_fine_tune(
+/// The demo's reaction siblings ([`DemoOptions::reaction_siblings`]): labels the cache with
+/// the predictor's checkpoint in `predictor` (the epoch they join at), writing
+/// `labels_stage1/` and the siblings to `synth/reaction/`, and prepares them as
+/// `reaction_cache`. Returns that checkpoint's held-out fidelity.
+fn make_reaction_siblings(
     options: &DemoOptions,
     cache: &Path,
-    first: &Path,
-    out: &Path,
-    config: &scbg_train::TrainConfig,
+    predictor: &Path,
+    reaction_cache: &Path,
     progress: &dyn Progress,
 ) -> anyhow::Result<Option<crate::fidelity::Fidelity>> {
     let root = &options.out;
     let siblings = root.join("synth").join("reaction");
-    // Another run's tables and siblings in this folder belong to another first predictor.
-    let reaction_cache = root.join("cache_reaction");
-    for stale in [
-        root.join("labels_stage1"),
-        siblings.clone(),
-        reaction_cache.clone(),
-    ] {
-        if stale.is_dir() {
-            std::fs::remove_dir_all(&stale)
-                .with_context(|| format!("removing {}", stale.display()))?;
-        }
-    }
     progress.note(&format!(
         "replaying {} sampled futures of B per scene in the synthetic world (reaction siblings)",
         options.reaction_siblings
     ));
     let (_, summary) = crate::labels::label_cache(
         &crate::labels::LabelRun {
-            model: first.to_path_buf(),
+            model: predictor.to_path_buf(),
             ensemble: Vec::new(),
             data: cache.to_path_buf(),
             out: root.join("labels_stage1"),
@@ -263,27 +247,40 @@ fn reaction_fine_tune(
     crate::data::prepare(
         &PrepareOptions {
             files_per_shard: 4,
-            ..PrepareOptions::new(vec![siblings.display().to_string()], reaction_cache.clone())
+            ..PrepareOptions::new(
+                vec![siblings.display().to_string()],
+                reaction_cache.to_path_buf(),
+            )
         },
         progress,
     )?;
-    let tune = scbg_train::TrainConfig {
-        init_from: Some(first.to_path_buf()),
-        reaction_cache: Some(reaction_cache),
-        epochs: options.reaction_epochs.max(1),
-        learning_rate: REACTION_LEARNING_RATE,
-        ..config.clone()
-    };
-    scbg_base::atomic::write(
-        root.join("predictor_reaction.toml"),
-        &predictor::train_config_toml(&tune)?,
-    )?;
-    progress.note(&format!(
-        "fine-tuning the predictor on them ({} epochs)",
-        tune.epochs
-    ));
-    predictor::train_predictor(cache, out, &tune, false, progress)?;
     Ok(summary.fidelity_held_out)
+}
+
+/// The demo's stages, in order: the keys of [`DemoReport::stage_seconds`].
+pub const STAGE_NAMES: [&str; 9] = [
+    "data",
+    "cache",
+    "predictor",
+    "predictor_eval",
+    "labels",
+    "generators",
+    "generator_eval",
+    "closed_loop",
+    "report",
+];
+
+/// Each stage's wall time from when the stages began (`(stage number, start)`, in order) and
+/// when the last one ended.
+fn stage_seconds(marks: &[(usize, Instant)], end: Instant) -> BTreeMap<&'static str, f64> {
+    marks
+        .iter()
+        .enumerate()
+        .map(|(i, &(n, began))| {
+            let until = marks.get(i + 1).map_or(end, |m| m.1);
+            (STAGE_NAMES[n - 1], (until - began).as_secs_f64())
+        })
+        .collect()
 }
 
 /// Runs the demo and writes `report.md`, `report.json` and the figures in `options.out`.
@@ -293,7 +290,12 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     std::fs::create_dir_all(out.join("figures"))
         .with_context(|| format!("creating {}", out.display()))?;
     let total = 9;
-    let stage = |n: usize, what: &str| progress.note(&format!("\n[{n}/{total}] {what}"));
+    // When each stage began (for `stage_seconds`).
+    let marks: std::cell::RefCell<Vec<(usize, Instant)>> = Default::default();
+    let stage = |n: usize, what: &str| {
+        marks.borrow_mut().push((n, Instant::now()));
+        progress.note(&format!("\n[{n}/{total}] {what}"));
+    };
     let inputs: Vec<String> = if options.data.is_empty() {
         stage(
             1,
@@ -358,6 +360,14 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     } else {
         None
     };
+    let reacting = options.reaction_siblings > 0 && options.data.is_empty();
+    // With reaction siblings: they join for the last `reaction_epochs` epochs, made from the
+    // checkpoint just before.
+    let reaction_from = options
+        .epochs
+        .saturating_sub(options.reaction_epochs)
+        .max(1);
+    let reaction_cache = out.join("cache_reaction");
     let config = scbg_train::TrainConfig {
         epochs: options.epochs,
         seed: options.seed,
@@ -365,30 +375,45 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         lane_frame_condition: options.lane_frame,
         stepwise_condition: options.stepwise,
         data_parallel_chunks: options.data_parallel_chunks.max(1),
+        reaction_cache: reacting.then(|| reaction_cache.clone()),
+        reaction_from_epoch: reacting.then_some(reaction_from),
         ..Default::default()
     };
     let predictor_dir = out.join("predictor");
-    let reacting = options.reaction_siblings > 0 && options.data.is_empty();
-    let first_dir = if reacting {
-        out.join("predictor_stage1")
-    } else {
-        predictor_dir.clone()
-    };
     scbg_base::atomic::write(
         out.join("predictor.toml"),
         &predictor::train_config_toml(&config)?,
     )?;
-    predictor::train_predictor(&cache, &first_dir, &config, false, progress)?;
-    let fidelity_stage1 = if reacting {
-        reaction_fine_tune(
-            options,
+    let fidelity_stage1 = if reacting && reaction_from < options.epochs {
+        // Another run's tables and siblings in this folder belong to another predictor.
+        for stale in [
+            out.join("labels_stage1"),
+            out.join("synth").join("reaction"),
+            reaction_cache.clone(),
+        ] {
+            if stale.is_dir() {
+                std::fs::remove_dir_all(&stale)
+                    .with_context(|| format!("removing {}", stale.display()))?;
+            }
+        }
+        predictor::train_predictor_until(
             &cache,
-            &first_dir,
             &predictor_dir,
             &config,
+            false,
+            Some(reaction_from),
             progress,
-        )?
+        )?;
+        let fidelity =
+            make_reaction_siblings(options, &cache, &predictor_dir, &reaction_cache, progress)?;
+        progress.note(&format!(
+            "training on with them (epochs {reaction_from}–{})",
+            options.epochs - 1
+        ));
+        predictor::train_predictor(&cache, &predictor_dir, &config, true, progress)?;
+        fidelity
     } else {
+        predictor::train_predictor(&cache, &predictor_dir, &config, false, progress)?;
         None
     };
     // Further members of the labelling ensemble: the same training, other seeds.
@@ -775,6 +800,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         checks: check_list.iter().map(|c| (c.key, c.passed)).collect(),
         generator_seconds,
         generator_stage_seconds,
+        stage_seconds: stage_seconds(&marks.borrow(), Instant::now()),
         seconds: started.elapsed().as_secs_f64(),
         check_list,
         scbg,

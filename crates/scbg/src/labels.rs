@@ -196,7 +196,7 @@ pub fn label_scenes(
     device: &Device,
     dataset: &PreparedDataset,
     range: std::ops::Range<usize>,
-    keep: &dyn Fn(&PreparedScene) -> bool,
+    keep: &(dyn Fn(&PreparedScene) -> bool + Sync),
     options: LabelOptions,
     seed: u64,
     progress: &dyn Progress,
@@ -248,7 +248,7 @@ pub fn label_scenes_ensemble(
     device: &Device,
     dataset: &PreparedDataset,
     range: std::ops::Range<usize>,
-    keep: &dyn Fn(&PreparedScene) -> bool,
+    keep: &(dyn Fn(&PreparedScene) -> bool + Sync),
     options: LabelOptions,
     seed: u64,
     progress: &dyn Progress,
@@ -258,22 +258,28 @@ pub fn label_scenes_ensemble(
     let scorers: Vec<(&Multipath, &scbg_features::FeatureStats)> =
         members.iter().map(|&(m, c)| (m, &c.stats)).collect();
     let pb = progress.bar("label", range.len() as u64);
-    let mut out = Vec::new();
-    for i in range {
-        let scene = dataset.scene(i)?;
-        pb.inc(1);
-        if !keep(&scene) {
-            continue;
-        }
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(scene_seed(seed, i as u64));
-        let roles = label_scene_ensemble(&scorers, &scene, &features, options, &mut rng, device);
-        out.push(SceneLabels {
-            index: i,
-            scenario_id: scene.scenario_id,
-            roles,
-        });
-    }
-    Ok(out)
+    // Scenes in parallel (each with its own seed, so the result does not depend on the
+    // threads), collected in index order.
+    use rayon::prelude::*;
+    let labelled: Vec<Option<SceneLabels>> = range
+        .into_par_iter()
+        .map(|i| {
+            let scene = dataset.scene(i)?;
+            pb.inc(1);
+            if !keep(&scene) {
+                return Ok(None);
+            }
+            let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(scene_seed(seed, i as u64));
+            let roles =
+                label_scene_ensemble(&scorers, &scene, &features, options, &mut rng, device);
+            Ok(Some(SceneLabels {
+                index: i,
+                scenario_id: scene.scenario_id,
+                roles,
+            }))
+        })
+        .collect::<anyhow::Result<_>>()?;
+    Ok(labelled.into_iter().flatten().collect())
 }
 
 /// Spearman(ψ of the logged y_B with roles (A, B) as in the ground truth, latent courtesy c)

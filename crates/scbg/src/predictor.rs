@@ -480,6 +480,9 @@ pub fn train_config_toml(config: &TrainConfig) -> anyhow::Result<String> {
 struct EpochProgress<'a> {
     progress: &'a dyn Progress,
     bar: RefCell<Option<Box<dyn Bar + 'a>>>,
+    /// Epochs done so far, and the count after which training stops (if any).
+    done: std::cell::Cell<usize>,
+    until: Option<usize>,
 }
 
 impl scbg_train::Progress for EpochProgress<'_> {
@@ -492,7 +495,11 @@ impl scbg_train::Progress for EpochProgress<'_> {
             pb.inc(1);
         }
     }
+    fn stop_requested(&self) -> bool {
+        self.until.is_some_and(|until| self.done.get() >= until)
+    }
     fn epoch_end(&self, r: &EpochReport) {
+        self.done.set(r.epoch + 1);
         self.bar.borrow_mut().take();
         self.progress.note(&format!(
             "epoch {:>3}: train loss {:.3}  val NLL {}  val minADE@8s {}  lr {:.2e}  skipped {}  {:.1}s",
@@ -516,6 +523,21 @@ pub fn train_predictor(
     resume: bool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Checkpoint> {
+    train_predictor_until(data, out, config, resume, None, progress)
+}
+
+/// [`train_predictor`] that stops once `until` epochs are done (if given), as an
+/// interruption would: `resume` continues from there (e.g. once a
+/// [`scbg_train::TrainConfig::reaction_cache`] joining at that epoch is made from the
+/// checkpoint).
+pub fn train_predictor_until(
+    data: &Path,
+    out: &Path,
+    config: &TrainConfig,
+    resume: bool,
+    until: Option<usize>,
+    progress: &dyn Progress,
+) -> anyhow::Result<Checkpoint> {
     let model = config.model_config()?;
     progress.note(&format!(
         "model: {} ({} parameters), backend {}",
@@ -531,6 +553,8 @@ pub fn train_predictor(
         &EpochProgress {
             progress,
             bar: RefCell::new(None),
+            done: Default::default(),
+            until,
         },
     )?;
     progress.note(&format!(

@@ -68,6 +68,14 @@ pub struct TrainConfig {
     /// training never drops their condition: A's future there is a reaction to an imposed B,
     /// which must teach the conditional mode only, not A's marginal behaviour.
     pub reaction_cache: Option<std::path::PathBuf>,
+    /// With `reaction_cache`: the epoch (0-based) from which its samples join the training.
+    /// Absent (the default): from the start, on top of the other samples. Given: the cache is
+    /// read only when that epoch begins, so it may be made from this very run's checkpoint
+    /// after the previous epoch (stop there, write the siblings, `--resume`), and each such
+    /// epoch trains on every reaction sample plus a seeded random subset of the other
+    /// training samples, as many samples in all as before, so the epoch length and the
+    /// learning-rate schedule do not change.
+    pub reaction_from_epoch: Option<usize>,
     /// Start from this checkpoint's weights and feature statistics instead of a fresh
     /// initialisation (fine-tuning, e.g. on a `counterfactual_cache` made with the first
     /// model): a fresh optimizer and learning-rate schedule over `epochs`. Its model
@@ -106,6 +114,7 @@ impl Default for TrainConfig {
             data_parallel_chunks: 1,
             counterfactual_cache: None,
             reaction_cache: None,
+            reaction_from_epoch: None,
             init_from: None,
             lane_frame_condition: false,
             stepwise_condition: false,
@@ -136,7 +145,8 @@ impl TrainConfig {
     }
 
     /// Checks the preset, positive `batch_size` and `epochs`, `validation_fraction` in
-    /// `[0, 1)`, a known `lr_schedule` and a finite, non-negative `classification_weight`.
+    /// `[0, 1)`, a known `lr_schedule`, a finite, non-negative `classification_weight` and a
+    /// `reaction_cache` wherever `reaction_from_epoch` is set.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.model_config()?;
         if self.batch_size == 0 || self.epochs == 0 || self.data_parallel_chunks == 0 {
@@ -158,6 +168,11 @@ impl TrainConfig {
         if !self.classification_weight.is_finite() || self.classification_weight < 0.0 {
             return Err(ConfigError::Invalid(
                 "classification_weight must be finite and >= 0".into(),
+            ));
+        }
+        if self.reaction_from_epoch.is_some() && self.reaction_cache.is_none() {
+            return Err(ConfigError::Invalid(
+                "reaction_from_epoch needs a reaction_cache".into(),
             ));
         }
         Ok(())

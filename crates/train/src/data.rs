@@ -60,7 +60,8 @@ impl SampleSet {
     }
 }
 
-/// Builds the train and validation sample sets (raw, not yet standardised), in cache order.
+/// Builds the train and validation sample sets (raw, not yet standardised), in cache order
+/// (the reaction cache's samples only when they join from the start).
 pub fn load_samples(
     dataset: &PreparedDataset,
     config: &TrainConfig,
@@ -111,18 +112,26 @@ pub fn load_samples(
             .samples
             .extend(counterfactual_samples(&siblings, config)?);
     }
-    if let Some(dir) = &config.reaction_cache {
-        let siblings = PreparedDataset::open(dir)?;
-        train.samples.extend(
-            counterfactual_samples(&siblings, config)?
-                .into_iter()
-                .map(|s| AgentSample {
-                    condition_required: true,
-                    ..s
-                }),
-        );
+    if let (Some(dir), None) = (&config.reaction_cache, config.reaction_from_epoch) {
+        train.samples.extend(reaction_samples(dir, config)?);
     }
     Ok((train, val))
+}
+
+/// The training samples of the reaction cache in `dir` (see [`TrainConfig::reaction_cache`]):
+/// [`counterfactual_samples`] whose condition is required.
+pub fn reaction_samples(
+    dir: &std::path::Path,
+    config: &TrainConfig,
+) -> Result<Vec<AgentSample>, CacheError> {
+    let siblings = PreparedDataset::open(dir)?;
+    Ok(counterfactual_samples(&siblings, config)?
+        .into_iter()
+        .map(|s| AgentSample {
+            condition_required: true,
+            ..s
+        })
+        .collect())
 }
 
 /// The training samples of a cache of counterfactual siblings (see

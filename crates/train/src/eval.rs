@@ -4,6 +4,7 @@
 //! frame as long as predictions and ground truth share it).
 
 use burn::tensor::Device;
+use rayon::prelude::*;
 use scbg_features::{AGENT_FEATURES, AgentSample};
 use scbg_metrics::{ClassifierThresholds, GroundTruth, MetricTable, Prediction};
 use scbg_model::{Batch, Multipath};
@@ -19,7 +20,8 @@ pub struct Modes {
     pub probs: Vec<f32>,
 }
 
-/// Runs the model on samples (already standardised) in batches of `batch_size`.
+/// Runs the model on samples (already standardised) in batches of `batch_size`, the batches
+/// in parallel (each batch's result does not depend on the threads), in sample order.
 pub fn predict(
     model: &Multipath,
     samples: &[&AgentSample],
@@ -27,10 +29,10 @@ pub fn predict(
     batch_size: usize,
     device: &Device,
 ) -> Vec<Modes> {
-    let mut out = Vec::with_capacity(samples.len());
-    for chunk in samples.chunks(batch_size.max(1)) {
-        let batch = Batch::for_mode(chunk, mode, device);
-        out.extend(
+    samples
+        .par_chunks(batch_size.max(1))
+        .flat_map_iter(|chunk| {
+            let batch = Batch::for_mode(chunk, mode, device);
             model
                 .forward_mode(&batch, mode)
                 .into_mixtures()
@@ -38,10 +40,9 @@ pub fn predict(
                 .map(|m| Modes {
                     xy: m.xy,
                     probs: m.probs,
-                }),
-        );
-    }
-    out
+                })
+        })
+        .collect()
 }
 
 /// Ground truth of a (raw, unstandardised) sample for the metrics; future velocities are
@@ -152,18 +153,25 @@ pub fn mean_nll(
     batch_size: usize,
     device: &Device,
 ) -> Option<f64> {
+    // Batches in parallel, summed in batch order (the same sum on any number of threads).
+    let losses: Vec<(f32, usize)> = samples
+        .par_chunks(batch_size.max(1))
+        .map(|chunk| {
+            let batch = Batch::for_mode(chunk, mode, device);
+            let loss: f32 = scbg_model::gmm_nll(
+                &model.forward_mode(&batch, mode),
+                batch.future_xy.clone(),
+                batch.future_valid.clone(),
+            )
+            .into_scalar();
+            (loss, chunk.len())
+        })
+        .collect();
     let (mut sum, mut n) = (0.0f64, 0usize);
-    for chunk in samples.chunks(batch_size.max(1)) {
-        let batch = Batch::for_mode(chunk, mode, device);
-        let loss: f32 = scbg_model::gmm_nll(
-            &model.forward_mode(&batch, mode),
-            batch.future_xy.clone(),
-            batch.future_valid.clone(),
-        )
-        .into_scalar();
+    for (loss, len) in losses {
         if loss.is_finite() {
-            sum += f64::from(loss) * chunk.len() as f64;
-            n += chunk.len();
+            sum += f64::from(loss) * len as f64;
+            n += len;
         }
     }
     (n > 0).then(|| sum / n as f64)

@@ -341,3 +341,83 @@ fn data_parallel_chunks_sum_to_the_whole_batch_gradient() {
         assert!(w != w1 || chunks == 1, "the chunked path ran");
     }
 }
+
+#[test]
+fn an_epoch_with_joined_samples_keeps_its_length_and_takes_them_all() {
+    // Nothing joined: one shuffle of every sample, as always.
+    let plain = crate::trainer::epoch_order(50, 50, 7, 3);
+    let mut sorted = plain.clone();
+    sorted.sort_unstable();
+    assert_eq!(sorted, (0..50).collect::<Vec<_>>());
+    assert_ne!(plain, sorted);
+    // 20 joined samples: all of them and 30 of the others, each once.
+    let order = crate::trainer::epoch_order(50, 70, 7, 3);
+    assert_eq!(order.len(), 50);
+    let mut sorted = order.clone();
+    sorted.sort_unstable();
+    sorted.dedup();
+    assert_eq!(sorted.len(), 50);
+    assert!((50..70).all(|i| order.contains(&i)));
+    assert_eq!(order.iter().filter(|&&i| i < 50).count(), 30);
+    // More joined samples than others: just the joined ones.
+    let order = crate::trainer::epoch_order(10, 35, 7, 3);
+    assert_eq!(order.len(), 25);
+    assert!(order.iter().all(|&i| i >= 10));
+}
+
+#[test]
+fn reaction_samples_join_at_their_epoch_made_from_the_run_itself() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let n = 16;
+    tiny_cache(&data, n);
+    let rx = dir.path().join("rx");
+    let config = TrainConfig {
+        reaction_cache: Some(rx.clone()),
+        reaction_from_epoch: Some(1),
+        ..tiny_config(2)
+    };
+    // Without a cache the option is refused.
+    let err = TrainConfig {
+        reaction_cache: None,
+        ..config.clone()
+    }
+    .validate()
+    .unwrap_err();
+    assert!(err.to_string().contains("reaction_cache"), "{err}");
+    struct Record(std::sync::Mutex<Vec<usize>>, bool);
+    impl Progress for Record {
+        fn epoch_start(&self, _epoch: usize, batches: usize) {
+            self.0.lock().unwrap().push(batches);
+        }
+        fn stop_requested(&self) -> bool {
+            self.1
+        }
+    }
+    // The first epoch runs before the cache exists (it is made from its checkpoint)...
+    let staged = dir.path().join("staged");
+    let stop = Record(Default::default(), true);
+    let first = train(&data, &staged, &config, false, &stop).unwrap();
+    assert_eq!(first.state.epoch, 1);
+    assert!(!rx.exists());
+    cache_of(
+        &rx,
+        (0..n).flat_map(|i| {
+            let s = scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::ALL);
+            (0..3).map(move |k| s.counterfactual(k, 3))
+        }),
+    );
+    // ... and the second, resumed, trains on the joined samples with as many batches.
+    let rest = Record(Default::default(), false);
+    train(&data, &staged, &config, true, &rest).unwrap();
+    assert_eq!(*rest.0.lock().unwrap(), *stop.0.lock().unwrap());
+    // The same as an uninterrupted run that finds the cache ready.
+    let straight = dir.path().join("straight");
+    train(&data, &straight, &config, false, &NoProgress).unwrap();
+    assert!(weights(&straight) == weights(&staged), "staged run differs");
+    // And not the same as a run without them.
+    let without = dir.path().join("without");
+    train(&data, &without, &tiny_config(2), false, &NoProgress).unwrap();
+    assert!(weights(&without) != weights(&staged));
+}

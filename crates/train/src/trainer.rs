@@ -147,15 +147,27 @@ pub fn train(
     let val_refs: Vec<&AgentSample> = val_set.samples.iter().collect();
     let raw_refs: Vec<&AgentSample> = raw_val.iter().collect();
     let mut last = None;
+    // The samples every epoch draws from; reaction samples joining later come after them.
+    let base_len = train_set.len();
+    let batches = base_len.div_ceil(config.batch_size);
     for epoch in state.epoch..config.epochs {
         let started = Instant::now();
-        let mut order: Vec<usize> = (0..train_set.len()).collect();
-        order.shuffle(&mut rand_pcg::Pcg64Mcg::seed_from_u64(mix(
-            config.seed,
-            epoch as u64,
-        )));
-        let batches = order.len().div_ceil(config.batch_size);
-        progress.epoch_start(epoch, batches);
+        if let (Some(dir), Some(from)) = (&config.reaction_cache, config.reaction_from_epoch)
+            && epoch >= from
+            && train_set.len() == base_len
+        {
+            let mut joining = crate::data::reaction_samples(dir, config)?;
+            for s in &mut joining {
+                stats.normalize(s);
+            }
+            tracing::info!(
+                "epoch {epoch}: {} reaction samples join the training",
+                joining.len()
+            );
+            train_set.samples.extend(joining);
+        }
+        let order = epoch_order(base_len, train_set.len(), config.seed, epoch);
+        progress.epoch_start(epoch, order.len().div_ceil(config.batch_size));
         let epoch_start_model = model.clone();
         let (mut loss_sum, mut loss_n, mut skipped) = (0.0f64, 0usize, 0usize);
         for chunk in order.chunks(config.batch_size) {
@@ -265,6 +277,22 @@ pub fn train(
         Some(c) => Ok(c),
         None => Ok(Checkpoint::read(out_dir)?),
     }
+}
+
+/// The samples of `epoch` in training order: all `len` of them, shuffled by (`seed`,
+/// `epoch`); when samples beyond the first `base_len` have joined (a reaction cache from some
+/// epoch on), all of those plus a random subset of the first `base_len`, `base_len` in all
+/// (or just the joined ones if they are more).
+pub(crate) fn epoch_order(base_len: usize, len: usize, seed: u64, epoch: usize) -> Vec<usize> {
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(mix(seed, epoch as u64));
+    let mut order: Vec<usize> = (0..base_len).collect();
+    order.shuffle(&mut rng);
+    if len > base_len {
+        order.truncate(base_len.saturating_sub(len - base_len));
+        order.extend(base_len..len);
+        order.shuffle(&mut rng);
+    }
+    order
 }
 
 /// The training loss of one batch (GMM NLL plus the weighted mode classification) on `model`.

@@ -169,12 +169,12 @@ fn demo_writes_a_report() {
         "--scenarios",
         "40",
         "--epochs",
-        "1",
+        "2",
         "--generator-epochs",
         "1",
         "--generator-seeds",
         "2",
-        // The opt-in fine-tuning on reaction siblings, end to end.
+        // Reaction siblings, made after the first epoch, join the second.
         "--reaction-siblings",
         "2",
         "--reaction-epochs",
@@ -248,13 +248,22 @@ fn demo_writes_a_report() {
     // The held-out split's share of the 40 scenes.
     let held_out = report["fidelity"]["logged"]["all"]["n"].as_u64().unwrap();
     assert!((1..40).contains(&held_out), "{report}");
-    // The first predictor's fidelity on the same held-out scenes, before its fine-tuning on
-    // the siblings of the training scenes' sampled futures.
+    // The fidelity on the same held-out scenes of the checkpoint the siblings were made with
+    // (after the first epoch), and the siblings' epoch in the predictor's history.
     assert_eq!(
         report["fidelity_stage1"]["logged"]["all"]["n"], held_out,
         "{report}"
     );
-    assert!(out.join("predictor_stage1/checkpoint.json").is_file());
+    let ckpt: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("predictor/checkpoint.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(ckpt["state"]["epoch"], 2, "{ckpt}");
+    assert_eq!(ckpt["train_config"]["reaction_from_epoch"], 1, "{ckpt}");
+    // Where the time went, stage by stage.
+    let stages = report["stage_seconds"].as_object().unwrap();
+    assert_eq!(stages.len(), 9, "{report}");
+    assert!(stages.values().all(|v| v.as_f64().unwrap() >= 0.0));
     let tuned: Value = serde_json::from_str(
         &std::fs::read_to_string(out.join("cache_reaction/manifest.json")).unwrap(),
     )

@@ -59,7 +59,7 @@ impl DemoReport {
                     "{}\n![fidelity](figures/psi_fidelity.png)\n{}",
                     f.to_markdown(),
                     self.fidelity_stage1.as_ref().map_or(String::new(), |f| format!(
-                        "\nThe first predictor, before its fine-tuning on reaction siblings:\n\n{}",
+                        "\nThe predictor before the reaction siblings joined its training:\n\n{}",
                         f.to_markdown()
                     ))
                 )
@@ -196,7 +196,7 @@ impl DemoReport {
             s += &f.to_markdown();
         }
         if let Some(f) = &self.fidelity_stage1 {
-            s += "the first predictor's, before its fine-tuning on reaction siblings:\n";
+            s += "the predictor's before the reaction siblings joined its training:\n";
             s += &f.to_markdown();
         }
         s += &self.seed_mean_markdown();
