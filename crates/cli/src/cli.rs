@@ -105,7 +105,7 @@ pub struct DemoArgs {
     )]
     pub stepwise: bool,
     /// Predictor training epochs.
-    #[arg(long, default_value_t = 26)]
+    #[arg(long, default_value_t = 30)]
     pub epochs: usize,
     /// Reaction siblings per scene: before the last --reaction-epochs epochs, replay this many
     /// of B's sampled futures (from the predictor's checkpoint there) per scene in the
