@@ -150,12 +150,14 @@ pub fn train(
     // The samples every epoch draws from; reaction samples joining later come after them.
     let base_len = train_set.len();
     let batches = base_len.div_ceil(config.batch_size);
+    let mut reaction_joined = false;
     for epoch in state.epoch..config.epochs {
         let started = Instant::now();
         if let (Some(dir), Some(from)) = (&config.reaction_cache, config.reaction_from_epoch)
             && epoch >= from
-            && train_set.len() == base_len
+            && !reaction_joined
         {
+            reaction_joined = true;
             let mut joining = crate::data::reaction_samples(dir, config)?;
             for s in &mut joining {
                 stats.normalize(s);
