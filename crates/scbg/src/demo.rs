@@ -16,19 +16,22 @@ use scbg_courtesy::label::LabelOptions;
 use scbg_features::cache::PreparedDataset;
 use scbg_generator::{Threshold, Variant};
 use scbg_train::data::{Split, split_of};
-use serde::Serialize;
 
 use crate::data::PrepareOptions;
 use crate::generator::{VariantSettings, examples_of, load_predictors, load_scbg, train_variant};
-use crate::labels::{LabelSummary, label_scenes_ensemble, write_label_outputs};
-use crate::predictor::{ModeSelection, PredictorEval, SplitSelection};
+use crate::labels::{label_scenes_ensemble, write_label_outputs};
+use crate::predictor::{ModeSelection, SplitSelection};
 use crate::scbg_eval::ScbgEval;
 use crate::synth::{GROUND_TRUTH_FILE, SynthOptions};
 use crate::{Progress, predictor};
 
 mod checks;
+mod closed_loop_stage;
+mod predictor_stage;
+mod report;
 mod text;
 pub use checks::{Check, acceptance_checks, seed_mean_std};
+pub use report::{DataReport, DemoReport, LabelsReport, STAGE_NAMES, ScbgEvalSummary};
 
 /// The demo's settings (the `scbg demo` flags).
 #[derive(Debug, Clone, PartialEq)]
@@ -98,191 +101,6 @@ pub struct DemoOptions {
 /// does (+0.04 ± 0.008).
 pub const DEMO_WOSAC_SCENES: usize = 10;
 
-/// The report's `data` section.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct DataReport {
-    /// The inputs (the synthetic folder or the user's patterns).
-    pub inputs: Vec<String>,
-    /// Scenarios in the cache.
-    pub scenarios: usize,
-    /// Windows in the cache.
-    pub windows: usize,
-    /// Interacting pairs in the cache.
-    pub pairs: usize,
-    /// Skipped inputs by reason.
-    pub skipped: BTreeMap<String, usize>,
-}
-
-/// The report's `labels` section.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct LabelsReport {
-    /// Labelled futures.
-    pub futures: usize,
-    /// Logged futures (pair roles).
-    pub logged: usize,
-    /// The part of ψ's spread that B's future decides.
-    pub psi_within_pair_std: f64,
-    /// Predictors whose ψ is averaged (the ensemble's size; 1 by default).
-    pub predictors: usize,
-}
-
-/// The report's `scbg_eval` section.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ScbgEvalSummary {
-    /// Held-out pair roles.
-    pub examples: usize,
-    /// |ψ_logged| above which a pair is high courtesy.
-    pub high_threshold_psi: f32,
-    /// Smallest training label.
-    pub psi_min: f32,
-    /// Largest training label.
-    pub psi_max: f32,
-    /// Figure files written in `figures/`.
-    pub figures: Vec<String>,
-}
-
-/// Everything the demo measured: `report.json` (stable keys, documented in the README).
-#[derive(Debug, Clone, Serialize)]
-pub struct DemoReport {
-    /// The data.
-    pub data: DataReport,
-    /// Table I.
-    pub predictor: PredictorEval,
-    /// The labels.
-    pub labels: LabelsReport,
-    /// Spearman(ψ of the logged future, latent courtesy) per family.
-    pub spearman_latent: BTreeMap<String, Option<f64>>,
-    /// ψ_label against the simulator's ψ_true on the held-out split (synthetic data only;
-    /// `null` otherwise).
-    pub fidelity: Option<crate::fidelity::Fidelity>,
-    /// The same over every labelled scene (the predictor's training split included), as
-    /// `labels/summary.json` has it.
-    pub fidelity_all_scenes: Option<crate::fidelity::Fidelity>,
-    /// With reaction siblings: `fidelity` of the predictor's checkpoint they were made with,
-    /// before they joined (held-out split); `null` otherwise.
-    pub fidelity_stage1: Option<crate::fidelity::Fidelity>,
-    /// The generator stage's seeds.
-    pub generator_seeds: Vec<u64>,
-    /// Table II and the correlations per variant: every number is the mean over the seeds.
-    pub variants: serde_json::Value,
-    /// The same layout with the standard deviation over the seeds.
-    pub variants_seed_std: serde_json::Value,
-    /// `variants` of each seed, in seed order.
-    pub variants_per_seed: Vec<serde_json::Value>,
-    /// Per variant, the generated futures scored by the simulator's oracle (synthetic data),
-    /// seed mean.
-    pub truth_control: serde_json::Value,
-    /// The same with the standard deviation over the seeds.
-    pub truth_control_seed_std: serde_json::Value,
-    /// The yardstick of `truth_control`: the same scoring of the synthetic world's own B at
-    /// courtesy c = q ([`crate::fidelity::WorldKnob`]); `null` without a ground truth.
-    pub truth_control_world: Option<crate::fidelity::WorldKnob>,
-    /// The other yardsticks of `truth_control`: choosing among B's labelled futures (the
-    /// generators' training candidates) by the labels and by ψ_true
-    /// ([`crate::fidelity::SelectionControl`]); `null` without a ground truth.
-    pub truth_control_selection: Option<crate::fidelity::SelectionControl>,
-    /// The evaluation's settings and figures.
-    pub scbg_eval: ScbgEvalSummary,
-    /// The closed-loop stage (full variant, first seed, held-out scenes): realised courtesy,
-    /// A's speed, B's collisions and off-road per quantile, WOSAC realism beside log replay,
-    /// constant velocity and IDM-only agents; `null` when skipped.
-    pub closed_loop: Option<crate::sim_eval::SimEval>,
-    /// The same closed-loop stage with sample and rank driving B (the ranked policy of the full
-    /// variant's first seed, re-planning at its own cadence, [`crate::sim::RANKED_REPLAN_EVERY`]
-    /// steps; without the knob-from-its-prior WOSAC score); `null` when skipped.
-    pub closed_loop_ranked: Option<crate::sim_eval::SimEval>,
-    /// Acceptance checks: key → passed.
-    pub checks: BTreeMap<&'static str, bool>,
-    /// Training time of each generator variant of the first seed, seconds.
-    pub generator_seconds: BTreeMap<String, f64>,
-    /// Wall time of the whole generator stage (every seed, side by side), seconds.
-    pub generator_stage_seconds: f64,
-    /// Wall time of each stage that ran, seconds, by [`STAGE_NAMES`].
-    pub stage_seconds: BTreeMap<&'static str, f64>,
-    /// Wall time of the demo, seconds.
-    pub seconds: f64,
-    /// The checks with their texts (report.md).
-    #[serde(skip)]
-    pub check_list: Vec<Check>,
-    /// The SCBG evaluation of the first seed (report.md's detailed tables and figures).
-    #[serde(skip)]
-    pub scbg: ScbgEval,
-    /// The label summary (report.md).
-    #[serde(skip)]
-    pub label_summary: LabelSummary,
-}
-
-/// The demo's reaction siblings ([`DemoOptions::reaction_siblings`]): labels the cache with
-/// the predictor's checkpoint in `predictor` (the epoch they join at), writing
-/// `labels_stage1/` and the siblings to `synth/reaction/`, and prepares them as
-/// `reaction_cache`. Returns that checkpoint's held-out fidelity.
-fn make_reaction_siblings(
-    options: &DemoOptions,
-    cache: &Path,
-    predictor: &Path,
-    reaction_cache: &Path,
-    progress: &dyn Progress,
-) -> anyhow::Result<Option<crate::fidelity::Fidelity>> {
-    let root = &options.out;
-    let siblings = root.join("synth").join("reaction");
-    progress.note(&format!(
-        "replaying {} sampled futures of B per scene in the synthetic world (reaction siblings)",
-        options.reaction_siblings
-    ));
-    let (_, summary) = crate::labels::label_cache(
-        &crate::labels::LabelRun {
-            model: predictor.to_path_buf(),
-            ensemble: Vec::new(),
-            data: cache.to_path_buf(),
-            out: root.join("labels_stage1"),
-            options: options.labels,
-            seed: options.seed,
-            ground_truth: Some(root.join("synth").join(GROUND_TRUTH_FILE)),
-            shard_index: 0,
-            num_shards: 1,
-            reaction_siblings: Some((siblings.clone(), options.reaction_siblings)),
-        },
-        progress,
-    )?;
-    crate::data::prepare(
-        &PrepareOptions {
-            files_per_shard: 4,
-            ..PrepareOptions::new(
-                vec![siblings.display().to_string()],
-                reaction_cache.to_path_buf(),
-            )
-        },
-        progress,
-    )?;
-    Ok(summary.fidelity_held_out)
-}
-
-/// The demo's stages, in order: the keys of [`DemoReport::stage_seconds`].
-pub const STAGE_NAMES: [&str; 9] = [
-    "data",
-    "cache",
-    "predictor",
-    "predictor_eval",
-    "labels",
-    "generators",
-    "generator_eval",
-    "closed_loop",
-    "report",
-];
-
-/// Each stage's wall time from when the stages began (`(stage number, start)`, in order) and
-/// when the last one ended.
-fn stage_seconds(marks: &[(usize, Instant)], end: Instant) -> BTreeMap<&'static str, f64> {
-    marks
-        .iter()
-        .enumerate()
-        .map(|(i, &(n, began))| {
-            let until = marks.get(i + 1).map_or(end, |m| m.1);
-            (STAGE_NAMES[n - 1], (until - began).as_secs_f64())
-        })
-        .collect()
-}
-
 /// Runs the demo and writes `report.md`, `report.json` and the figures in `options.out`.
 pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Result<DemoReport> {
     let started = Instant::now();
@@ -339,107 +157,14 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             options.epochs
         ),
     );
-    let counterfactual_cache = if options.data.is_empty() && options.counterfactuals > 0 {
-        let dir = out.join("cache_counterfactual");
-        crate::data::prepare(
-            &PrepareOptions {
-                files_per_shard: 4,
-                ..PrepareOptions::new(
-                    vec![
-                        out.join("synth")
-                            .join(crate::synth::COUNTERFACTUAL_DIR)
-                            .display()
-                            .to_string(),
-                    ],
-                    dir.clone(),
-                )
-            },
-            progress,
-        )?;
-        Some(dir)
-    } else {
-        None
-    };
-    let reacting = options.reaction_siblings > 0 && options.data.is_empty();
-    // With reaction siblings: they join for the last `reaction_epochs` epochs, made from the
-    // checkpoint just before.
-    let reaction_from = options
-        .epochs
-        .saturating_sub(options.reaction_epochs)
-        .max(1);
-    let reaction_cache = out.join("cache_reaction");
-    let config = scbg_train::TrainConfig {
-        epochs: options.epochs,
-        seed: options.seed,
-        counterfactual_cache,
-        lane_frame_condition: options.lane_frame,
-        stepwise_condition: options.stepwise,
-        data_parallel_chunks: options.data_parallel_chunks.max(1),
-        reaction_cache: reacting.then(|| reaction_cache.clone()),
-        reaction_from_epoch: reacting.then_some(reaction_from),
-        ..Default::default()
-    };
-    let predictor_dir = out.join("predictor");
-    scbg_base::atomic::write(
-        out.join("predictor.toml"),
-        &predictor::train_config_toml(&config)?,
-    )?;
-    let fidelity_stage1 = if reacting && reaction_from < options.epochs {
-        // Another run's tables and siblings in this folder belong to another predictor.
-        for stale in [
-            out.join("labels_stage1"),
-            out.join("synth").join("reaction"),
-            reaction_cache.clone(),
-        ] {
-            if stale.is_dir() {
-                std::fs::remove_dir_all(&stale)
-                    .with_context(|| format!("removing {}", stale.display()))?;
-            }
-        }
-        predictor::train_predictor_until(
-            &cache,
-            &predictor_dir,
-            &config,
-            false,
-            Some(reaction_from),
-            progress,
-        )?;
-        let fidelity =
-            make_reaction_siblings(options, &cache, &predictor_dir, &reaction_cache, progress)?;
-        progress.note(&format!(
-            "training on with them (epochs {reaction_from}–{})",
-            options.epochs - 1
-        ));
-        predictor::train_predictor(&cache, &predictor_dir, &config, true, progress)?;
-        fidelity
-    } else {
-        predictor::train_predictor(&cache, &predictor_dir, &config, false, progress)?;
-        None
-    };
-    // Further members of the labelling ensemble: the same training, other seeds.
-    let mut ensemble_dirs = Vec::new();
-    for k in 1..options.predictors.max(1) as u64 {
-        let dir = out.join(format!("predictor_seed{k}"));
-        progress.note(&format!(
-            "training ensemble member {} of {} (seed {})",
-            k + 1,
-            options.predictors,
-            options.seed + k
-        ));
-        let member = scbg_train::TrainConfig {
-            seed: options.seed + k,
-            ..config.clone()
-        };
-        predictor::train_predictor(&cache, &dir, &member, false, progress)?;
-        ensemble_dirs.push(dir);
-    }
+    let trained = predictor_stage::train_predictors(options, &cache, progress)?;
 
     stage(
         4,
         "evaluating the predictor (held-out scenarios) beside the baselines",
     );
     let eval = predictor::evaluate_predictor(
-        &predictor_dir,
+        &trained.dir,
         &cache,
         ModeSelection::Both,
         SplitSelection::Validation,
@@ -453,9 +178,10 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             options.labels.samples
         ),
     );
-    let predictors = load_predictors(&predictor_dir)?;
+    let predictors = load_predictors(&trained.dir)?;
     let dataset = PreparedDataset::open(&cache)?;
-    let others = ensemble_dirs
+    let others = trained
+        .ensemble_dirs
         .iter()
         .map(|dir| {
             let ckpt = scbg_train::Checkpoint::read(dir)?;
@@ -666,72 +392,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             8,
             "closed loop: the full generator, then sample and rank, drive B among reactive agents on held-out scenes (realised courtesy, WOSAC realism)",
         );
-        // The full variant of the first seed and the held-out scenes, once for both policies.
-        let loaded = (|| -> anyhow::Result<_> {
-            let model = load_scbg(&out.join(generator_dir_name(Variant::Full, 0)), None)?;
-            let (scenes, _) = crate::sim_eval::load_scenes(
-                &inputs,
-                truth.as_deref(),
-                crate::predictor::SplitSelection::Validation,
-                vf,
-                options.closed_loop_scenes,
-            )?;
-            Ok((model, scenes))
-        })();
-        match loaded {
-            Err(err) => {
-                progress.note(&format!("the closed-loop stage failed: {err:#}"));
-                (None, None)
-            }
-            Ok((mut model, scenes)) => {
-                let mut run = |policy: crate::choices::Policy| {
-                    model.scbg.policy = policy;
-                    let eval_options = crate::sim_eval::SimEvalOptions {
-                        scenes: options.closed_loop_scenes,
-                        wosac_scenes: options.closed_loop_scenes.min(DEMO_WOSAC_SCENES),
-                        wosac_prior: policy == crate::choices::Policy::Generator,
-                        ..crate::sim_eval::SimEvalOptions::of_policy(policy)
-                    };
-                    let figures = match policy {
-                        crate::choices::Policy::Generator => out.join("figures"),
-                        crate::choices::Policy::Ranked => out.join("figures/closed_loop_ranked"),
-                    };
-                    let result = crate::sim_eval::evaluate_sim(&model, &scenes, &eval_options)
-                        .and_then(|eval| {
-                            crate::sim_eval::write_figures(&eval, &figures)?;
-                            Ok(eval)
-                        });
-                    match result {
-                        Ok(eval) => {
-                            progress.note(&format!(
-                                "closed loop ({}): {} scenes in {:.0} s; Spearman(quantile, realised courtesy) {}",
-                                eval.policy,
-                                eval.curve.scenes,
-                                eval.seconds,
-                                eval.curve
-                                    .spearman_quantile_realised_courtesy
-                                    .get("all")
-                                    .copied()
-                                    .flatten()
-                                    .map_or("-".into(), |r| format!("{r:.3}"))
-                            ));
-                            Some(eval)
-                        }
-                        Err(err) => {
-                            progress.note(&format!(
-                                "the closed-loop stage ({}) failed: {err:#}",
-                                policy.name()
-                            ));
-                            None
-                        }
-                    }
-                };
-                (
-                    run(crate::choices::Policy::Generator),
-                    run(crate::choices::Policy::Ranked),
-                )
-            }
-        }
+        closed_loop_stage::closed_loop_stage(options, &inputs, truth.as_deref(), vf, progress)
     };
 
     stage(9, "writing figures and the report");
@@ -779,7 +440,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             .collect(),
         fidelity,
         fidelity_all_scenes: label_summary.fidelity.clone(),
-        fidelity_stage1,
+        fidelity_stage1: trained.fidelity_stage1,
         generator_seeds: seeds.clone(),
         variants: variants_mean,
         variants_seed_std: variants_std,
@@ -800,7 +461,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         checks: check_list.iter().map(|c| (c.key, c.passed)).collect(),
         generator_seconds,
         generator_stage_seconds,
-        stage_seconds: stage_seconds(&marks.borrow(), Instant::now()),
+        stage_seconds: report::stage_seconds(&marks.borrow(), Instant::now()),
         seconds: started.elapsed().as_secs_f64(),
         check_list,
         scbg,

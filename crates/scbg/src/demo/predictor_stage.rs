@@ -1,0 +1,177 @@
+//! The demo's predictor stage: the Multipath++ predictor's one training run, with the
+//! reaction siblings made from its own checkpoint partway (issue 11), and the further members
+//! of a labelling ensemble.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+
+use super::DemoOptions;
+use crate::data::PrepareOptions;
+use crate::synth::GROUND_TRUTH_FILE;
+use crate::{Progress, predictor};
+
+/// What the predictor stage leaves for the rest of the demo.
+pub(super) struct TrainedPredictors {
+    /// The predictor: the generators' J_φ, the one evaluated, the ensemble's first member.
+    pub dir: PathBuf,
+    /// The further members of the labelling ensemble ([`DemoOptions::predictors`]).
+    pub ensemble_dirs: Vec<PathBuf>,
+    /// With reaction siblings: the held-out fidelity of the checkpoint they were made with.
+    pub fidelity_stage1: Option<crate::fidelity::Fidelity>,
+}
+
+/// Trains the predictor on `cache` (and the counterfactual and reaction siblings the options
+/// ask for) into `out/predictor`, writing `out/predictor.toml`, then the ensemble's further
+/// members.
+pub(super) fn train_predictors(
+    options: &DemoOptions,
+    cache: &Path,
+    progress: &dyn Progress,
+) -> anyhow::Result<TrainedPredictors> {
+    let out = &options.out;
+    let counterfactual_cache = if options.data.is_empty() && options.counterfactuals > 0 {
+        let dir = out.join("cache_counterfactual");
+        crate::data::prepare(
+            &PrepareOptions {
+                files_per_shard: 4,
+                ..PrepareOptions::new(
+                    vec![
+                        out.join("synth")
+                            .join(crate::synth::COUNTERFACTUAL_DIR)
+                            .display()
+                            .to_string(),
+                    ],
+                    dir.clone(),
+                )
+            },
+            progress,
+        )?;
+        Some(dir)
+    } else {
+        None
+    };
+    let reacting = options.reaction_siblings > 0 && options.data.is_empty();
+    // With reaction siblings: they join for the last `reaction_epochs` epochs, made from the
+    // checkpoint just before.
+    let reaction_from = options
+        .epochs
+        .saturating_sub(options.reaction_epochs)
+        .max(1);
+    let reaction_cache = out.join("cache_reaction");
+    let config = scbg_train::TrainConfig {
+        epochs: options.epochs,
+        seed: options.seed,
+        counterfactual_cache,
+        lane_frame_condition: options.lane_frame,
+        stepwise_condition: options.stepwise,
+        data_parallel_chunks: options.data_parallel_chunks.max(1),
+        reaction_cache: reacting.then(|| reaction_cache.clone()),
+        reaction_from_epoch: reacting.then_some(reaction_from),
+        ..Default::default()
+    };
+    let predictor_dir = out.join("predictor");
+    scbg_base::atomic::write(
+        out.join("predictor.toml"),
+        &predictor::train_config_toml(&config)?,
+    )?;
+    let fidelity_stage1 = if reacting && reaction_from < options.epochs {
+        // Another run's tables and siblings in this folder belong to another predictor.
+        for stale in [
+            out.join("labels_stage1"),
+            out.join("synth").join("reaction"),
+            reaction_cache.clone(),
+        ] {
+            if stale.is_dir() {
+                std::fs::remove_dir_all(&stale)
+                    .with_context(|| format!("removing {}", stale.display()))?;
+            }
+        }
+        predictor::train_predictor_until(
+            cache,
+            &predictor_dir,
+            &config,
+            false,
+            Some(reaction_from),
+            progress,
+        )?;
+        let fidelity =
+            make_reaction_siblings(options, cache, &predictor_dir, &reaction_cache, progress)?;
+        progress.note(&format!(
+            "training on with them (epochs {reaction_from}–{})",
+            options.epochs - 1
+        ));
+        predictor::train_predictor(cache, &predictor_dir, &config, true, progress)?;
+        fidelity
+    } else {
+        predictor::train_predictor(cache, &predictor_dir, &config, false, progress)?;
+        None
+    };
+    // Further members of the labelling ensemble: the same training, other seeds.
+    let mut ensemble_dirs = Vec::new();
+    for k in 1..options.predictors.max(1) as u64 {
+        let dir = out.join(format!("predictor_seed{k}"));
+        progress.note(&format!(
+            "training ensemble member {} of {} (seed {})",
+            k + 1,
+            options.predictors,
+            options.seed + k
+        ));
+        let member = scbg_train::TrainConfig {
+            seed: options.seed + k,
+            ..config.clone()
+        };
+        predictor::train_predictor(cache, &dir, &member, false, progress)?;
+        ensemble_dirs.push(dir);
+    }
+    Ok(TrainedPredictors {
+        dir: predictor_dir,
+        ensemble_dirs,
+        fidelity_stage1,
+    })
+}
+
+/// The demo's reaction siblings ([`DemoOptions::reaction_siblings`]): labels the cache with
+/// the predictor's checkpoint in `predictor` (the epoch they join at), writing
+/// `labels_stage1/` and the siblings to `synth/reaction/`, and prepares them as
+/// `reaction_cache`. Returns that checkpoint's held-out fidelity.
+fn make_reaction_siblings(
+    options: &DemoOptions,
+    cache: &Path,
+    predictor: &Path,
+    reaction_cache: &Path,
+    progress: &dyn Progress,
+) -> anyhow::Result<Option<crate::fidelity::Fidelity>> {
+    let root = &options.out;
+    let siblings = root.join("synth").join("reaction");
+    progress.note(&format!(
+        "replaying {} sampled futures of B per scene in the synthetic world (reaction siblings)",
+        options.reaction_siblings
+    ));
+    let (_, summary) = crate::labels::label_cache(
+        &crate::labels::LabelRun {
+            model: predictor.to_path_buf(),
+            ensemble: Vec::new(),
+            data: cache.to_path_buf(),
+            out: root.join("labels_stage1"),
+            options: options.labels,
+            seed: options.seed,
+            ground_truth: Some(root.join("synth").join(GROUND_TRUTH_FILE)),
+            shard_index: 0,
+            num_shards: 1,
+            reaction_siblings: Some((siblings.clone(), options.reaction_siblings)),
+        },
+        progress,
+    )?;
+    crate::data::prepare(
+        &PrepareOptions {
+            files_per_shard: 4,
+            ..PrepareOptions::new(
+                vec![siblings.display().to_string()],
+                reaction_cache.to_path_buf(),
+            )
+        },
+        progress,
+    )?;
+    Ok(summary.fidelity_held_out)
+}
