@@ -119,8 +119,10 @@ pub struct DemoArgs {
     #[arg(long, default_value_t = 10)]
     pub reaction_epochs: usize,
     /// Data-parallel chunks of each predictor training step (the batch split into chunks whose
-    /// passes run in parallel; the same step up to rounding, ~0.8× the time on 2 cores).
-    #[arg(long, default_value_t = 1)]
+    /// passes run in parallel; the same step up to rounding, ~0.8× the time on 2 cores). Over
+    /// four paired data seeds two chunks changed no number beyond the seeds' own spread
+    /// (BENCHMARKS.md, issue 11); 1 keeps one graph per step.
+    #[arg(long, default_value_t = 2)]
     pub data_parallel_chunks: usize,
     /// Predictors to train (seeds --seed, --seed + 1, …) and label with as an ensemble (ψ
     /// averaged; the first one is the generators' J_φ). Each adds a predictor training

@@ -1,0 +1,35 @@
+#!/bin/bash
+# Issue 11's chunk question on a device machine's 16 CPU cores (no GPU used): eight `scbg demo`
+# runs side by side, two threads each -- data seeds 0-3, each with one graph per training step
+# (`--data-parallel-chunks 1`, the default) and with two data-parallel chunks. Paired by seed,
+# they say whether two chunks cost label fidelity or control (BENCHMARKS.md, "Two
+# data-parallel chunks, paired over seeds"). Carries target/devcarry/scbg.xz (a stripped
+# `cargo build --release -p scbg-cli`, xz). Stops at a deadline and keeps what each run wrote.
+set -u
+LOG=${OUT:-/tmp}/log.txt
+exec > >(tee -a "$LOG") 2>&1
+T0=$(date +%s)
+DEADLINE=${DEADLINE:-560}
+lscpu | grep -E "^Model name|^CPU\(s\)"
+mkdir -p /tmp/bin && xz -dc target/devcarry/scbg.xz > /tmp/bin/scbg && chmod +x /tmp/bin/scbg
+export SCBG_REAL_DATA=/nonexistent
+D=/tmp/d; mkdir -p $D
+for s in 0 1 2 3; do
+  for c in 1 2; do
+    /tmp/bin/scbg --threads 2 demo --out $D/s${s}_c$c --seed $s --data-parallel-chunks $c \
+      > $D/s${s}_c$c.log 2>&1 &
+  done
+done
+collect() {
+  for r in $D/s*_c?; do
+    n=$(basename $r); mkdir -p $OUT/$n
+    cp $r/report.json $r/predictor.toml $OUT/$n/ 2>/dev/null
+    for l in labels labels_stage1; do [ -f $r/$l/summary.json ] && cp $r/$l/summary.json $OUT/$n/$l.summary.json; done
+    tail -c 4000 $r.log > $OUT/$n/log_tail.txt
+  done
+}
+# Collect every 20 s: a run cut short by the call's limit still leaves its latest files.
+while [ $(( $(date +%s) - T0 )) -lt $DEADLINE ] && [ -n "$(jobs -r)" ]; do sleep 20; collect; done
+echo "stopped at $(( $(date +%s) - T0 )) s; running: $(jobs -r | wc -l)"
+collect
+ls -R $OUT | head -60
