@@ -5,6 +5,8 @@
 # they say whether two chunks cost label fidelity or control (BENCHMARKS.md, "Two
 # data-parallel chunks, paired over seeds"). Carries target/devcarry/scbg.xz (a stripped
 # `cargo build --release -p scbg-cli`, xz). Stops at a deadline and keeps what each run wrote.
+# On the H100 machine's Xeon, eight runs side by side took ~2x as long per epoch as one demo on
+# a 2-core EPYC: a 600 s call reaches epoch ~20 of 30 (BENCHMARKS.md).
 set -u
 LOG=${OUT:-/tmp}/log.txt
 exec > >(tee -a "$LOG") 2>&1
@@ -20,16 +22,13 @@ for s in 0 1 2 3; do
       > $D/s${s}_c$c.log 2>&1 &
   done
 done
+# One archive, replaced whole each time: a call returns only a few files from $OUT.
 collect() {
-  for r in $D/s*_c?; do
-    n=$(basename $r); mkdir -p $OUT/$n
-    cp $r/report.json $r/predictor.toml $OUT/$n/ 2>/dev/null
-    for l in labels labels_stage1; do [ -f $r/$l/summary.json ] && cp $r/$l/summary.json $OUT/$n/$l.summary.json; done
-    tail -c 4000 $r.log > $OUT/$n/log_tail.txt
-  done
+  (cd $D && tar czf $OUT/runs.tgz.tmp $(ls -d s*_c?/report.json s*_c?/predictor.toml \
+    s*_c?/labels*/summary.json s*_c?.log 2>/dev/null)) && mv $OUT/runs.tgz.tmp $OUT/runs.tgz
 }
 # Collect every 20 s: a run cut short by the call's limit still leaves its latest files.
 while [ $(( $(date +%s) - T0 )) -lt $DEADLINE ] && [ -n "$(jobs -r)" ]; do sleep 20; collect; done
 echo "stopped at $(( $(date +%s) - T0 )) s; running: $(jobs -r | wc -l)"
 collect
-ls -R $OUT | head -60
+ls -la $OUT
