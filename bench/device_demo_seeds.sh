@@ -1,9 +1,9 @@
 #!/bin/bash
 # Issue 11's chunk question on a device machine's 16 CPU cores (no GPU used): eight `scbg demo`
 # runs side by side, two threads each -- data seeds 0-3, each with one graph per training step
-# (`--data-parallel-chunks 1`, the default) and with two data-parallel chunks. Paired by seed,
-# they say whether two chunks cost label fidelity or control (BENCHMARKS.md, "Two
-# data-parallel chunks, paired over seeds"). Carries target/devcarry/scbg.xz (a stripped
+# (`--data-parallel-chunks 1`) and with two data-parallel chunks (the demo's default). Paired by
+# seed, they say whether two chunks cost label fidelity or control (BENCHMARKS.md, "Two
+# data-parallel chunks, paired over four data seeds"). Carries target/devcarry/scbg.xz (a stripped
 # `cargo build --release -p scbg-cli`, xz). Stops at a deadline and keeps what each run wrote.
 # On the H100 machine's Xeon, eight runs side by side took ~2x as long per epoch as one demo on
 # a 2-core EPYC: a 600 s call reaches epoch ~20 of 30 (BENCHMARKS.md).
