@@ -104,8 +104,10 @@ pub struct DemoArgs {
         value_name = "BOOL"
     )]
     pub stepwise: bool,
-    /// Predictor training epochs.
-    #[arg(long, default_value_t = 30)]
+    /// Predictor training epochs (34 since the twenty-fourth session: with two data-parallel
+    /// chunks the four extra epochs before the reaction siblings raised control in truth in
+    /// four paired data seeds of four; BENCHMARKS.md, issue 11).
+    #[arg(long, default_value_t = 34)]
     pub epochs: usize,
     /// Reaction siblings per scene: before the last --reaction-epochs epochs, replay this many
     /// of B's sampled futures (from the predictor's checkpoint there) per scene in the
