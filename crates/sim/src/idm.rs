@@ -291,10 +291,19 @@ fn occupied(arrival: &impl Fn(f64) -> Option<f64>, s_in: f64, s_out: f64, tau: f
 const SIDE_CLEARANCE_M: f64 = 0.8;
 /// Time in which the bounded steering turns the agent parallel to the one alongside, s.
 const SIDE_ALIGN_S: f64 = 0.5;
+/// An agent behind that catches up counts as alongside from as far back as it closes in this
+/// many seconds (a slow B at 13 m/s moving over into the lane of A coming up at 24 m/s was hit
+/// from behind-left, A's centre 1.6 m behind B's: bounded only once A was alongside, B was
+/// already in its way; BENCHMARKS.md).
+const SIDE_CATCH_UP_S: f64 = 3.0;
+/// A catching-up agent whose box overlaps mine sideways by more than this is behind me in my
+/// lane, not in the next one, m.
+const SIDE_SAME_LANE_M: f64 = 0.5;
 
 /// Steering bounds `(min, max)` (rad, positive left) that keep an agent from turning toward
 /// another one alongside it: an agent heading within 30° of its heading whose centre is within
-/// half the two lengths plus 1 m along it and whose box is less than 0.8 m away to one side.
+/// half the two lengths plus 1 m along it (behind it, plus what the other closes on it in
+/// 3 s) and whose box is less than 0.8 m away to one side.
 /// Toward such an agent the steering may at most turn the agent parallel to it within 0.5 s
 /// (the bicycle's yaw rate `v·tan δ / wheelbase`). `None` when nobody is alongside.
 pub(crate) fn side_steer_bounds(
@@ -314,9 +323,19 @@ pub(crate) fn side_steer_bounds(
         let along = dx * cs + dy * sn;
         let left = -dx * sn + dy * cs;
         let clearance = left.abs() - 0.5 * f64::from(me.width_m + o.width_m);
-        if along.abs() > 0.5 * f64::from(me.length_m + o.length_m) + 1.0
-            || clearance > SIDE_CLEARANCE_M
-        {
+        // Behind me, an agent catching up counts from as far back as it closes in
+        // SIDE_CATCH_UP_S: turning toward it then would put me in its way as it arrives.
+        let closing = (f64::from(o.velocity_x_mps) * cs + f64::from(o.velocity_y_mps) * sn
+            - speed_mps)
+            .max(0.0);
+        // (Only one in the next lane: one behind me in mine is for the leader rule.)
+        let alongside = 0.5 * f64::from(me.length_m + o.length_m) + 1.0;
+        let reach = if along < -alongside && clearance > -SIDE_SAME_LANE_M {
+            alongside + closing * SIDE_CATCH_UP_S
+        } else {
+            alongside
+        };
+        if along.abs() > reach || clearance > SIDE_CLEARANCE_M {
             continue;
         }
         // The steering that turns me parallel to it within SIDE_ALIGN_S.
@@ -721,6 +740,15 @@ mod tests {
         assert_eq!(bounds(&[&at(8.0, 2.5, 0.0)]), None);
         assert_eq!(bounds(&[&at(0.0, 3.0, 0.0)]), None);
         assert_eq!(bounds(&[&at(0.0, 2.5, 90.0)]), None);
+        // 15 m behind in the next lane: counted while it closes on me (at 20 m/s against my
+        // 10 it is alongside in 1.5 s), not at my own speed.
+        let behind = |speed_mps: f32| AgentState {
+            velocity_x_mps: speed_mps,
+            velocity_y_mps: 0.0,
+            ..at(-15.0, 2.5, 0.0)
+        };
+        assert_eq!(bounds(&[&behind(10.0)]), None);
+        assert_eq!(bounds(&[&behind(20.0)]), Some((f64::NEG_INFINITY, 0.0)));
     }
 
     #[test]

@@ -22,8 +22,15 @@ pub const REACH_M: f64 = 6.0;
 /// the crossing road's lane it happens to lie on.
 pub const MAX_ANGLE_COS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 /// Plan points less than this apart (over two steps) are standing: they keep the direction
-/// the plan had before (m).
+/// the plan had before (m). Used only where the plan spans less than [`CHORD_M`] on both sides
+/// of a point.
 pub const MOVING_M: f64 = 0.2;
+/// The plan's direction at a point is that of the chord from the last point at least this far
+/// behind it to the first point at least this far ahead (either end alone where the other does
+/// not exist), m: a plan that slows to a stand wiggles by decimetres, and a direction taken
+/// over two steps there can point across the road — onto the crossing road's lanes at an
+/// intersection, which then pulled B's points 5 m sideways into A's lane (BENCHMARKS.md).
+pub const CHORD_M: f64 = 2.0;
 
 /// The car-lane centre-line segments of a map (every lane but bike lanes), listed once per
 /// simulation: the map does not change while plans are made.
@@ -79,20 +86,7 @@ impl LaneSegments {
                     && a[1].min(b[1]) <= hi[1]
             })
             .collect();
-        // The plan's direction at each point (central difference; where the plan stands, the
-        // last direction it had, or none before it first moves).
-        let n = plan.len();
-        let mut heading: Vec<Option<[f64; 2]>> = Vec::with_capacity(n);
-        let mut last = None;
-        for k in 0..n {
-            let (a, b) = (plan[k.saturating_sub(1)], plan[(k + 1).min(n - 1)]);
-            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-            let len = dx.hypot(dy);
-            if len >= MOVING_M {
-                last = Some([dx / len, dy / len]);
-            }
-            heading.push(last);
-        }
+        let heading = plan_directions(plan);
         let mut moved = 0;
         for (p, heading) in plan.iter_mut().zip(heading) {
             let mut best = (REACH_M * REACH_M, None);
@@ -126,6 +120,35 @@ impl LaneSegments {
         }
         moved
     }
+}
+
+/// The plan's direction at each point: the chord over [`CHORD_M`] on either side
+/// ([`CHORD_M`]'s docs); where the plan spans less than that on both sides, the central
+/// difference over two steps, or where that stands (under [`MOVING_M`]) the last direction the
+/// plan had, or none before it first moves.
+fn plan_directions(plan: &[[f64; 2]]) -> Vec<Option<[f64; 2]>> {
+    let n = plan.len();
+    let dist = |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]).hypot(b[1] - a[1]);
+    let unit = |a: [f64; 2], b: [f64; 2]| {
+        let len = dist(a, b);
+        (len >= MOVING_M).then(|| [(b[0] - a[0]) / len, (b[1] - a[1]) / len])
+    };
+    let mut out = Vec::with_capacity(n);
+    let mut last = None;
+    for k in 0..n {
+        let p = plan[k];
+        let behind = (0..k).rev().find(|&j| dist(plan[j], p) >= CHORD_M);
+        let ahead = (k + 1..n).find(|&j| dist(p, plan[j]) >= CHORD_M);
+        let direction = match (behind, ahead) {
+            (None, None) => unit(plan[k.saturating_sub(1)], plan[(k + 1).min(n - 1)]),
+            (b, a) => unit(plan[b.unwrap_or(k)], plan[a.unwrap_or(k)]),
+        };
+        if direction.is_some() {
+            last = direction;
+        }
+        out.push(last);
+    }
+    out
 }
 
 #[cfg(test)]
@@ -194,5 +217,50 @@ mod tests {
         let mut p = vec![[15.0, -2.0]];
         assert_eq!(LaneSegments::new(&bike).keep_near(&mut p, 0.5), 0);
         assert_eq!(p[0], [15.0, -2.0]);
+    }
+
+    #[test]
+    fn a_plan_wiggling_to_a_stand_before_a_crossing_road_is_not_pulled_onto_it() {
+        // B's lane heads +y and ends at y = 0; the crossing road's lane runs along x at
+        // y = 2.5. B's plan comes up its lane and stands just past the stop line, wiggling
+        // sideways by half a metre: over two steps it heads along x there.
+        let map = Map {
+            lanes: vec![
+                Lane {
+                    lane_type: LaneType::SurfaceStreet,
+                    polyline: (0..=5)
+                        .map(|i| MapPoint {
+                            x_m: 0.0,
+                            y_m: 10.0 * f64::from(i) - 50.0,
+                            z_m: 0.0,
+                        })
+                        .collect(),
+                    ..Lane::default()
+                },
+                Lane {
+                    lane_type: LaneType::SurfaceStreet,
+                    polyline: (0..=10)
+                        .map(|i| MapPoint {
+                            x_m: 10.0 * f64::from(i) - 50.0,
+                            y_m: 2.5,
+                            z_m: 0.0,
+                        })
+                        .collect(),
+                    ..Lane::default()
+                },
+            ],
+            ..Map::default()
+        };
+        let mut plan: Vec<[f64; 2]> = (0..10).map(|k| [0.0, f64::from(k) - 9.0]).collect();
+        plan.extend([[0.0, 0.5], [0.5, 0.6], [1.0, 0.7], [0.5, 0.8], [0.0, 0.9]]);
+        LaneSegments::new(&map).keep_near(&mut plan, 0.25);
+        for p in &plan {
+            assert!(p[1] < 1.0, "{p:?} pulled toward the crossing road");
+        }
+        // Its own lane's end pulls the wiggle back toward it instead.
+        assert!(plan[11][0] < 0.5 && plan[12][0] < 1.0);
+        // The direction over two steps alone would have taken the crossing road's lane.
+        let two_step = plan_directions(&[[0.0, 0.5], [0.5, 0.6], [1.0, 0.7]]);
+        assert!(two_step[1].is_some_and(|h| h[0] > 0.9));
     }
 }
