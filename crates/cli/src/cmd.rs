@@ -447,6 +447,7 @@ fn label_options(
         estimator.audience_weighting,
     )
     .map_err(anyhow::Error::msg)?;
+    options.baseline_samples = estimator.baseline_samples;
     Ok(options)
 }
 

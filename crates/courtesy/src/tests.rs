@@ -332,6 +332,7 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
             marginal,
             sample_noise: 1.0,
             audience,
+            baseline_samples: 0,
         };
         let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(9);
         let all = label_role(
@@ -394,6 +395,58 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
 }
 
 #[test]
+fn baseline_samples_widen_the_marginal_estimate_and_label_only_the_first_futures() {
+    use crate::label::{LabelOptions, MarginalEstimate, label_pair, marginal_mixtures};
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex();
+    device.seed(6);
+    let model = MultipathConfig::cpu_small().init(&device);
+    let (scene, cfg) = audience_setup();
+    let w = scene.windows[0];
+    let pair = scene.pairs[0][0];
+    let mut builder = SampleBuilder::new(&scene, &cfg);
+    let a_raw = builder.sample(&w, pair.first, Some(pair.second)).unwrap();
+    let stats = FeatureStats::fit([&a_raw]);
+    let (mut a, mut b) = (a_raw, builder.sample(&w, pair.second, None).unwrap());
+    stats.normalize(&mut a);
+    stats.normalize(&mut b);
+    let mixture = marginal_mixtures(&model, &[&b], &device).remove(0);
+    let options = |samples, baseline_samples| LabelOptions {
+        samples,
+        reward: Reward::AverageSpeed,
+        marginal: MarginalEstimate::ConditionalAverage,
+        sample_noise: 1.0,
+        audience: Audience::Pair,
+        baseline_samples,
+    };
+    let label = |o| {
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
+        label_pair(&model, &a, &b, &mixture, o, &mut rng, &device)
+    };
+    // 3 labelled futures and 5 more for the baseline draw the same 8 futures as 8 labelled
+    // ones: the first 4 (logged + 3) are the same, scored the same, against the same mean.
+    let wide = label(options(3, 5));
+    let all = label(options(8, 0));
+    let narrow = label(options(3, 0));
+    assert_eq!(wide.psi.len(), 4);
+    assert_eq!(wide.futures_in_a, all.futures_in_a[..4].to_vec());
+    assert_eq!(wide.e_cond, all.e_cond[..4].to_vec());
+    assert_eq!(wide.e_marg, all.e_marg);
+    let mean8 = all.e_cond[1..].iter().sum::<f32>() / 8.0;
+    assert!((wide.e_marg - mean8).abs() < 1e-5 * (1.0 + mean8.abs()));
+    for k in 0..4 {
+        assert!((wide.psi[k] - (wide.e_cond[k] - wide.e_marg)).abs() < 1e-6);
+    }
+    // Without them the baseline is the mean over the 3 labelled futures alone.
+    for (n, w) in narrow.e_cond.iter().zip(&wide.e_cond) {
+        assert!((n - w).abs() < 1e-5 * (1.0 + w.abs()), "{n} vs {w}");
+    }
+    let mean3 = narrow.e_cond[1..].iter().sum::<f32>() / 3.0;
+    assert!((narrow.e_marg - mean3).abs() < 1e-5 * (1.0 + mean3.abs()));
+    assert_ne!(narrow.e_marg, wide.e_marg);
+}
+
+#[test]
 fn an_ensemble_scores_the_first_members_futures_with_every_member_and_averages() {
     use crate::label::{
         LabelOptions, MarginalEstimate, label_role, label_scene, label_scene_ensemble,
@@ -424,6 +477,7 @@ fn an_ensemble_scores_the_first_members_futures_with_every_member_and_averages()
         marginal: MarginalEstimate::ConditionalAverage,
         sample_noise: 1.0,
         audience: Audience::Pair,
+        baseline_samples: 0,
     };
     let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(4);
     let label = |members: &[(&Multipath, &FeatureStats)]| {

@@ -71,6 +71,7 @@ fn labelled(
             marginal: MarginalEstimate::Direct,
             sample_noise: 1.0,
             audience: Default::default(),
+            baseline_samples: 0,
         },
         seed,
         device,
@@ -433,6 +434,7 @@ fn untrained_scbg(
             marginal: MarginalEstimate::ConditionalAverage,
             sample_noise: 1.0,
             audience: Default::default(),
+            baseline_samples: 0,
         },
         policy,
     };
@@ -626,6 +628,7 @@ fn labelled_toward_neighbours(
             marginal: MarginalEstimate::ConditionalAverage,
             sample_noise: 1.0,
             audience,
+            baseline_samples: 0,
         },
         4,
         device,

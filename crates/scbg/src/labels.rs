@@ -374,6 +374,9 @@ pub struct LabelSummary {
     pub pairs_roles: usize,
     /// Futures sampled from B's marginal prediction per pair role.
     pub samples_per_pair: usize,
+    /// More futures of B sampled per pair role for the estimate of E[r(Y_A) | x] alone
+    /// ([`LabelOptions::baseline_samples`]).
+    pub baseline_samples: usize,
     /// The reward r(y_A).
     pub reward: Reward,
     /// How E[r(Y_A) | x] was estimated.
@@ -419,6 +422,7 @@ impl LabelSummary {
             predictors: 1,
             pairs_roles: logged.len(),
             samples_per_pair: options.samples,
+            baseline_samples: options.baseline_samples,
             reward: options.reward,
             marginal: options.marginal,
             sample_noise: options.sample_noise,
@@ -467,6 +471,14 @@ impl LabelSummary {
             self.psi_within_pair_std,
             100.0 * self.psi_all.fraction_abs_gt_2
         );
+        if self.baseline_samples > 0
+            && self.marginal == scbg_courtesy::label::MarginalEstimate::ConditionalAverage
+        {
+            s += &format!(
+                "; E[r | x] averaged over {} sampled futures of B",
+                self.samples_per_pair + self.baseline_samples
+            );
+        }
         if self.predictors > 1 {
             s += &format!(
                 "\nψ averaged over an ensemble of {} predictors",
@@ -548,6 +560,7 @@ pub fn label_options(
         marginal,
         sample_noise,
         audience: Default::default(),
+        baseline_samples: 0,
     })
 }
 
