@@ -170,6 +170,22 @@ mod tests {
         }
     }
 
+    /// A lane heading +y along `x` over `ys` (points 10 m apart).
+    fn lane_along_y(x: f64, ys: std::ops::RangeInclusive<f64>) -> Lane {
+        let n = ((ys.end() - ys.start()) / 10.0).round() as u32;
+        Lane {
+            lane_type: LaneType::SurfaceStreet,
+            polyline: (0..=n)
+                .map(|i| MapPoint {
+                    x_m: x,
+                    y_m: ys.start() + 10.0 * f64::from(i),
+                    z_m: 0.0,
+                })
+                .collect(),
+            ..Lane::default()
+        }
+    }
+
     #[test]
     fn points_off_the_lane_come_back_and_points_on_it_stay() {
         let map = Map {
@@ -194,17 +210,7 @@ mod tests {
         // A lane across the plan's way does not count: a plan heading +x drifting onto a
         // lane along y is pulled to the nearest lane along x (out of reach here: unchanged).
         let crossing = Map {
-            lanes: vec![Lane {
-                lane_type: LaneType::SurfaceStreet,
-                polyline: (0..=10)
-                    .map(|i| MapPoint {
-                        x_m: 50.0,
-                        y_m: 10.0 * f64::from(i) - 50.0,
-                        z_m: 0.0,
-                    })
-                    .collect(),
-                ..Lane::default()
-            }],
+            lanes: vec![lane_along_y(50.0, -50.0..=50.0)],
             ..Map::default()
         };
         let mut p = vec![[48.0, 20.0], [49.0, 20.0], [50.0, 20.0]];
@@ -221,44 +227,30 @@ mod tests {
 
     #[test]
     fn a_plan_wiggling_to_a_stand_before_a_crossing_road_is_not_pulled_onto_it() {
-        // B's lane heads +y and ends at y = 0; the crossing road's lane runs along x at
-        // y = 2.5. B's plan comes up its lane and stands just past the stop line, wiggling
+        // B's lane heads +y along x = 50 and ends at y = 0; the crossing road's lane runs
+        // along x at y = 2.5. B's plan comes up its lane and stands just past the stop line, wiggling
         // sideways by half a metre: over two steps it heads along x there.
         let map = Map {
             lanes: vec![
-                Lane {
-                    lane_type: LaneType::SurfaceStreet,
-                    polyline: (0..=5)
-                        .map(|i| MapPoint {
-                            x_m: 0.0,
-                            y_m: 10.0 * f64::from(i) - 50.0,
-                            z_m: 0.0,
-                        })
-                        .collect(),
-                    ..Lane::default()
-                },
-                Lane {
-                    lane_type: LaneType::SurfaceStreet,
-                    polyline: (0..=10)
-                        .map(|i| MapPoint {
-                            x_m: 10.0 * f64::from(i) - 50.0,
-                            y_m: 2.5,
-                            z_m: 0.0,
-                        })
-                        .collect(),
-                    ..Lane::default()
-                },
+                lane_along_y(50.0, -50.0..=0.0),
+                lane(2.5, LaneType::SurfaceStreet),
             ],
             ..Map::default()
         };
-        let mut plan: Vec<[f64; 2]> = (0..10).map(|k| [0.0, f64::from(k) - 9.0]).collect();
-        plan.extend([[0.0, 0.5], [0.5, 0.6], [1.0, 0.7], [0.5, 0.8], [0.0, 0.9]]);
+        let mut plan: Vec<[f64; 2]> = (0..10).map(|k| [50.0, f64::from(k) - 9.0]).collect();
+        plan.extend([
+            [50.0, 0.5],
+            [50.5, 0.6],
+            [51.0, 0.7],
+            [50.5, 0.8],
+            [50.0, 0.9],
+        ]);
         LaneSegments::new(&map).keep_near(&mut plan, 0.25);
         for p in &plan {
             assert!(p[1] < 1.0, "{p:?} pulled toward the crossing road");
         }
         // Its own lane's end pulls the wiggle back toward it instead.
-        assert!(plan[11][0] < 0.5 && plan[12][0] < 1.0);
+        assert!(plan[11][0] < 50.5 && plan[12][0] < 51.0);
         // The direction over two steps alone would have taken the crossing road's lane.
         let two_step = plan_directions(&[[0.0, 0.5], [0.5, 0.6], [1.0, 0.7]]);
         assert!(two_step[1].is_some_and(|h| h[0] > 0.9));
