@@ -294,7 +294,7 @@ pub fn label_role(
     }
     // Every future scored, the baseline's extra ones included.
     let n_all = 1 + sampled.len();
-    let mut cond = Vec::with_capacity(members.len() * n * t * 3);
+    let mut cond = Vec::with_capacity(members.len() * n_all * t * 3);
     let mut futures_in_a = Vec::new();
     for (j, &(s, _)) in members.iter().enumerate() {
         let logged: Vec<[f32; 2]> = (0..t)
