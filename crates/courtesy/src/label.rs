@@ -244,6 +244,17 @@ pub struct LabelOptions {
     pub baseline_samples: usize,
 }
 
+impl LabelOptions {
+    /// The futures of B drawn for E[r(Y_A) | x] alone: `baseline_samples` with
+    /// [`MarginalEstimate::ConditionalAverage`], none with the direct estimate (it uses none).
+    pub fn baseline_futures(&self) -> usize {
+        match self.marginal {
+            MarginalEstimate::ConditionalAverage => self.baseline_samples,
+            MarginalEstimate::Direct => 0,
+        }
+    }
+}
+
 /// Labels one ordered pair. `a` is A's standardised sample conditioned on B's logged future;
 /// `b` is B's standardised marginal sample; `b_mixture` is B's marginal prediction.
 pub fn label_pair(
@@ -279,7 +290,6 @@ pub fn label_role(
         reward,
         marginal,
         sample_noise,
-        baseline_samples,
         ..
     } = options;
     let members: Vec<(&AgentSample, f32)> = std::iter::once(a)
@@ -289,8 +299,8 @@ pub fn label_role(
     let mut sampled = b_mixture.sample(samples, sample_noise, rng);
     // The labelled futures: the logged one and the first `samples` sampled ones.
     let n = 1 + sampled.len();
-    if marginal == MarginalEstimate::ConditionalAverage && baseline_samples > 0 {
-        sampled.extend(b_mixture.sample(baseline_samples, sample_noise, rng));
+    if options.baseline_futures() > 0 {
+        sampled.extend(b_mixture.sample(options.baseline_futures(), sample_noise, rng));
     }
     // Every future scored, the baseline's extra ones included.
     let n_all = 1 + sampled.len();
@@ -327,7 +337,7 @@ pub fn label_role(
         }
     }
     let rows = members.len() * n_all;
-    // Every member's scene is encoded once for its n futures of B.
+    // Every member's scene is encoded once for all its futures of B.
     let samples: Vec<&AgentSample> = members.iter().map(|&(s, _)| s).collect();
     let base = Batch::for_mode(&samples, Mode::Conditional, device);
     let member_of_row: Vec<usize> = (0..members.len())

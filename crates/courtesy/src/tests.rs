@@ -291,11 +291,29 @@ fn audience_weights_names_and_members() {
     assert!(checked_some, "the scene has no neighbours at any radius");
 }
 
+/// A (conditioned on B) and B of the first pair of `scene`'s first window, standardised by
+/// A's own statistics (returned too), and B's marginal mixture under `model`.
+fn standardised_pair(
+    model: &scbg_model::Multipath,
+    scene: &PreparedScene,
+    cfg: &FeatureConfig,
+    device: &Device,
+) -> (AgentSample, AgentSample, FeatureStats, Mixture) {
+    let w = scene.windows[0];
+    let pair = scene.pairs[0][0];
+    let mut builder = SampleBuilder::new(scene, cfg);
+    let mut a = builder.sample(&w, pair.first, Some(pair.second)).unwrap();
+    let mut b = builder.sample(&w, pair.second, None).unwrap();
+    let stats = FeatureStats::fit([&a]);
+    stats.normalize(&mut a);
+    stats.normalize(&mut b);
+    let mixture = crate::label::marginal_mixtures(model, &[&b], device).remove(0);
+    (a, b, stats, mixture)
+}
+
 #[test]
 fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
-    use crate::label::{
-        LabelOptions, MarginalEstimate, audience_members, label_pair, label_role, marginal_mixtures,
-    };
+    use crate::label::{LabelOptions, MarginalEstimate, audience_members, label_pair, label_role};
     let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
     device.seed(5);
@@ -304,13 +322,8 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
     let w = scene.windows[0];
     let pair = scene.pairs[0][0];
     let (ia, ib) = (pair.first, pair.second);
+    let (a, b, stats, mixture) = standardised_pair(&model, &scene, &cfg, &device);
     let mut builder = SampleBuilder::new(&scene, &cfg);
-    let a_raw = builder.sample(&w, ia, Some(ib)).unwrap();
-    let stats = FeatureStats::fit([&a_raw]);
-    let (mut a, mut b) = (a_raw, builder.sample(&w, ib, None).unwrap());
-    stats.normalize(&mut a);
-    stats.normalize(&mut b);
-    let mixture = marginal_mixtures(&model, &[&b], &device).remove(0);
     // A radius that takes in every vehicle, the farthest at half weight.
     let far = Audience::parse("neighbours", 1e4, Weighting::Sum)
         .unwrap()
@@ -396,21 +409,13 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
 
 #[test]
 fn baseline_samples_widen_the_marginal_estimate_and_label_only_the_first_futures() {
-    use crate::label::{LabelOptions, MarginalEstimate, label_pair, marginal_mixtures};
+    use crate::label::{LabelOptions, MarginalEstimate, label_pair};
     let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
     device.seed(6);
     let model = MultipathConfig::cpu_small().init(&device);
     let (scene, cfg) = audience_setup();
-    let w = scene.windows[0];
-    let pair = scene.pairs[0][0];
-    let mut builder = SampleBuilder::new(&scene, &cfg);
-    let a_raw = builder.sample(&w, pair.first, Some(pair.second)).unwrap();
-    let stats = FeatureStats::fit([&a_raw]);
-    let (mut a, mut b) = (a_raw, builder.sample(&w, pair.second, None).unwrap());
-    stats.normalize(&mut a);
-    stats.normalize(&mut b);
-    let mixture = marginal_mixtures(&model, &[&b], &device).remove(0);
+    let (a, b, _, mixture) = standardised_pair(&model, &scene, &cfg, &device);
     let options = |samples, baseline_samples| LabelOptions {
         samples,
         reward: Reward::AverageSpeed,

@@ -375,7 +375,7 @@ pub struct LabelSummary {
     /// Futures sampled from B's marginal prediction per pair role.
     pub samples_per_pair: usize,
     /// More futures of B sampled per pair role for the estimate of E[r(Y_A) | x] alone
-    /// ([`LabelOptions::baseline_samples`]).
+    /// ([`LabelOptions::baseline_futures`]: 0 with the direct estimate).
     pub baseline_samples: usize,
     /// The reward r(y_A).
     pub reward: Reward,
@@ -422,7 +422,7 @@ impl LabelSummary {
             predictors: 1,
             pairs_roles: logged.len(),
             samples_per_pair: options.samples,
-            baseline_samples: options.baseline_samples,
+            baseline_samples: options.baseline_futures(),
             reward: options.reward,
             marginal: options.marginal,
             sample_noise: options.sample_noise,
@@ -471,9 +471,7 @@ impl LabelSummary {
             self.psi_within_pair_std,
             100.0 * self.psi_all.fraction_abs_gt_2
         );
-        if self.baseline_samples > 0
-            && self.marginal == scbg_courtesy::label::MarginalEstimate::ConditionalAverage
-        {
+        if self.baseline_samples > 0 {
             s += &format!(
                 "; E[r | x] averaged over {} sampled futures of B",
                 self.samples_per_pair + self.baseline_samples

@@ -325,13 +325,12 @@ pub(crate) fn side_steer_bounds(
         let clearance = left.abs() - 0.5 * f64::from(me.width_m + o.width_m);
         // Behind me, an agent catching up counts from as far back as it closes in
         // SIDE_CATCH_UP_S: turning toward it then would put me in its way as it arrives.
-        let closing = (f64::from(o.velocity_x_mps) * cs + f64::from(o.velocity_y_mps) * sn
-            - speed_mps)
-            .max(0.0);
         // (Only one in the next lane: one behind me in mine is for the leader rule.)
         let alongside = 0.5 * f64::from(me.length_m + o.length_m) + 1.0;
         let reach = if along < -alongside && clearance > -SIDE_SAME_LANE_M {
-            alongside + closing * SIDE_CATCH_UP_S
+            let closing =
+                f64::from(o.velocity_x_mps) * cs + f64::from(o.velocity_y_mps) * sn - speed_mps;
+            alongside + closing.max(0.0) * SIDE_CATCH_UP_S
         } else {
             alongside
         };

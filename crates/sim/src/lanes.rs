@@ -228,8 +228,8 @@ mod tests {
     #[test]
     fn a_plan_wiggling_to_a_stand_before_a_crossing_road_is_not_pulled_onto_it() {
         // B's lane heads +y along x = 50 and ends at y = 0; the crossing road's lane runs
-        // along x at y = 2.5. B's plan comes up its lane and stands just past the stop line, wiggling
-        // sideways by half a metre: over two steps it heads along x there.
+        // along x at y = 2.5. B's plan comes up its lane and stands just past the stop line,
+        // wiggling sideways by half a metre: over two steps it heads along x there.
         let map = Map {
             lanes: vec![
                 lane_along_y(50.0, -50.0..=0.0),
