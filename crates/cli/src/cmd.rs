@@ -395,6 +395,7 @@ fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
                 .map_or("-".into(), |w| format!("{:.4}", w.metametric))
         );
     }
+    println!("{}", e.curve.collision_line());
     for (name, b) in &e.baselines {
         println!(
             "{name:>18}: A speed {:.2} m/s, B collision {:.3}, WOSAC meta {}",

@@ -104,6 +104,9 @@ pub struct QuantileSim {
     pub realised_courtesy_std_mps: f64,
     /// Fraction of scenes in which B collides.
     pub b_collision_rate: f64,
+    /// The same over the scenes in which B's box overlaps no other at the current step (a
+    /// contact in the log's start state is none of the rollout's doing).
+    pub b_collision_rate_clear_start: f64,
     /// Fraction of scenes in which B goes off-road.
     pub b_offroad_rate: f64,
     /// B's mean |jerk|, m/s³.
@@ -299,6 +302,9 @@ pub struct KnobCurve {
     pub a_speed_curve_rises: bool,
     /// The largest B collision rate over the quantiles.
     pub max_b_collision_rate: f64,
+    /// The largest over the quantiles of B's collision rate in the scenes where B starts clear
+    /// of every other agent ([`QuantileSim::b_collision_rate_clear_start`]).
+    pub max_b_collision_rate_clear_start: f64,
     /// Every rollout in which B collides: the scene, the quantile and B's first contact
     /// (with whom, at which step, both speeds, the geometry) — what a diagnosis needs.
     pub b_collisions: Vec<BCollision>,
@@ -315,9 +321,25 @@ pub struct BCollision {
     pub quantile: f32,
     /// B's first box overlap.
     pub contact: Contact,
+    /// Whether B's box already overlapped another's at the current step (the log's start).
+    pub starts_in_contact: bool,
 }
 
 impl KnobCurve {
+    /// One line on B's collisions: the largest rate over the quantiles, and the same over
+    /// the scenes where B starts clear of every other agent.
+    pub fn collision_line(&self) -> String {
+        let at_start = self.b_collisions.iter().filter(|b| b.starts_in_contact);
+        let scenes: std::collections::BTreeSet<&str> =
+            at_start.map(|b| b.scenario_id.as_str()).collect();
+        format!(
+            "B's collision rate at most {:.3} over the quantiles; {:.3} in the scenes where B starts clear of every other agent ({} scene(s) start with B's box overlapping another in the log)",
+            self.max_b_collision_rate,
+            self.max_b_collision_rate_clear_start,
+            scenes.len()
+        )
+    }
+
     /// The curve of `done` scenes, each with one (A, B) result per quantile of `quantiles`.
     fn of(done: &[SceneResult], quantiles: &[f32]) -> Self {
         let mut speed_points = Vec::new();
@@ -343,6 +365,9 @@ impl KnobCurve {
                 realised_courtesy_mps,
                 realised_courtesy_std_mps,
                 b_collision_rate: rate(b().map(|m| m.collision)),
+                b_collision_rate_clear_start: rate(
+                    b().filter(|m| !m.starts_in_contact).map(|m| m.collision),
+                ),
                 b_offroad_rate: rate(b().map(|m| m.offroad.unwrap_or(false))),
                 b_mean_abs_jerk_mps3: mean_std(
                     &b().map(|m| m.mean_abs_jerk_mps3).collect::<Vec<_>>(),
@@ -357,11 +382,13 @@ impl KnobCurve {
             .enumerate()
             .flat_map(|(k, &q)| {
                 done.iter().filter_map(move |r| {
-                    r.curve[k].1.first_contact.map(|contact| BCollision {
+                    let b = &r.curve[k].1;
+                    b.first_contact.map(|contact| BCollision {
                         scenario_id: r.scenario_id.clone(),
                         family: r.family.clone(),
                         quantile: q,
                         contact,
+                        starts_in_contact: b.starts_in_contact,
                     })
                 })
             })
@@ -378,6 +405,10 @@ impl KnobCurve {
             max_b_collision_rate: per_quantile
                 .iter()
                 .map(|r| r.b_collision_rate)
+                .fold(0.0, f64::max),
+            max_b_collision_rate_clear_start: per_quantile
+                .iter()
+                .map(|r| r.b_collision_rate_clear_start)
                 .fold(0.0, f64::max),
             per_quantile,
             spearman_quantile_a_speed: spearman_per_family(&speed_points),

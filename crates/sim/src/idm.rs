@@ -129,8 +129,9 @@ const CONFLICT_WINDOW_S: f64 = 2.0;
 /// time — from when its box reaches the other's until it has left it, or for good when its plan
 /// stops there (a plan that stands in another's way is a conflict however late the other
 /// comes). A follower — behind the agent and heading its way (velocity within 60° of its
-/// heading) — counts only while it is faster: one that does not catch up is left to yield, as
-/// braking in front of it would only bring it closer. The conflict point is returned as a
+/// heading) — counts only while it is faster and in the next lane (its box overlapping mine
+/// sideways by at most 0.5 m): one that does not catch up is left to yield, and one behind me in
+/// my lane to its leader rule, as braking in front of it would only bring it closer. The conflict point is returned as a
 /// standing leader `(bumper gap m, 0)`; the nearest one counts. The agent never stops for a
 /// conflict inside another agent's way: when the way of a crossing agent (one heading at 45° or
 /// more to the path; its position continued along its velocity) crosses the path between the
@@ -152,14 +153,15 @@ pub(crate) fn crossing_conflict(
     for o in others.iter().filter(moving_near) {
         let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
         let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
-        // A follower (behind, heading the same way) that is not catching up is no conflict
-        // to brake for: braking in front of it only brings it closer.
+        // A follower (behind, heading the same way) that is not catching up, or that is
+        // behind me in my own lane, is no conflict to brake for: braking in front of it only
+        // brings it closer (in my lane, keeping its distance is its leader rule's work).
         let along = vx * cs + vy * sn;
-        if along > 0.5 * vx.hypot(vy)
-            && dx * cs + dy * sn < 0.0
-            && along <= f64::from(me.speed_mps())
-        {
-            continue;
+        if along > 0.5 * vx.hypot(vy) && dx * cs + dy * sn < 0.0 {
+            let clearance = (-dx * sn + dy * cs).abs() - 0.5 * f64::from(me.width_m + o.width_m);
+            if along <= f64::from(me.speed_mps()) || clearance < -SIDE_SAME_LANE_M {
+                continue;
+            }
         }
         let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
         // Where the other is at `tau` s from now, as (arclength, signed offset) on my path.
@@ -176,9 +178,14 @@ pub(crate) fn crossing_conflict(
             let (sn_p, cs_p) = path.heading_at(s).sin_cos();
             let cos_rel = ((vx * cs_p + vy * sn_p) / vx.hypot(vy)).abs();
             let sin_rel = (1.0 - cos_rel * cos_rel).max(0.0).sqrt();
-            let reach = 0.5 * f64::from(me.length_m)
-                + 0.5 * (f64::from(o.length_m) * cos_rel + f64::from(o.width_m) * sin_rel)
-                + CONFLICT_MARGIN_M;
+            let touch = 0.5 * f64::from(me.length_m)
+                + 0.5 * (f64::from(o.length_m) * cos_rel + f64::from(o.width_m) * sin_rel);
+            // Committed: my front is already past the near edge of a crossing agent's box at
+            // that point, so braking would only leave me standing in its way.
+            if cos_rel <= std::f64::consts::FRAC_1_SQRT_2 && ahead < touch {
+                return None;
+            }
+            let reach = touch + CONFLICT_MARGIN_M;
             occupied(&arrival, s - reach, s + reach, tau)
                 .then(|| ahead - 0.5 * f64::from(me.length_m + o.length_m))
         };
@@ -287,10 +294,22 @@ fn occupied(arrival: &impl Fn(f64) -> Option<f64>, s_in: f64, s_out: f64, tau: f
         && arrival(s_out).is_none_or(|leave| tau < leave + CONFLICT_WINDOW_S)
 }
 
-/// Lateral clearance below which an agent alongside bounds the steering, m.
+/// Lateral clearance below which an agent alongside bounds the steering, m (more while I drift
+/// toward it: see [`SIDE_ALIGN_S`]).
 const SIDE_CLEARANCE_M: f64 = 0.8;
-/// Time in which the bounded steering turns the agent parallel to the one alongside, s.
+/// Time constant in which the bounded steering turns the agent parallel to the one alongside,
+/// s. The yaw rate toward parallel is the relative heading over it, re-set every step, so the
+/// turn decays exponentially and the agent drifts `v_lat ·` this much sideways on the way, with
+/// `v_lat` its lateral speed toward the other: while drifting, the time is shortened so the
+/// drift keeps [`SIDE_KEEP_M`] of the clearance (down to [`SIDE_MIN_ALIGN_S`]), and the bound
+/// starts where the drift of the full time would take more than the clearance. (A B at 24 m/s
+/// moving over at 6° toward A, 3 m ahead of it, was bounded at 0.7 m and drifted 1.2 m into it;
+/// BENCHMARKS.md.)
 const SIDE_ALIGN_S: f64 = 0.5;
+/// The least alignment time constant, s (a yaw rate the bicycle's steering reaches in ~0.1 s).
+const SIDE_MIN_ALIGN_S: f64 = 0.1;
+/// Clearance the bounded drift toward an agent alongside leaves, m.
+const SIDE_KEEP_M: f64 = 0.2;
 /// An agent behind that catches up counts as alongside from as far back as it closes in this
 /// many seconds (a slow B at 13 m/s moving over into the lane of A coming up at 24 m/s was hit
 /// from behind-left, A's centre 1.6 m behind B's: bounded only once A was alongside, B was
@@ -303,9 +322,10 @@ const SIDE_SAME_LANE_M: f64 = 0.5;
 /// Steering bounds `(min, max)` (rad, positive left) that keep an agent from turning toward
 /// another one alongside it: an agent heading within 30° of its heading whose centre is within
 /// half the two lengths plus 1 m along it (behind it, plus what the other closes on it in
-/// 3 s) and whose box is less than 0.8 m away to one side.
-/// Toward such an agent the steering may at most turn the agent parallel to it within 0.5 s
-/// (the bicycle's yaw rate `v·tan δ / wheelbase`). `None` when nobody is alongside.
+/// 3 s) and whose box is less than 0.8 m away to one side (more while drifting toward it).
+/// Toward such an agent the steering may at most turn the agent parallel to it with a time
+/// constant of 0.5 s, shorter while drifting toward it ([`SIDE_ALIGN_S`]; the bicycle's yaw
+/// rate `v·tan δ / wheelbase`). `None` when nobody is alongside.
 pub(crate) fn side_steer_bounds(
     me: &AgentState,
     speed_mps: f64,
@@ -334,11 +354,20 @@ pub(crate) fn side_steer_bounds(
         } else {
             alongside
         };
-        if along.abs() > reach || clearance > SIDE_CLEARANCE_M {
+        // My lateral speed toward it (my heading turned toward its side of its heading).
+        let toward_mps = speed_mps * (-rel * left.signum()).sin();
+        let trigger = SIDE_CLEARANCE_M.max(SIDE_KEEP_M + toward_mps * SIDE_ALIGN_S);
+        if along.abs() > reach || clearance > trigger {
             continue;
         }
-        // The steering that turns me parallel to it within SIDE_ALIGN_S.
-        let yaw_rate = rel / SIDE_ALIGN_S;
+        // The steering that turns me parallel to it, with the time constant whose drift keeps
+        // SIDE_KEEP_M of the clearance.
+        let align_s = if toward_mps > 0.0 {
+            ((clearance - SIDE_KEEP_M) / toward_mps).clamp(SIDE_MIN_ALIGN_S, SIDE_ALIGN_S)
+        } else {
+            SIDE_ALIGN_S
+        };
+        let yaw_rate = rel / align_s;
         let align = (yaw_rate * wheelbase_m / speed_mps.max(1.0)).atan();
         if left > 0.0 {
             hi = hi.min(align);
@@ -748,6 +777,35 @@ mod tests {
         };
         assert_eq!(bounds(&[&behind(10.0)]), None);
         assert_eq!(bounds(&[&behind(20.0)]), Some((f64::NEG_INFINITY, 0.0)));
+    }
+
+    #[test]
+    fn drifting_toward_an_agent_alongside_is_bounded_earlier_and_harder() {
+        // Me at 24 m/s heading 6° left of the other, which is 3 m behind on my left.
+        let me = me_along_x();
+        let rel = -6f64.to_radians();
+        let (v, wheelbase) = (24.0, 2.7);
+        let toward = v * 6f64.to_radians().sin();
+        let half_widths = f64::from(me.width_m);
+        let at_clearance = |c: f64| AgentState {
+            x_m: -3.0,
+            y_m: half_widths + c,
+            heading_rad: rel as f32,
+            ..me
+        };
+        let hi = |c: f64| side_steer_bounds(&me, v, wheelbase, &[&at_clearance(c)]).map(|b| b.1);
+        // The time constant is the one whose drift keeps 0.2 m of the clearance — from beyond
+        // 0.8 m (where 0.5 s of drift would take more than the clearance) on, and the closer,
+        // the harder the turn away.
+        let expected = |c: f64| ((rel / ((c - 0.2) / toward)) * wheelbase / v).atan();
+        for c in [1.3, 0.7] {
+            assert!((hi(c).unwrap() - expected(c)).abs() < 1e-6, "clearance {c}");
+        }
+        assert!(expected(0.7) < expected(1.3));
+        // Farther than 0.5 s of drift: free. Very close: the shortest time constant, 0.1 s.
+        assert_eq!(hi(0.3 + toward * 0.5), None);
+        let hardest = ((rel / 0.1) * wheelbase / v).atan();
+        assert!((hi(0.25).unwrap() - hardest).abs() < 1e-6);
     }
 
     #[test]

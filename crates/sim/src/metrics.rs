@@ -17,6 +17,9 @@ pub struct AgentRolloutMetrics {
     pub collision: bool,
     /// The first such overlap (`None` without a collision): when, with whom and how.
     pub first_contact: Option<Contact>,
+    /// Whether its box already overlaps another valid agent's at the current step, where the
+    /// simulation starts from the log: a contact no action of the rollout could avoid.
+    pub starts_in_contact: bool,
     /// Whether it is off the road (signed road-edge distance > 0) at a simulated step;
     /// `None` when the map has no road edge.
     pub offroad: Option<bool>,
@@ -78,6 +81,13 @@ pub fn agent_metrics(
     let start = scene.current_step;
     let me = &scene.tracks[track];
     let steps = start + 1..scene.num_steps();
+    let overlaps_at = |t: usize| {
+        let s = &me.states[t];
+        scene.tracks.iter().enumerate().find(|&(j, o)| {
+            j != track && s.valid && o.states[t].valid && scbg_synth::boxes_overlap(s, &o.states[t])
+        })
+    };
+    let starts_in_contact = overlaps_at(start).is_some();
     let mut first_contact = None;
     let mut offroad = road_edges.map(|_| false);
     let mut scratch = Vec::new();
@@ -96,14 +106,8 @@ pub fn agent_metrics(
         speed_sum += f64::from(s.speed_mps());
         speeds.push(f64::from(s.speed_mps()));
         if first_contact.is_none() {
-            first_contact = scene
-                .tracks
-                .iter()
-                .enumerate()
-                .find(|&(j, o)| {
-                    j != track && o.states[t].valid && scbg_synth::boxes_overlap(s, &o.states[t])
-                })
-                .map(|(_, o)| Contact::between(t - start, s, o.id, &o.states[t]));
+            first_contact =
+                overlaps_at(t).map(|(_, o)| Contact::between(t - start, s, o.id, &o.states[t]));
         }
         if let (Some(edges), Some(off)) = (road_edges, offroad.as_mut()) {
             *off = *off
@@ -123,6 +127,7 @@ pub fn agent_metrics(
         id: me.id,
         collision: first_contact.is_some(),
         first_contact,
+        starts_in_contact,
         offroad,
         progress_m: progress,
         avg_speed_mps: if valid_steps > 0 {
@@ -191,7 +196,7 @@ mod tests {
             ..Default::default()
         };
         let m = agent_metrics(&scene, 0, None);
-        assert!(m.collision);
+        assert!(m.collision && !m.starts_in_contact);
         let c = m.first_contact.expect("a contact");
         assert_eq!(c.other_id, 2);
         assert!((8..=12).contains(&c.step), "{c:?}");
@@ -208,5 +213,10 @@ mod tests {
         scene.tracks.pop();
         let m = agent_metrics(&scene, 0, None);
         assert!(!m.collision && m.first_contact.is_none());
+        // A car 3 m ahead at the current step already overlaps mine: a contact at the start.
+        scene.tracks.push(car(3, 3.0, 0.0, 0.0, 10.0));
+        let m = agent_metrics(&scene, 0, None);
+        assert!(m.starts_in_contact && m.collision);
+        assert_eq!(m.first_contact.map(|c| (c.other_id, c.step)), Some((3, 1)));
     }
 }

@@ -269,6 +269,7 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
         meta(c.wosac_scbg.as_ref())
     );
     out += &format!("\n{}.\n", c.realism_line());
+    out += &format!("\n{}.\n", c.curve.collision_line());
     if let Some(w) = &c.world_knob {
         out += &format!(
             "\nThe ceiling: the same {} scenes with B driven by the synthetic world's own rule at courtesy c = q (a B faithful to its courtesy). A's realised speed per quantile: {}. Spearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene: {}; responsive scenes: {}. B collision rate at most {:.3}.\n",
