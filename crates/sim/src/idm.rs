@@ -133,10 +133,10 @@ const CONFLICT_WINDOW_S: f64 = 2.0;
 /// sideways by at most 0.5 m): one that does not catch up is left to yield, and one behind me in
 /// my lane to its leader rule, as braking in front of it would only bring it closer. The conflict point is returned as a
 /// standing leader `(bumper gap m, 0)`; the nearest one counts. The agent never stops for a
-/// conflict inside another agent's way: when the way of a crossing agent (one heading at 45° or
-/// more to the path; its position continued along its velocity) crosses the path between the
-/// agent and the conflict, it stops before that way instead if it can at 3 m/s² (don't block
-/// the box).
+/// conflict inside another agent's way: when its box, moved along the path, reaches the way of
+/// a crossing agent (one heading at 45° or more to the path; the band around its position
+/// continued along its velocity) before the conflict, it stops before that way instead if it
+/// can at 3 m/s² (don't block the box).
 pub(crate) fn crossing_conflict(
     path: &RefPath,
     s_m: f64,
@@ -218,7 +218,7 @@ pub(crate) fn crossing_conflict(
         let v = f64::from(me.speed_mps());
         let stopping_m = v * v / (2.0 * WAY_STOP_DECEL_MPS2);
         for o in others.iter().filter(moving_near) {
-            if let Some(gap) = crossing_way(path, s_m, me, o)
+            if let Some(gap) = crossing_way(path, s_m, me, o, conflict_gap)
                 && gap >= stopping_m
                 && gap > 0.0
                 && gap < conflict_gap
@@ -244,43 +244,54 @@ const CROSSING_MIN_ANGLE_RAD: f64 = std::f64::consts::FRAC_PI_4;
 /// at the conflict beyond it (the guard IDM's comfortable braking), m/s².
 const WAY_STOP_DECEL_MPS2: f64 = 3.0;
 
-/// Where the way of a crossing agent `o` (its position continued along its velocity for up to
-/// [`LOOKAHEAD_M`]) crosses the corridor of my `path` ahead of `s_m`, as a standing leader's
-/// bumper gap to the nearest arclength of the crossing (the near edge of the way, whichever
-/// side the agent comes from); `None` for an agent heading within 45° of my path's heading or
-/// its opposite there, or one whose way does not cross my path ahead.
-fn crossing_way(path: &RefPath, s_m: f64, me: &AgentState, o: &AgentState) -> Option<f64> {
+/// Half-width margin of a crossing agent's way beyond half its width, m.
+const WAY_MARGIN_M: f64 = 0.5;
+
+/// Where my box, moved along my `path` ahead of `s_m` (at the path's heading, in steps of
+/// 0.5 m), first reaches the way of a crossing agent `o` — the band of half its width plus
+/// [`WAY_MARGIN_M`] around its position continued along its velocity for up to
+/// [`LOOKAHEAD_M`] — as the distance my centre can still go, m (0: my box is in it already);
+/// `None` when the way crosses my path at under 45° (or over 135°) there, or my box does not
+/// reach it within `limit_m`. (Measured from my box, not my path's centre line: a B turning
+/// right into a road from the side had its nose in the cross traffic's lane while the way's
+/// crossing of its path's centre line was still 4 m ahead; BENCHMARKS.md.)
+fn crossing_way(
+    path: &RefPath,
+    s_m: f64,
+    me: &AgentState,
+    o: &AgentState,
+    limit_m: f64,
+) -> Option<f64> {
     let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
     let v = vx.hypot(vy);
     let (ux, uy) = (vx / v, vy / v);
-    let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
+    let band = 0.5 * f64::from(o.width_m) + WAY_MARGIN_M;
+    let (hl, hw) = (0.5 * f64::from(me.length_m), 0.5 * f64::from(me.width_m));
     let crossing = CROSSING_MIN_ANGLE_RAD..=std::f64::consts::PI - CROSSING_MIN_ANGLE_RAD;
-    let mut hint = None;
-    let mut nearest: Option<f64> = None;
-    // Steps of 2 m: the corridor is at least 3.6 m across (a car and a pedestrian), crossed at
-    // 45° or more.
-    for r in (0..=LOOKAHEAD_M as usize).step_by(2) {
-        let (x, y) = (o.x_m + ux * r as f64, o.y_m + uy * r as f64);
-        let (s, d) = path.project(x, y, hint.or(Some(s_m + 25.0)));
-        hint = Some(s);
-        let ahead = s - s_m;
-        let inside = ahead > 0.0 && ahead <= LOOKAHEAD_M && d.abs() <= half;
-        if !inside {
-            if nearest.is_some() {
-                break; // through the corridor
-            }
-            continue;
+    let mut k = 0.0;
+    while k <= limit_m.min(LOOKAHEAD_M) {
+        let s = s_m + k;
+        let (x, y) = path.pose(s, 0.0);
+        let h = path.heading_at(s);
+        let (sn, cs) = h.sin_cos();
+        // My box's corners in the way's frame: along it from o, and across it.
+        let (mut a_min, mut a_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut c_min, mut c_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (u, w) in [(1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (-1.0, 1.0)] {
+            let cx = x + u * hl * cs - w * hw * sn - o.x_m;
+            let cy = y + u * hl * sn + w * hw * cs - o.y_m;
+            let along = cx * ux + cy * uy;
+            let across = -cx * uy + cy * ux;
+            (a_min, a_max) = (a_min.min(along), a_max.max(along));
+            (c_min, c_max) = (c_min.min(across), c_max.max(across));
         }
-        if nearest.is_none() {
-            let (sn_p, cs_p) = path.heading_at(s).sin_cos();
-            let angle = (ux * cs_p + uy * sn_p).clamp(-1.0, 1.0).acos();
-            if !crossing.contains(&angle) {
-                return None;
-            }
+        if a_max >= 0.0 && a_min <= LOOKAHEAD_M && c_min <= band && c_max >= -band {
+            let angle = (ux * cs + uy * sn).clamp(-1.0, 1.0).acos();
+            return crossing.contains(&angle).then_some(k);
         }
-        nearest = Some(nearest.map_or(ahead, |n: f64| n.min(ahead)));
+        k += 0.5;
     }
-    nearest.map(|ahead| ahead - 0.5 * f64::from(me.length_m + o.length_m))
+    None
 }
 
 /// Whether the agent that reaches each arclength at `arrival(s)` s from now (`None`: never, its
@@ -636,7 +647,7 @@ mod tests {
     #[test]
     fn a_conflict_behind_another_way_stops_me_before_that_way() {
         // A conflict at x = 40 m (an agent crossing there as I arrive), and the way of a second
-        // crossing agent at x = 25 m, far away yet: I stop before x = 25 m, not in its way.
+        // crossing agent at x = 25 m, far away yet: I stop before its way, not in it.
         let me = me_along_x();
         let path = path_along_x();
         let conflict = crossing_y(40.0, -40.0, 10.0);
@@ -646,7 +657,9 @@ mod tests {
         assert!((alone - (40.0 - 4.5)).abs() < 1.0, "gap {alone}");
         let (both, v) =
             crossing_conflict(&path, 0.0, &me, &[&conflict, &far_way], arrival_at_10_mps).unwrap();
-        assert!((both - (25.0 - 4.5)).abs() < 1.0, "gap {both}");
+        // (Where my front reaches the band around that way: 25 m less half my length and half
+        // the band, 0.95 + 0.5 m.)
+        assert!((both - (25.0 - 2.25 - 1.45)).abs() < 0.5, "gap {both}");
         assert_eq!(v, 0.0);
         // Without a conflict the far way alone does not stop me.
         assert_eq!(
@@ -661,11 +674,11 @@ mod tests {
             velocity_x_mps: 3.0,
             ..me
         };
-        assert_eq!(crossing_way(&path, 0.0, &me, &alongside), None);
+        assert_eq!(crossing_way(&path, 0.0, &me, &alongside, 60.0), None);
     }
 
     #[test]
-    fn a_crossing_way_is_measured_to_its_near_edge_from_either_side() {
+    fn a_crossing_way_is_measured_from_my_box_to_its_near_edge_from_either_side() {
         // Rays crossing my path (along x) at x = 30 m at 90°, 60° and 135°, each from 40 m
         // away; at 30° to my path a way is not a crossing one.
         let me = me_along_x();
@@ -681,23 +694,26 @@ mod tests {
                 ..me
             }
         };
-        let gap = |deg: f64| crossing_way(&path, 0.0, &me, &ray(deg));
-        let half = 0.5 * (1.9 + 1.9) + 0.5;
-        let bumpers = 4.5;
-        // Perpendicular: the crossing point itself (within the 2 m sampling).
-        let g90 = gap(90.0).unwrap();
-        assert!((g90 - (30.0 - bumpers)).abs() <= 2.0, "{g90}");
-        // Oblique, coming toward me (135°): the near edge is half / tan 45° = 2.4 m closer
-        // than the centre crossing.
-        let g135 = gap(135.0).unwrap();
-        assert!(g135 <= 30.0 - half - bumpers + 2.0, "{g135}");
-        assert!(g135 >= 30.0 - half - bumpers - 2.0, "{g135}");
-        // Oblique, going my way (60°): the near edge too.
-        let g60 = gap(60.0).unwrap();
-        let near = 30.0 - half / 60f64.to_radians().tan();
-        assert!((g60 - (near - bumpers)).abs() <= 2.0, "{g60}");
+        let gap = |deg: f64| crossing_way(&path, 0.0, &me, &ray(deg), 60.0);
+        // My box (4.5 × 1.9 m) first touches the band (half 0.95 + 0.5 m) around the ray when
+        // my front corner on the ray's near side does: half my length, half the band across
+        // my path and half my width along the ray short of the crossing (found in 0.5 m steps).
+        let first_touch = |deg: f64| {
+            let theta = deg.to_radians();
+            30.0 - 2.25 - 1.45 / theta.sin() - 0.95 / theta.tan().abs()
+        };
+        for deg in [90.0, 60.0, 135.0] {
+            let (g, expected) = (gap(deg).unwrap(), first_touch(deg));
+            assert!(
+                g >= expected - 1e-9 && g < expected + 0.5,
+                "{deg}°: {g} vs {expected}"
+            );
+        }
         assert_eq!(gap(30.0), None);
         assert_eq!(gap(150.0), None);
+        // Beyond the limit it is not looked for; my box already in it gives 0.
+        assert_eq!(crossing_way(&path, 0.0, &me, &ray(90.0), 20.0), None);
+        assert_eq!(crossing_way(&path, 30.0, &me, &ray(90.0), 60.0), Some(0.0));
     }
 
     #[test]
