@@ -130,13 +130,15 @@ const CONFLICT_WINDOW_S: f64 = 2.0;
 /// stops there (a plan that stands in another's way is a conflict however late the other
 /// comes). A follower — behind the agent and heading its way (velocity within 60° of its
 /// heading) — counts only while it is faster and in the next lane (its box overlapping mine
-/// sideways by at most 0.5 m): one that does not catch up is left to yield, and one behind me in
-/// my lane to its leader rule, as braking in front of it would only bring it closer. The conflict point is returned as a
-/// standing leader `(bumper gap m, 0)`; the nearest one counts. The agent never stops for a
-/// conflict inside another agent's way: when its box, moved along the path, reaches the way of
-/// a crossing agent (one heading at 45° or more to the path; the band around its position
-/// continued along its velocity) before the conflict, it stops before that way instead if it
-/// can at 3 m/s² (don't block the box).
+/// sideways by at most 0.5 m): one that does not catch up is left to yield, and one behind me
+/// in my lane to its leader rule, as braking in front of it would only bring it closer. Nor
+/// does a crossing agent (at 45° or more) whose near edge my front has already passed at the
+/// conflict point: braking would only leave me standing in its way. The conflict point is
+/// returned as a standing leader `(bumper gap m, 0)`; the nearest one counts. The agent never
+/// stops for a conflict inside another agent's way: when its box, moved along the path,
+/// reaches the way of a crossing agent (one heading at 45° or more to the path; the band
+/// around its position continued along its velocity) before the conflict, it stops before
+/// that way instead if it can at 3 m/s² (don't block the box).
 pub(crate) fn crossing_conflict(
     path: &RefPath,
     s_m: f64,
