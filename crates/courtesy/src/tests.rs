@@ -10,6 +10,22 @@ use super::*;
 
 /// burn's seeded RNG is process-global: tests that seed it must not interleave.
 static SEED_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+/// The seed lock (hold it for the test), a flex device seeded with `seed` and an untrained
+/// cpu-small model drawn from it.
+fn seeded_cpu_small(
+    seed: u64,
+) -> (
+    std::sync::MutexGuard<'static, ()>,
+    Device,
+    scbg_model::Multipath,
+) {
+    let guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex();
+    device.seed(seed);
+    let model = MultipathConfig::cpu_small().init(&device);
+    (guard, device, model)
+}
 use crate::label::{SampleMixture, change_frame};
 use scbg_model::Mixture;
 
@@ -157,10 +173,7 @@ fn courtesy_gradient_matches_finite_differences() {
 
 #[test]
 fn marginal_terms_do_not_depend_on_the_condition() {
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
-    let device = Device::flex();
-    device.seed(11);
-    let model = MultipathConfig::cpu_small().init(&device);
+    let (_guard, device, model) = seeded_cpu_small(11);
     let sample = pair_sample();
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
     let batch = Batch::from_samples(&[&sample], &BatchAugment::default(), &mut rng, &device);
@@ -314,10 +327,7 @@ fn standardised_pair(
 #[test]
 fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
     use crate::label::{LabelOptions, MarginalEstimate, audience_members, label_pair, label_role};
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
-    let device = Device::flex();
-    device.seed(5);
-    let model = MultipathConfig::cpu_small().init(&device);
+    let (_guard, device, model) = seeded_cpu_small(5);
     let (scene, cfg) = audience_setup();
     let w = scene.windows[0];
     let pair = scene.pairs[0][0];
@@ -410,10 +420,7 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
 #[test]
 fn baseline_samples_widen_the_marginal_estimate_and_label_only_the_first_futures() {
     use crate::label::{LabelOptions, MarginalEstimate, label_pair};
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
-    let device = Device::flex();
-    device.seed(6);
-    let model = MultipathConfig::cpu_small().init(&device);
+    let (_guard, device, model) = seeded_cpu_small(6);
     let (scene, cfg) = audience_setup();
     let (a, b, _, mixture) = standardised_pair(&model, &scene, &cfg, &device);
     let options = |samples, baseline_samples| LabelOptions {

@@ -4,6 +4,8 @@
 //!   rate) and the tracker that follows a plan;
 //! - [`idm`]: reactive agents for any scene (IDM along the agent's logged path, corridor
 //!   leaders);
+//! - [`guard`]: the safety guard's crossing conflicts and steering bounds for an agent
+//!   following a plan;
 //! - [`rollout`]: the step-wise [`Simulation`] (`reset → step → … → to_scene`) with a
 //!   [`Planner`] for the controlled agents; on a synthetic scene the synthetic world's own
 //!   reaction rule ([`scbg_synth::ClosedLoop`]) drives the reactive agents;
@@ -15,6 +17,7 @@
 
 #![warn(missing_docs)]
 
+pub mod guard;
 pub mod idm;
 pub mod kinematics;
 pub mod lanes;

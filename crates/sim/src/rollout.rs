@@ -14,7 +14,8 @@ use scbg_scene::{AgentState, Scene};
 use scbg_synth::ClosedLoop;
 use serde::{Deserialize, Serialize};
 
-use crate::idm::{IdmAgent, crossing_conflict, leader_on_path, polyline_path, side_steer_bounds};
+use crate::guard::{crossing_conflict, side_steer_bounds};
+use crate::idm::{IdmAgent, leader_on_path, polyline_path};
 
 /// The safety guard's IDM (a free road never limits: the desired speed is out of reach).
 const GUARD: scbg_synth::Idm = scbg_synth::Idm {
@@ -105,9 +106,9 @@ pub struct SimConfig {
     /// to spare at either end) — for good when the plan stops there — taken as a standing
     /// obstacle at that point, or before
     /// the way of another crossing agent in between; a follower behind counts only while it is
-    /// faster),
+    /// faster and in the next lane; [`crate::guard`]),
     /// and the steering is bounded so as not to turn toward an agent alongside, or one coming
-    /// up from behind in the next lane ([`crate::idm`]'s `side_steer_bounds`), so a plan that
+    /// up from behind in the next lane ([`crate::guard`]'s `side_steer_bounds`), so a plan that
     /// runs into another agent is followed at a safe distance instead. On by default.
     pub safety_guard: bool,
     /// Lane keeping of the controlled agents' plans ([`crate::lanes`]): every plan point is

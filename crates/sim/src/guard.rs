@@ -1,0 +1,608 @@
+//! The safety guard's rules for an agent following a plan: crossing conflicts along its path
+//! (another agent at constant velocity in the plan's corridor while the agent's box is there,
+//! never stopping inside a crossing agent's way) and steering bounds beside another agent.
+//! The rollout caps the tracker's acceleration by IDM toward the nearest conflict (with the
+//! corridor leader of [`crate::idm`]) and clamps its steering to the bounds.
+
+use scbg_scene::AgentState;
+use scbg_synth::{RefPath, closer};
+
+use crate::idm::LOOKAHEAD_M;
+
+/// Steps of [`crossing_conflict`]'s look-ahead: the other agent's position every 0.5 s up to
+/// 5 s ahead (and where it crosses my path between two of them).
+const CONFLICT_HORIZON_STEPS: u32 = 10;
+const CONFLICT_STEP_S: f64 = 0.5;
+/// A crossing conflict is two arrivals at the same point less than this many seconds apart.
+/// (With 3 s and 1 s, the controlled B of the synthetic crossings stopped with its nose in the
+/// cross traffic's lane in 2–4 % of closed-loop rollouts; with 5 s and 2 s in ≤ 1 %,
+/// BENCHMARKS.md.)
+const CONFLICT_WINDOW_S: f64 = 2.0;
+
+/// A crossing conflict ahead of an agent at `s_m` on `path` that follows `arrival` (the time,
+/// s from now, at which it reaches each arclength, increasing; `None` beyond where its plan
+/// stops): another agent whose position extrapolated at constant velocity 0.5, 1, …, 5 s ahead
+/// lies in the corridor ahead at an arclength the agent's box occupies within 2 s of the same
+/// time — from when its box reaches the other's until it has left it, or for good when its plan
+/// stops there (a plan that stands in another's way is a conflict however late the other
+/// comes). A follower — behind the agent and heading its way (velocity within 60° of its
+/// heading) — counts only while it is faster and in the next lane (its box overlapping mine
+/// sideways by at most 0.5 m): one that does not catch up is left to yield, and one behind me
+/// in my lane to its leader rule, as braking in front of it would only bring it closer. Nor
+/// does a crossing agent (at 45° or more) whose near edge my front has already passed at the
+/// conflict point: braking would only leave me standing in its way. The conflict point is
+/// returned as a standing leader `(bumper gap m, 0)`; the nearest one counts. The agent never
+/// stops for a conflict inside another agent's way: when its box, moved along the path,
+/// reaches the way of a crossing agent (one heading at 45° or more to the path; the band
+/// around its position continued along its velocity) before the conflict, it stops before
+/// that way instead if it can at 3 m/s² (don't block the box).
+pub(crate) fn crossing_conflict(
+    path: &RefPath,
+    s_m: f64,
+    me: &AgentState,
+    others: &[&AgentState],
+    arrival: impl Fn(f64) -> Option<f64>,
+) -> Option<(f64, f64)> {
+    let mut best: Option<(f64, f64)> = None;
+    let (sn, cs) = f64::from(me.heading_rad).sin_cos();
+    let moving_near = |o: &&&AgentState| {
+        let v = f64::from(o.velocity_x_mps).hypot(f64::from(o.velocity_y_mps));
+        v >= 0.5 && (o.x_m - me.x_m).hypot(o.y_m - me.y_m) <= LOOKAHEAD_M + 40.0
+    };
+    for o in others.iter().filter(moving_near) {
+        let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
+        let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
+        // A follower (behind, heading the same way) that is not catching up, or that is
+        // behind me in my own lane, is no conflict to brake for: braking in front of it only
+        // brings it closer (in my lane, keeping its distance is its leader rule's work).
+        let along = vx * cs + vy * sn;
+        if along > 0.5 * vx.hypot(vy) && dx * cs + dy * sn < 0.0 {
+            let clearance = (-dx * sn + dy * cs).abs() - 0.5 * f64::from(me.width_m + o.width_m);
+            if along <= f64::from(me.speed_mps()) || clearance < -SIDE_SAME_LANE_M {
+                continue;
+            }
+        }
+        let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
+        // Where the other is at `tau` s from now, as (arclength, signed offset) on my path.
+        let probe = |tau: f64| path.project(o.x_m + vx * tau, o.y_m + vy * tau, Some(s_m + 25.0));
+        // Whether the other, at `tau` s from now, is in my corridor while my box is on its way;
+        // the bumper gap to that point if so.
+        let conflict_at = |tau: f64, (s, d): (f64, f64)| -> Option<f64> {
+            let ahead = s - s_m;
+            if ahead <= 0.0 || ahead > LOOKAHEAD_M || d.abs() > half {
+                return None;
+            }
+            // My box overlaps the other's (at s, crossing my path at its heading there) while
+            // my centre is within `reach` of s, less the margin.
+            let (sn_p, cs_p) = path.heading_at(s).sin_cos();
+            let cos_rel = ((vx * cs_p + vy * sn_p) / vx.hypot(vy)).abs();
+            let sin_rel = (1.0 - cos_rel * cos_rel).max(0.0).sqrt();
+            let touch = 0.5 * f64::from(me.length_m)
+                + 0.5 * (f64::from(o.length_m) * cos_rel + f64::from(o.width_m) * sin_rel);
+            // Committed: my front is already past the near edge of a crossing agent's box at
+            // that point, so braking would only leave me standing in its way.
+            if cos_rel <= std::f64::consts::FRAC_1_SQRT_2 && ahead < touch {
+                return None;
+            }
+            let reach = touch + CONFLICT_MARGIN_M;
+            occupied(&arrival, s - reach, s + reach, tau)
+                .then(|| ahead - 0.5 * f64::from(me.length_m + o.length_m))
+        };
+        // The side of my path the other is on at each sample: a fast agent (over ~9.6 m/s at
+        // 90°) can cross my corridor between two samples 0.5 s apart, so where the side flips
+        // the crossing itself (its time interpolated) is tested too.
+        let mut previous = (0.0, probe(0.0).1);
+        for k in 1..=CONFLICT_HORIZON_STEPS {
+            let tau = CONFLICT_STEP_S * f64::from(k);
+            let at = probe(tau);
+            let (tau_0, d_0) = previous;
+            let d = at.1;
+            previous = (tau, d);
+            let crossed = (d_0 > half && d < -half) || (d_0 < -half && d > half);
+            let tau_cross = tau_0 + (tau - tau_0) * d_0.abs() / (d_0.abs() + d.abs());
+            if let Some(gap) = crossed
+                .then(|| conflict_at(tau_cross, probe(tau_cross)))
+                .flatten()
+                .or_else(|| conflict_at(tau, at))
+            {
+                best = closer(best, Some((gap, 0.0)));
+                break;
+            }
+        }
+    }
+    // Never stop for a conflict inside another agent's way: stop before the nearest way
+    // between here and the conflict instead — one I can still stop before at a comfortable
+    // deceleration (braking harder for it would only leave me standing in it).
+    if let Some((conflict_gap, _)) = best {
+        let v = f64::from(me.speed_mps());
+        let stopping_m = v * v / (2.0 * WAY_STOP_DECEL_MPS2);
+        for o in others.iter().filter(moving_near) {
+            if let Some(gap) = crossing_way(path, s_m, me, o, conflict_gap)
+                && gap >= stopping_m
+                && gap > 0.0
+                && gap < conflict_gap
+            {
+                best = closer(best, Some((gap, 0.0)));
+            }
+        }
+    }
+    best
+}
+
+/// Margin by which my box is taken to reach a crossing agent's box early and leave it late,
+/// m: the tracker may run past the point where a plan stops, and the other need not keep its
+/// velocity (held-out synthetic scenes: B's crossing collisions 20 → 11 of 2 745 rollouts at
+/// 2 m, none fewer at 3 m; BENCHMARKS.md).
+const CONFLICT_MARGIN_M: f64 = 2.0;
+
+/// Heading difference between two agents' ways above which one crosses the other (and below
+/// 180° minus it), rad.
+const CROSSING_MIN_ANGLE_RAD: f64 = std::f64::consts::FRAC_PI_4;
+
+/// The deceleration at which the guard still stops before a crossing agent's way rather than
+/// at the conflict beyond it (the guard IDM's comfortable braking), m/s².
+const WAY_STOP_DECEL_MPS2: f64 = 3.0;
+
+/// Half-width margin of a crossing agent's way beyond half its width, m.
+const WAY_MARGIN_M: f64 = 0.5;
+
+/// Where my box, moved along my `path` ahead of `s_m` (at the path's heading, in steps of
+/// 0.5 m), first reaches the way of a crossing agent `o` — the band of half its width plus
+/// [`WAY_MARGIN_M`] around its position continued along its velocity for up to
+/// [`LOOKAHEAD_M`] — as the distance my centre can still go, m (0: my box is in it already);
+/// `None` when the way crosses my path at under 45° (or over 135°) there, or my box does not
+/// reach it within `limit_m`. (Measured from my box, not my path's centre line: a B turning
+/// right into a road from the side had its nose in the cross traffic's lane while the way's
+/// crossing of its path's centre line was still 4 m ahead; BENCHMARKS.md.)
+fn crossing_way(
+    path: &RefPath,
+    s_m: f64,
+    me: &AgentState,
+    o: &AgentState,
+    limit_m: f64,
+) -> Option<f64> {
+    let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
+    let v = vx.hypot(vy);
+    let (ux, uy) = (vx / v, vy / v);
+    let band = 0.5 * f64::from(o.width_m) + WAY_MARGIN_M;
+    let (hl, hw) = (0.5 * f64::from(me.length_m), 0.5 * f64::from(me.width_m));
+    let crossing = CROSSING_MIN_ANGLE_RAD..=std::f64::consts::PI - CROSSING_MIN_ANGLE_RAD;
+    let mut k = 0.0;
+    while k <= limit_m.min(LOOKAHEAD_M) {
+        let s = s_m + k;
+        let (x, y) = path.pose(s, 0.0);
+        let h = path.heading_at(s);
+        let (sn, cs) = h.sin_cos();
+        // My box's corners in the way's frame: along it from o, and across it.
+        let (mut a_min, mut a_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        let (mut c_min, mut c_max) = (f64::INFINITY, f64::NEG_INFINITY);
+        for (u, w) in [(1.0, 1.0), (1.0, -1.0), (-1.0, -1.0), (-1.0, 1.0)] {
+            let cx = x + u * hl * cs - w * hw * sn - o.x_m;
+            let cy = y + u * hl * sn + w * hw * cs - o.y_m;
+            let along = cx * ux + cy * uy;
+            let across = -cx * uy + cy * ux;
+            (a_min, a_max) = (a_min.min(along), a_max.max(along));
+            (c_min, c_max) = (c_min.min(across), c_max.max(across));
+        }
+        if a_max >= 0.0 && a_min <= LOOKAHEAD_M && c_min <= band && c_max >= -band {
+            let angle = (ux * cs + uy * sn).clamp(-1.0, 1.0).acos();
+            return crossing.contains(&angle).then_some(k);
+        }
+        k += 0.5;
+    }
+    None
+}
+
+/// Whether the agent that reaches each arclength at `arrival(s)` s from now (`None`: never, its
+/// plan stops before) is on `[s_in, s_out]` within [`CONFLICT_WINDOW_S`] of `tau`: from when it
+/// gets to `s_in` until it has left `s_out`, or for good when its plan stops in between.
+fn occupied(arrival: &impl Fn(f64) -> Option<f64>, s_in: f64, s_out: f64, tau: f64) -> bool {
+    let Some(enter) = arrival(s_in) else {
+        return false;
+    };
+    tau > enter - CONFLICT_WINDOW_S
+        && arrival(s_out).is_none_or(|leave| tau < leave + CONFLICT_WINDOW_S)
+}
+
+/// Lateral clearance below which an agent alongside bounds the steering, m (more while I drift
+/// toward it: see [`SIDE_ALIGN_S`]).
+const SIDE_CLEARANCE_M: f64 = 0.8;
+/// Time constant in which the bounded steering turns the agent parallel to the one alongside,
+/// s. The yaw rate toward parallel is the relative heading over it, re-set every step, so the
+/// turn decays exponentially and the agent drifts `v_lat ·` this much sideways on the way, with
+/// `v_lat` its lateral speed toward the other: while drifting, the time is shortened so the
+/// drift keeps [`SIDE_KEEP_M`] of the clearance (down to [`SIDE_MIN_ALIGN_S`]), and the bound
+/// starts where the drift of the full time would take more than the clearance. (A B at 24 m/s
+/// moving over at 6° toward A, 3 m ahead of it, was bounded at 0.7 m and drifted 1.2 m into it;
+/// BENCHMARKS.md.)
+const SIDE_ALIGN_S: f64 = 0.5;
+/// The least alignment time constant, s (a yaw rate the bicycle's steering reaches in ~0.1 s).
+const SIDE_MIN_ALIGN_S: f64 = 0.1;
+/// Clearance the bounded drift toward an agent alongside leaves, m.
+const SIDE_KEEP_M: f64 = 0.2;
+/// An agent behind that catches up counts as alongside from as far back as it closes in this
+/// many seconds (a slow B at 13 m/s moving over into the lane of A coming up at 24 m/s was hit
+/// from behind-left, A's centre 1.6 m behind B's: bounded only once A was alongside, B was
+/// already in its way; BENCHMARKS.md).
+const SIDE_CATCH_UP_S: f64 = 3.0;
+/// A catching-up agent whose box overlaps mine sideways by more than this is behind me in my
+/// lane, not in the next one, m.
+const SIDE_SAME_LANE_M: f64 = 0.5;
+
+/// Steering bounds `(min, max)` (rad, positive left) that keep an agent from turning toward
+/// another one alongside it: an agent heading within 30° of its heading whose centre is within
+/// half the two lengths plus 1 m along it (behind it, plus what the other closes on it in
+/// 3 s) and whose box is less than 0.8 m away to one side (more while drifting toward it).
+/// Toward such an agent the steering may at most turn the agent parallel to it with a time
+/// constant of 0.5 s, shorter while drifting toward it ([`SIDE_ALIGN_S`]; the bicycle's yaw
+/// rate `v·tan δ / wheelbase`). `None` when nobody is alongside.
+pub(crate) fn side_steer_bounds(
+    me: &AgentState,
+    speed_mps: f64,
+    wheelbase_m: f64,
+    others: &[&AgentState],
+) -> Option<(f64, f64)> {
+    let (sn, cs) = f64::from(me.heading_rad).sin_cos();
+    let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+    for o in others {
+        let rel = scbg_scene::wrap_angle_rad(f64::from(o.heading_rad - me.heading_rad));
+        if rel.abs() > 30f64.to_radians() {
+            continue;
+        }
+        let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
+        let along = dx * cs + dy * sn;
+        let left = -dx * sn + dy * cs;
+        let clearance = left.abs() - 0.5 * f64::from(me.width_m + o.width_m);
+        // Behind me, an agent catching up counts from as far back as it closes in
+        // SIDE_CATCH_UP_S: turning toward it then would put me in its way as it arrives.
+        // (Only one in the next lane: one behind me in mine is for the leader rule.)
+        let alongside = 0.5 * f64::from(me.length_m + o.length_m) + 1.0;
+        let reach = if along < -alongside && clearance > -SIDE_SAME_LANE_M {
+            let closing =
+                f64::from(o.velocity_x_mps) * cs + f64::from(o.velocity_y_mps) * sn - speed_mps;
+            alongside + closing.max(0.0) * SIDE_CATCH_UP_S
+        } else {
+            alongside
+        };
+        // My lateral speed toward it (my heading turned toward its side of its heading).
+        let toward_mps = speed_mps * (-rel * left.signum()).sin();
+        let trigger = SIDE_CLEARANCE_M.max(SIDE_KEEP_M + toward_mps * SIDE_ALIGN_S);
+        if along.abs() > reach || clearance > trigger {
+            continue;
+        }
+        // The steering that turns me parallel to it, with the time constant whose drift keeps
+        // SIDE_KEEP_M of the clearance.
+        let align_s = if toward_mps > 0.0 {
+            ((clearance - SIDE_KEEP_M) / toward_mps).clamp(SIDE_MIN_ALIGN_S, SIDE_ALIGN_S)
+        } else {
+            SIDE_ALIGN_S
+        };
+        let yaw_rate = rel / align_s;
+        let align = (yaw_rate * wheelbase_m / speed_mps.max(1.0)).atan();
+        if left > 0.0 {
+            hi = hi.min(align);
+        } else {
+            lo = lo.max(align);
+        }
+    }
+    if lo == f64::NEG_INFINITY && hi == f64::INFINITY {
+        return None;
+    }
+    if lo > hi {
+        // Hemmed in on both sides: steer halfway.
+        let mid = 0.5 * (lo + hi);
+        return Some((mid, mid));
+    }
+    Some((lo, hi))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::idm::polyline_path;
+
+    /// A car at the origin heading +x at 10 m/s.
+    fn me_along_x() -> AgentState {
+        AgentState {
+            length_m: 4.5,
+            width_m: 1.9,
+            velocity_x_mps: 10.0,
+            valid: true,
+            ..Default::default()
+        }
+    }
+
+    /// An agent like [`me_along_x`] at `(x, y)` driving along y at `vy` m/s, across a path
+    /// along x.
+    fn crossing_y(x: f64, y: f64, vy: f32) -> AgentState {
+        AgentState {
+            x_m: x,
+            y_m: y,
+            heading_rad: std::f32::consts::FRAC_PI_2 * vy.signum(),
+            velocity_x_mps: 0.0,
+            velocity_y_mps: vy,
+            ..me_along_x()
+        }
+    }
+
+    /// My path: straight along x from the origin.
+    fn path_along_x() -> RefPath {
+        polyline_path(&[[0.0, 0.0], [200.0, 0.0]], 0.0)
+    }
+
+    /// When [`me_along_x`] reaches arclength `s_m` of a straight path along x.
+    fn arrival_at_10_mps(s_m: f64) -> Option<f64> {
+        Some(s_m / 10.0)
+    }
+
+    /// The same plan at 10 m/s, stopping at arclength `x_stop` (never reaching beyond it).
+    fn stops_at(x_stop: f64) -> impl Fn(f64) -> Option<f64> {
+        move |s: f64| (s <= x_stop).then_some(s / 10.0)
+    }
+
+    #[test]
+    fn crossing_conflicts_within_two_seconds_up_to_five_ahead() {
+        // Me at the origin heading +x at 10 m/s, my path straight along x (arrival at
+        // arclength s after s / 10 s). The other drives +y at 10 m/s and crosses my path at
+        // x = 30 m (I get there after 3 s) when `t_cross` s from now.
+        let me = me_along_x();
+        let path = path_along_x();
+        let arrival = arrival_at_10_mps;
+        let crossing_at = |t_cross: f64| AgentState {
+            x_m: 30.0,
+            y_m: -10.0 * t_cross,
+            heading_rad: std::f32::consts::FRAC_PI_2,
+            velocity_x_mps: 0.0,
+            velocity_y_mps: 10.0,
+            ..me
+        };
+        let conflict = |t_cross: f64| {
+            let other = crossing_at(t_cross);
+            crossing_conflict(&path, 0.0, &me, &[&other], arrival)
+        };
+        // 1.5 s apart (a near miss the old 1 s window let through) and 4.5 s ahead (beyond
+        // the old 3 s look-ahead) are conflicts; 3 s apart is not.
+        for t in [3.0, 1.5, 4.5] {
+            let (gap, v) = conflict(t).unwrap_or_else(|| panic!("no conflict at {t} s"));
+            assert!((gap - (30.0 - 4.5)).abs() < 1.0, "gap {gap}");
+            assert_eq!(v, 0.0);
+        }
+        assert_eq!(conflict(6.0), None);
+        assert_eq!(conflict(0.0), None, "it is through before I get there");
+    }
+
+    #[test]
+    fn a_plan_that_stops_in_the_way_is_a_conflict_whenever_the_other_comes() {
+        // My plan stops with my centre at x = 28 m: my box (4.5 m) then reaches into the way
+        // of an agent crossing at x = 30 m, so that agent is a conflict even when it comes
+        // long after I get there; a plan that stops at x = 20 m leaves its way free.
+        let me = me_along_x();
+        let path = path_along_x();
+        let crossing_in = |t_cross: f64| AgentState {
+            x_m: 30.0,
+            y_m: -10.0 * t_cross,
+            heading_rad: std::f32::consts::FRAC_PI_2,
+            velocity_x_mps: 0.0,
+            velocity_y_mps: 10.0,
+            ..me
+        };
+        let other = crossing_in(5.0);
+        assert!(crossing_conflict(&path, 0.0, &me, &[&other], stops_at(28.0)).is_some());
+        assert_eq!(
+            crossing_conflict(&path, 0.0, &me, &[&other], stops_at(20.0)),
+            None
+        );
+        // Passing through at 20 m/s (never stopping), I have left its way 3.3 s before it
+        // comes.
+        assert_eq!(
+            crossing_conflict(&path, 0.0, &me, &[&other], |s: f64| Some(s / 20.0)),
+            None
+        );
+    }
+
+    #[test]
+    fn a_fast_crossing_agent_is_not_missed_between_samples() {
+        // At 15 m/s across my path at x = 30 m (me there after 3 s), its centre is 3.75 m
+        // before my path at 1.5 s and 3.75 m past it at 2 s: outside my corridor (± 2.4 m) at
+        // both half-second samples, inside it in between — a conflict all the same.
+        let me = me_along_x();
+        let path = path_along_x();
+        let fast = crossing_y(30.0, -26.25, 15.0);
+        assert!(crossing_conflict(&path, 0.0, &me, &[&fast], arrival_at_10_mps).is_some());
+    }
+
+    #[test]
+    fn a_plan_that_stops_just_short_of_the_way_keeps_a_margin() {
+        // The other crosses at x = 30 m; my box reaches its box with my centre 3.2 m before
+        // (half my length plus half its width). A plan that stops at 26.5 m leaves 0.3 m: not
+        // enough (the margin is 2 m); one that stops at 24 m is clear.
+        let me = me_along_x();
+        let path = path_along_x();
+        let other = crossing_y(30.0, -50.0, 10.0);
+        assert!(crossing_conflict(&path, 0.0, &me, &[&other], stops_at(26.5)).is_some());
+        assert_eq!(
+            crossing_conflict(&path, 0.0, &me, &[&other], stops_at(24.0)),
+            None
+        );
+    }
+
+    #[test]
+    fn a_conflict_behind_another_way_stops_me_before_that_way() {
+        // A conflict at x = 40 m (an agent crossing there as I arrive), and the way of a second
+        // crossing agent at x = 25 m, far away yet: I stop before its way, not in it.
+        let me = me_along_x();
+        let path = path_along_x();
+        let conflict = crossing_y(40.0, -40.0, 10.0);
+        let far_way = crossing_y(25.0, 55.0, -5.0);
+        let (alone, _) =
+            crossing_conflict(&path, 0.0, &me, &[&conflict], arrival_at_10_mps).unwrap();
+        assert!((alone - (40.0 - 4.5)).abs() < 1.0, "gap {alone}");
+        let (both, v) =
+            crossing_conflict(&path, 0.0, &me, &[&conflict, &far_way], arrival_at_10_mps).unwrap();
+        // (Where my front reaches the band around that way: 25 m less half my length and half
+        // the band, 0.95 + 0.5 m.)
+        assert!((both - (25.0 - 2.25 - 1.45)).abs() < 0.5, "gap {both}");
+        assert_eq!(v, 0.0);
+        // Without a conflict the far way alone does not stop me.
+        assert_eq!(
+            crossing_conflict(&path, 0.0, &me, &[&far_way], arrival_at_10_mps),
+            None
+        );
+        // An agent driving along my path (in the next lane, inside my corridor) has no
+        // crossing way.
+        let alongside = AgentState {
+            x_m: 20.0,
+            y_m: 2.0,
+            velocity_x_mps: 3.0,
+            ..me
+        };
+        assert_eq!(crossing_way(&path, 0.0, &me, &alongside, 60.0), None);
+    }
+
+    #[test]
+    fn a_crossing_way_is_measured_from_my_box_to_its_near_edge_from_either_side() {
+        // Rays crossing my path (along x) at x = 30 m at 90°, 60° and 135°, each from 40 m
+        // away; at 30° to my path a way is not a crossing one.
+        let me = me_along_x();
+        let path = path_along_x();
+        let ray = |deg: f64| {
+            let (sn, cs) = deg.to_radians().sin_cos();
+            AgentState {
+                x_m: 30.0 - 40.0 * cs,
+                y_m: -40.0 * sn,
+                heading_rad: deg.to_radians() as f32,
+                velocity_x_mps: (5.0 * cs) as f32,
+                velocity_y_mps: (5.0 * sn) as f32,
+                ..me
+            }
+        };
+        let gap = |deg: f64| crossing_way(&path, 0.0, &me, &ray(deg), 60.0);
+        // My box (4.5 × 1.9 m) first touches the band (half 0.95 + 0.5 m) around the ray when
+        // my front corner on the ray's near side does: half my length, half the band across
+        // my path and half my width along the ray short of the crossing (found in 0.5 m steps).
+        let first_touch = |deg: f64| {
+            let theta = deg.to_radians();
+            30.0 - 2.25 - 1.45 / theta.sin() - 0.95 / theta.tan().abs()
+        };
+        for deg in [90.0, 60.0, 135.0] {
+            let (g, expected) = (gap(deg).unwrap(), first_touch(deg));
+            assert!(
+                g >= expected - 1e-9 && g < expected + 0.5,
+                "{deg}°: {g} vs {expected}"
+            );
+        }
+        assert_eq!(gap(30.0), None);
+        assert_eq!(gap(150.0), None);
+        // Beyond the limit it is not looked for; my box already in it gives 0.
+        assert_eq!(crossing_way(&path, 0.0, &me, &ray(90.0), 20.0), None);
+        assert_eq!(crossing_way(&path, 30.0, &me, &ray(90.0), 60.0), Some(0.0));
+    }
+
+    #[test]
+    fn a_way_too_close_to_stop_before_leaves_the_conflict() {
+        // At 10 m/s I need 16.7 m to stop at 3 m/s²: a way 10 m ahead is passed, and I stop
+        // for the conflict at 40 m.
+        let me = me_along_x();
+        let path = path_along_x();
+        let conflict = crossing_y(40.0, -40.0, 10.0);
+        let near_way = crossing_y(14.5, 55.0, -5.0);
+        let (gap, _) =
+            crossing_conflict(&path, 0.0, &me, &[&conflict, &near_way], arrival_at_10_mps).unwrap();
+        assert!((gap - (40.0 - 4.5)).abs() < 1.0, "gap {gap}");
+    }
+
+    #[test]
+    fn a_follower_is_a_conflict_only_while_it_catches_up() {
+        // Me at the origin heading +x at 10 m/s; the other 5 m behind in the next lane over
+        // (2 m to the left, inside the corridor: half the widths plus 0.5 m), heading +x.
+        let me = me_along_x();
+        let path = path_along_x();
+        let arrival = arrival_at_10_mps;
+        let follower = |speed_mps: f32| AgentState {
+            x_m: -5.0,
+            y_m: 2.0,
+            velocity_x_mps: speed_mps,
+            ..me
+        };
+        let conflict = |v: f32| crossing_conflict(&path, 0.0, &me, &[&follower(v)], arrival);
+        // Slower or as fast: braking would only bring it closer, so no conflict.
+        assert_eq!(conflict(8.0), None);
+        assert_eq!(conflict(10.0), None);
+        // Faster: it will be alongside ahead of me, so I hold back (a standing obstacle).
+        let (gap, v) = conflict(14.0).expect("a faster follower is a conflict");
+        assert!(gap < 10.0, "gap {gap}");
+        assert_eq!(v, 0.0);
+        // The same agent ahead of me and slower still is one (the crossing rule).
+        let ahead = AgentState {
+            x_m: 8.0,
+            ..follower(8.0)
+        };
+        assert!(crossing_conflict(&path, 0.0, &me, &[&ahead], arrival).is_some());
+    }
+
+    #[test]
+    fn an_agent_alongside_bounds_the_steering_toward_it() {
+        let me = me_along_x();
+        let at = |x_m: f64, y_m: f64, heading_deg: f32| AgentState {
+            x_m,
+            y_m,
+            heading_rad: heading_deg.to_radians(),
+            ..me
+        };
+        let bounds = |others: &[&AgentState]| side_steer_bounds(&me, 10.0, 2.7, others);
+        // Parallel, 2.5 m to the left (0.6 m between the boxes): no steering to the left.
+        let left = at(1.0, 2.5, 0.0);
+        assert_eq!(bounds(&[&left]), Some((f64::NEG_INFINITY, 0.0)));
+        // Turned 10° away from me: I may follow it parallel, within 0.5 s.
+        let (lo, hi) = bounds(&[&at(1.0, 2.5, 10.0)]).unwrap();
+        let expected = ((10f64.to_radians() / 0.5) * 2.7 / 10.0).atan();
+        assert_eq!(lo, f64::NEG_INFINITY);
+        assert!((hi - expected).abs() < 1e-6);
+        // On the right it bounds from below; on both sides both ways.
+        let right = at(-2.0, -2.6, 0.0);
+        assert_eq!(bounds(&[&right]), Some((0.0, f64::INFINITY)));
+        assert_eq!(bounds(&[&left, &right]), Some((0.0, 0.0)));
+        // Far enough ahead, far enough to the side or crossing: nobody alongside.
+        assert_eq!(bounds(&[&at(8.0, 2.5, 0.0)]), None);
+        assert_eq!(bounds(&[&at(0.0, 3.0, 0.0)]), None);
+        assert_eq!(bounds(&[&at(0.0, 2.5, 90.0)]), None);
+        // 15 m behind in the next lane: counted while it closes on me (at 20 m/s against my
+        // 10 it is alongside in 1.5 s), not at my own speed.
+        let behind = |speed_mps: f32| AgentState {
+            velocity_x_mps: speed_mps,
+            velocity_y_mps: 0.0,
+            ..at(-15.0, 2.5, 0.0)
+        };
+        assert_eq!(bounds(&[&behind(10.0)]), None);
+        assert_eq!(bounds(&[&behind(20.0)]), Some((f64::NEG_INFINITY, 0.0)));
+    }
+
+    #[test]
+    fn drifting_toward_an_agent_alongside_is_bounded_earlier_and_harder() {
+        // Me at 24 m/s heading 6° left of the other, which is 3 m behind on my left.
+        let me = me_along_x();
+        let rel = -6f64.to_radians();
+        let (v, wheelbase) = (24.0, 2.7);
+        let toward = v * 6f64.to_radians().sin();
+        let half_widths = f64::from(me.width_m);
+        let at_clearance = |c: f64| AgentState {
+            x_m: -3.0,
+            y_m: half_widths + c,
+            heading_rad: rel as f32,
+            ..me
+        };
+        let hi = |c: f64| side_steer_bounds(&me, v, wheelbase, &[&at_clearance(c)]).map(|b| b.1);
+        // The time constant is the one whose drift keeps 0.2 m of the clearance — from beyond
+        // 0.8 m (where 0.5 s of drift would take more than the clearance) on, and the closer,
+        // the harder the turn away.
+        let expected = |c: f64| ((rel / ((c - 0.2) / toward)) * wheelbase / v).atan();
+        for c in [1.3, 0.7] {
+            assert!((hi(c).unwrap() - expected(c)).abs() < 1e-6, "clearance {c}");
+        }
+        assert!(expected(0.7) < expected(1.3));
+        // Farther than 0.5 s of drift: free. Very close: the shortest time constant, 0.1 s.
+        assert_eq!(hi(0.3 + toward * 0.5), None);
+        let hardest = ((rel / 0.1) * wheelbase / v).atan();
+        assert!((hi(0.25).unwrap() - hardest).abs() < 1e-6);
+    }
+}
