@@ -126,6 +126,12 @@ pub struct DemoArgs {
     /// (BENCHMARKS.md, issue 11); 1 keeps one graph per step.
     #[arg(long, default_value_t = 2)]
     pub data_parallel_chunks: usize,
+    /// Samples per predictor training step.
+    #[arg(long, default_value_t = 32, value_parser = clap::value_parser!(u64).range(1..))]
+    pub batch_size: u64,
+    /// Peak learning rate of the predictor (cosine schedule down to 1 % of it).
+    #[arg(long, default_value_t = 1e-3)]
+    pub learning_rate: f64,
     /// Predictors to train (seeds --seed, --seed + 1, …) and label with as an ensemble (ψ
     /// averaged; the first one is the generators' J_φ). Each adds a predictor training
     /// (~5 minutes on 2 cores); 1 by default (BENCHMARKS.md, issue 11).

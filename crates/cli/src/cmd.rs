@@ -32,6 +32,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     reaction_siblings: a.reaction_siblings,
                     reaction_epochs: a.reaction_epochs,
                     data_parallel_chunks: a.data_parallel_chunks,
+                    batch_size: a.batch_size as usize,
+                    learning_rate: a.learning_rate,
                     predictors: a.predictors as usize,
                     generator_epochs: a.generator_epochs,
                     generator_seeds: a.generator_seeds,

@@ -66,6 +66,10 @@ pub struct DemoOptions {
     /// Data-parallel chunks of each predictor training step
     /// ([`scbg_train::TrainConfig::data_parallel_chunks`]).
     pub data_parallel_chunks: usize,
+    /// Samples per predictor training step ([`scbg_train::TrainConfig::batch_size`]).
+    pub batch_size: usize,
+    /// The predictor's peak learning rate ([`scbg_train::TrainConfig::learning_rate`]).
+    pub learning_rate: f64,
     /// Predictors to train (seeds `seed`, `seed + 1`, …) and label with as an ensemble (ψ
     /// averaged, [`crate::labels::label_scenes_ensemble`]); the first is the generators' J_φ
     /// and the one evaluated. 1: the paper's single predictor.

@@ -179,7 +179,17 @@ fn demo_writes_a_report() {
         "2",
         "--reaction-epochs",
         "1",
+        // The predictor's batch and learning rate reach its training config.
+        "--batch-size",
+        "64",
+        "--learning-rate",
+        "0.002",
     ]);
+    let config = std::fs::read_to_string(out.join("predictor.toml")).unwrap();
+    assert!(
+        config.contains("batch_size = 64") && config.contains("learning_rate = 0.002"),
+        "{config}"
+    );
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["data"]["scenarios"], 40);

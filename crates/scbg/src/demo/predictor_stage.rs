@@ -66,6 +66,8 @@ pub(super) fn train_predictors(
         lane_frame_condition: options.lane_frame,
         stepwise_condition: options.stepwise,
         data_parallel_chunks: options.data_parallel_chunks.max(1),
+        batch_size: options.batch_size.max(1),
+        learning_rate: options.learning_rate,
         reaction_cache: reacting.then(|| reaction_cache.clone()),
         reaction_from_epoch: reacting.then_some(reaction_from),
         ..Default::default()
