@@ -7,6 +7,8 @@ use std::process::{Command, Output};
 use serde_json::Value;
 
 mod corrupt;
+mod demo;
+mod generator;
 mod pipeline;
 mod predictor;
 mod real_data;

@@ -1,0 +1,181 @@
+//! `scbg demo`: the whole pipeline on a tiny synthetic set.
+
+use crate::scbg_ok;
+use serde_json::Value;
+
+#[test]
+fn demo_writes_a_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("demo");
+    scbg_ok(&[
+        "demo",
+        "--out",
+        out.to_str().unwrap(),
+        "--scenarios",
+        "40",
+        "--epochs",
+        "2",
+        "--generator-epochs",
+        "1",
+        "--generator-seeds",
+        "2",
+        // Reaction siblings, made after the first epoch, join the second.
+        "--reaction-siblings",
+        "2",
+        "--reaction-epochs",
+        "1",
+        // The predictor's batch and learning rate reach its training config.
+        "--batch-size",
+        "64",
+        "--learning-rate",
+        "0.002",
+    ]);
+    let config = std::fs::read_to_string(out.join("predictor.toml")).unwrap();
+    assert!(
+        config.contains("batch_size = 64") && config.contains("learning_rate = 0.002"),
+        "{config}"
+    );
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(report["data"]["scenarios"], 40);
+    assert!(
+        report["predictor"]["Marginal (interacting agents)"]["min_ade"].is_number(),
+        "{report}"
+    );
+    // The report.json layout.
+    for variant in ["baseline", "aug", "full"] {
+        let v = &report["variants"][variant];
+        for key in [
+            "courtesy_mse_data",
+            "courtesy_mse_range",
+            "courtesy_mse_arbitrary",
+            "traj_ade",
+        ] {
+            assert!(v[key]["mean"].is_number(), "{variant}.{key}: {report}");
+        }
+        assert!(v.get("corr_quantile").is_some() && v.get("corr_quantile_high").is_some());
+    }
+    let families = report["spearman_latent"].as_object().unwrap();
+    assert_eq!(families.len(), 3, "{report}");
+    assert!(report["checks"]["range_below_arbitrary"].is_boolean());
+    // The closed-loop stage ran on the held-out scenes.
+    let cl = &report["closed_loop"];
+    assert_eq!(cl["per_quantile"].as_array().unwrap().len(), 9);
+    assert!(cl["baselines"]["constant_velocity"]["wosac"]["metametric"].is_number());
+    assert!(report["checks"]["closed_loop_b_collision_2pct"].is_boolean());
+    assert!(report["checks"]["closed_loop_wosac_prior_above_baselines"].is_boolean());
+    assert!(cl["wosac_scbg_prior"]["metametric"].is_number());
+    assert!(cl["wosac_prior_minus_idm"]["std_error"].is_number());
+    // The knob within a scene: a mean of Spearman values, over responsive scenes only.
+    let within = cl["spearman_within_scene_a_speed"]["all"].as_f64().unwrap();
+    let responsive = cl["responsive_fraction"]["all"].as_f64().unwrap();
+    assert!(within.abs() <= responsive + 1e-9, "{cl}");
+    assert!(report["truth_control"]["full"]["spearman_within_example"]["all"].is_number());
+    // Then sample and rank in the same loop, at its own cadence (both 2 s), without the
+    // prior's score.
+    let rk = &report["closed_loop_ranked"];
+    assert_eq!(rk["policy"], "ranked", "{rk}");
+    assert_eq!(rk["replan_every"], 20);
+    assert_eq!(cl["replan_every"], 20);
+    assert_eq!(rk["per_quantile"].as_array().unwrap().len(), 9);
+    assert!(rk["wosac_scbg"]["metametric"].is_number(), "{rk}");
+    assert!(rk["wosac_scbg_prior"].is_null());
+    assert!(report["checks"]["closed_loop_ranked_b_collision_2pct"].is_boolean());
+    assert!(
+        report["checks"]
+            .get("closed_loop_ranked_wosac_prior_above_baselines")
+            .is_none()
+    );
+    assert!(
+        out.join("figures/closed_loop_ranked/sim_courtesy.png")
+            .is_file()
+    );
+    // Two generator seeds: seed means, their spread, each seed's numbers.
+    assert_eq!(report["generator_seeds"], serde_json::json!([0, 1]));
+    assert_eq!(report["variants_per_seed"].as_array().unwrap().len(), 2);
+    assert!(report["variants_seed_std"]["full"]["traj_ade"]["mean"].is_number());
+    assert!(out.join("generator_full_seed1/generator.json").is_file());
+    // The fidelity issue's keys.
+    assert_eq!(
+        report["fidelity_all_scenes"]["logged"]["all"]["n"], 40,
+        "{report}"
+    );
+    // The held-out split's share of the 40 scenes.
+    let held_out = report["fidelity"]["logged"]["all"]["n"].as_u64().unwrap();
+    assert!((1..40).contains(&held_out), "{report}");
+    // The fidelity on the same held-out scenes of the checkpoint the siblings were made with
+    // (after the first epoch), and the siblings' epoch in the predictor's history.
+    assert_eq!(
+        report["fidelity_stage1"]["logged"]["all"]["n"], held_out,
+        "{report}"
+    );
+    let ckpt: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("predictor/checkpoint.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(ckpt["state"]["epoch"], 2, "{ckpt}");
+    assert_eq!(ckpt["train_config"]["reaction_from_epoch"], 1, "{ckpt}");
+    // Where the time went, stage by stage.
+    let stages = report["stage_seconds"].as_object().unwrap();
+    assert_eq!(stages.len(), 9, "{report}");
+    assert!(stages.values().all(|v| v.as_f64().unwrap() >= 0.0));
+    let tuned: Value = serde_json::from_str(
+        &std::fs::read_to_string(out.join("cache_reaction/manifest.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(tuned["total"]["scenarios"], 40 * 2, "{tuned}");
+    assert!(report["truth_control"]["full"]["spearman_quantile_psi_true"].is_object());
+    // Its yardstick scores the same held-out roles.
+    let world = &report["truth_control_world"];
+    assert_eq!(
+        world["examples"]["all"].as_f64().unwrap(),
+        report["truth_control"]["full"]["examples"]["all"]
+            .as_f64()
+            .unwrap(),
+        "{report}"
+    );
+    assert_eq!(world["per_quantile"].as_array().unwrap().len(), 9);
+    for key in [
+        "oracle_consistency_95",
+        "fidelity_logged_spearman_0_7",
+        "fidelity_sampled_spearman_0_7",
+        "fidelity_spread_ratio",
+        "label_latent_spearman_0_5",
+        "truth_control_spearman",
+        "corr_quantile_at_least_0_6",
+        "corr_quantile_high_at_least_0_8",
+    ] {
+        assert!(report["checks"][key].is_boolean(), "{key}: {report}");
+    }
+    assert!(report["checks"]["oracle_consistency_95"].as_bool().unwrap());
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains("| Conditional (interacting agents) |"), "{md}");
+    assert!(md.contains("| ①+②+③ courtesy loss |"), "{md}");
+    for f in [
+        "scene.png",
+        "psi_histogram.png",
+        "psi_fidelity.png",
+        "fig4_quantile_courtesy.png",
+        "fig5a_case1.png",
+        "fig5b_quantile_speed.png",
+    ] {
+        assert!(out.join("figures").join(f).is_file(), "{f}");
+    }
+    // Outputs get the usual permissions (what `File::create` gives under this umask), not a
+    // temporary file's owner-only 0600.
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        let probe = out.join("probe");
+        std::fs::File::create(&probe).unwrap();
+        let mode = |p: &std::path::Path| std::fs::metadata(p).unwrap().permissions().mode() & 0o777;
+        for f in [
+            "report.json",
+            "report.md",
+            "figures/fig4_quantile_courtesy.png",
+            "labels/labels-00000.parquet",
+        ] {
+            assert_eq!(mode(&out.join(f)), mode(&probe), "{f}");
+        }
+    }
+}

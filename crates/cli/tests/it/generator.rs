@@ -1,0 +1,430 @@
+//! `scbg label`, `scbg train generator` and what runs on a trained generator.
+
+use crate::predictor::tiny_trained_model;
+use crate::{inspect_json, scbg, scbg_ok};
+use serde_json::Value;
+
+#[test]
+fn label_writes_parquet_and_resumes() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).display().to_string();
+    tiny_trained_model(dir.path(), 20, 8);
+    let gt = format!("{}/ground_truth.jsonl", p("synth"));
+    scbg_ok(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels"),
+        "--samples",
+        "3",
+        "--ground-truth",
+        &gt,
+    ]);
+    let summary: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("labels/summary.json")).unwrap(),
+    )
+    .unwrap();
+    // 20 scenarios × 1 labelled pair × 2 roles × (1 logged + 3 sampled).
+    assert_eq!(summary["rows"], 20 * 2 * 4);
+    assert_eq!(summary["pairs_roles"], 40);
+    assert!(dir.path().join("labels/psi_histogram.png").is_file());
+    // The fidelity report: every future of the 20 ground-truth roles is scored by the oracle.
+    let fidelity = &summary["fidelity"];
+    assert_eq!(fidelity["logged"]["all"]["n"], 20, "{summary}");
+    assert_eq!(fidelity["sampled"]["all"]["n"], 60, "{summary}");
+    for key in ["spearman", "pearson", "slope", "spread_ratio"] {
+        assert!(fidelity["logged"]["all"].get(key).is_some(), "{key}");
+    }
+    assert!(fidelity["oracle_consistency"]["all"][0].as_f64().unwrap() >= 0.95);
+    assert!(dir.path().join("labels/psi_fidelity.png").is_file());
+    let rows =
+        scbg::labels::read_label_table(&dir.path().join("labels/labels-00000.parquet")).unwrap();
+    assert_eq!(rows.iter().filter(|r| r.psi_true.is_some()).count(), 80);
+    let parquet = dir.path().join("labels/labels-00000.parquet");
+    let bytes = std::fs::read(&parquet).unwrap();
+    assert_eq!(&bytes[..4], b"PAR1");
+    // A second run reads the finished shard instead of relabelling it.
+    let before = std::fs::metadata(&parquet).unwrap().modified().unwrap();
+    scbg_ok(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels"),
+        "--samples",
+        "3",
+    ]);
+    assert_eq!(
+        std::fs::metadata(&parquet).unwrap().modified().unwrap(),
+        before
+    );
+    // ψ toward B's neighbours (issue 12): same rows, each counting its audience; a bad radius
+    // is refused before anything is written.
+    let bad = scbg(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels_bad"),
+        "--audience",
+        "neighbours",
+        "--audience-radius-m",
+        "0",
+    ]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(!bad.status.success() && err.contains("radius 0"), "{err}");
+    assert!(!dir.path().join("labels_bad").exists());
+    scbg_ok(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels_neighbours"),
+        "--samples",
+        "3",
+        "--audience",
+        "neighbours",
+        "--audience-weighting",
+        "proximity",
+        "--ground-truth",
+        &gt,
+    ]);
+    let summary: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("labels_neighbours/summary.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(summary["rows"], 20 * 2 * 4);
+    assert_eq!(summary["audience"]["kind"], "neighbours", "{summary}");
+    assert_eq!(summary["audience"]["weighting"], "proximity", "{summary}");
+    assert!(summary["audience_size_mean"].as_f64().unwrap() >= 1.0);
+    assert!(summary["fidelity"].is_null(), "{summary}");
+}
+
+#[test]
+fn train_generator_saves_generator_and_range_predictor() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = |s: &str| dir.path().join(s).display().to_string();
+    tiny_trained_model(dir.path(), 16, 12);
+    scbg_ok(&[
+        "train",
+        "generator",
+        "--predictor",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("gen"),
+        "--epochs",
+        "2",
+        "--samples",
+        "2",
+        "--batch-size",
+        "8",
+        "--range-steps",
+        "20",
+    ]);
+    let saved: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("gen/generator.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(saved["variant"], "full");
+    assert_eq!(saved["history"].as_array().unwrap().len(), 2);
+    assert!(saved["examples"].as_u64().unwrap() > 0);
+    assert!(saved["range_loss"].as_f64().unwrap().is_finite());
+    assert!(
+        dir.path().join("gen/generator.bpk").is_file()
+            && dir.path().join("gen/range.bpk").is_file()
+    );
+    scbg_ok(&[
+        "train",
+        "generator",
+        "--predictor",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("gen_base"),
+        "--variant",
+        "baseline",
+        "--epochs",
+        "1",
+        "--samples",
+        "2",
+        "--batch-size",
+        "8",
+        "--range-steps",
+        "20",
+    ]);
+
+    // `scbg generate` on a pair of the synthetic ground truth.
+    let gt = std::fs::read_to_string(dir.path().join("synth/ground_truth.jsonl")).unwrap();
+    let first: Value = serde_json::from_str(gt.lines().next().unwrap()).unwrap();
+    let (a, b) = (first["a_id"].to_string(), first["b_id"].to_string());
+    let file = std::fs::read_dir(dir.path().join("synth"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.extension().is_some_and(|x| x == "tfrecord"))
+        .unwrap();
+    let file = file.display().to_string();
+    let sid = first["scenario_id"].as_str().unwrap();
+    let gen_dir = p("gen");
+    // `scbg generate` for this scenario and A, with B and the remaining arguments given.
+    let generate = |b: &str, rest: &[&str]| {
+        let mut args = vec![
+            "generate",
+            "--model",
+            &gen_dir,
+            "--scenario",
+            &file,
+            "--scenario-id",
+            sid,
+            "--a",
+            &a,
+            "--b",
+            b,
+        ];
+        args.extend_from_slice(rest);
+        scbg(&args)
+    };
+    let (traj_json, traj_png) = (p("traj.json"), p("traj.png"));
+    let ok = generate(
+        &b,
+        &[
+            "--quantile",
+            "0.1",
+            "0.5",
+            "0.9",
+            "--out",
+            &traj_json,
+            "--render",
+            &traj_png,
+        ],
+    );
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    let traj: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("traj.json")).unwrap())
+            .unwrap();
+    let trajs = traj["trajectories"].as_array().unwrap();
+    assert_eq!(trajs.len(), 3);
+    assert_eq!(trajs[0]["world_xy_m"].as_array().unwrap().len(), 80);
+    assert!(trajs[0]["psi"].as_f64().unwrap() <= trajs[2]["psi"].as_f64().unwrap());
+    assert!(dir.path().join("traj.png").is_file());
+    // Bad requests name what is wrong and exit 2.
+    let bad = generate("987654321", &["--quantile", "0.5"]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("987654321"));
+    let bad = generate(&b, &["--quantile", "1.5"]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("quantile"));
+
+    // `scbg eval scbg` over both variants, with figures.
+    let out = scbg_ok(&[
+        "eval",
+        "scbg",
+        "--model",
+        &p("gen_base"),
+        &p("gen"),
+        "--data",
+        &p("cache"),
+        "--split",
+        "all",
+        "--ground-truth",
+        &p("synth/ground_truth.jsonl"),
+        "--json",
+        "--figures",
+        &p("figs"),
+    ]);
+    let eval: Value = serde_json::from_str(&out).unwrap();
+    // Control in truth for each variant, and its yardstick over the same roles.
+    let roles = eval["truth_control"]["full"]["examples"]["all"]
+        .as_u64()
+        .unwrap();
+    assert!(roles > 0, "{eval}");
+    assert_eq!(
+        eval["truth_control_world"]["examples"]["all"].as_u64(),
+        Some(roles)
+    );
+    assert!(eval["truth_control_world"]["spearman_quantile_psi_true"]["all"].is_number());
+    // The selectors among B's labelled futures score the same roles; ranked by ψ_true itself,
+    // each role's picks rise with the quantile, so the mean does too.
+    let selection = &eval["truth_control_selection"];
+    assert_eq!(
+        selection["by_label"]["examples"]["all"].as_u64(),
+        Some(roles),
+        "{eval}"
+    );
+    let means: Vec<f64> = selection["by_truth"]["per_quantile"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|q| q["psi_true_mean"].as_f64().unwrap())
+        .collect();
+    assert_eq!(means.len(), 9);
+    assert!(means.windows(2).all(|w| w[0] <= w[1]), "{means:?}");
+    assert!(selection["candidates_mean"].as_f64().unwrap() >= 2.0);
+    // Within each role the picks by ψ_true never fall with q: every responsive role's
+    // Spearman is positive.
+    let by_truth = &selection["by_truth"];
+    let within = by_truth["spearman_within_example"]["all"].as_f64().unwrap();
+    let responsive = by_truth["responsive_fraction"]["all"].as_f64().unwrap();
+    assert!(within >= 0.0 && within <= responsive + 1e-9, "{by_truth}");
+    assert_eq!(within > 0.0, responsive > 0.0, "{by_truth}");
+    for variant in ["baseline", "full"] {
+        let v = &eval["variants"][variant];
+        for key in [
+            "courtesy_mse_data",
+            "courtesy_mse_range",
+            "courtesy_mse_arbitrary",
+            "traj_ade",
+        ] {
+            assert!(
+                v[key]["mean"].as_f64().unwrap().is_finite(),
+                "{variant} {key}"
+            );
+            assert!(v[key]["std"].as_f64().unwrap() >= 0.0);
+        }
+        assert!(v.get("corr_quantile").is_some() && v.get("corr_quantile_high").is_some());
+        assert_eq!(v["per_quantile"].as_array().unwrap().len(), 9);
+    }
+    for f in [
+        "fig4_quantile_courtesy.png",
+        "fig5a_case1.png",
+        "fig5b_quantile_speed.png",
+    ] {
+        assert!(dir.path().join("figs").join(f).is_file(), "{f}");
+    }
+
+    // `scbg sim`: one rollout as a Scenario file, 32 as a WOSAC shard, in the synthetic world
+    // (ground_truth.jsonl beside the file); `scbg eval sim` on the synthetic folder.
+    let sim = |out: &str, rest: &[&str]| {
+        let mut args = vec![
+            "sim",
+            "--model",
+            &gen_dir,
+            "--scenario",
+            &file,
+            "--scenario-id",
+            sid,
+            "--a",
+            &a,
+            "--b",
+            &b,
+            "--out",
+            out,
+        ];
+        args.extend_from_slice(rest);
+        scbg(&args)
+    };
+    let ok = sim(&p("sim1"), &["--quantile", "0.8"]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    assert!(String::from_utf8_lossy(&ok.stderr).contains("synthetic world"));
+    let summary = inspect_json(&[&dir.path().join("sim1/rollouts.tfrecord")]);
+    assert_eq!(summary.len(), 1);
+    assert_eq!(summary[0]["scenario_id"], sid);
+    let report: Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("sim1/sim.json")).unwrap())
+            .unwrap();
+    assert_eq!(report["reports"].as_array().unwrap().len(), 1);
+    assert!(report["synthetic_world"].as_bool().unwrap());
+    let ok = sim(&p("simw"), &["--format", "wosac", "--name", "mine"]);
+    assert!(
+        ok.status.success(),
+        "{}",
+        String::from_utf8_lossy(&ok.stderr)
+    );
+    assert!(
+        dir.path()
+            .join("simw/mine.binproto-00000-of-00001")
+            .is_file()
+    );
+    // Bad requests: named, exit 2, nothing written.
+    for (rest, needle) in [
+        (&["--quantile", "1.5"][..], "quantile 1.5"),
+        (&["--also", "4242=0.5"][..], "4242"),
+        (&["--format", "wosac", "--rollouts", "3"][..], "32 rollouts"),
+        (&["--replan-every", "0"][..], "replan_every"),
+    ] {
+        let bad = sim(&p("simbad"), rest);
+        assert_eq!(bad.status.code(), Some(2), "{rest:?}");
+        let err = String::from_utf8_lossy(&bad.stderr);
+        assert!(err.contains(needle), "{rest:?}: {err}");
+        assert!(!dir.path().join("simbad/sim.json").exists());
+    }
+    let out = scbg_ok(&[
+        "eval",
+        "sim",
+        "--model",
+        &gen_dir,
+        "--data",
+        &p("synth"),
+        "--ground-truth",
+        &p("synth/ground_truth.jsonl"),
+        "--split",
+        "all",
+        "--scenes",
+        "2",
+        "--wosac-scenes",
+        "1",
+        "--wosac-quantiles",
+        "0.5",
+        "--spread",
+        "0.1",
+        "--out",
+        &p("evalsim"),
+        "--json",
+    ]);
+    let eval: Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(eval["scenes"], 2);
+    assert_eq!(eval["per_quantile"].as_array().unwrap().len(), 9);
+    assert!(
+        eval["baselines"]["idm_only"]["wosac"]["metametric"]
+            .as_f64()
+            .is_some()
+    );
+    // Only the quantile asked for is scored around its band, and the prior beside it.
+    let wosac_rows: Vec<f64> = eval["per_quantile"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|r| !r["wosac"].is_null())
+        .map(|r| r["quantile"].as_f64().unwrap())
+        .collect();
+    assert_eq!(wosac_rows, [0.5]);
+    assert_eq!(eval["wosac_prior_minus_idm"]["scenes"], 1);
+    for f in ["eval_sim.json", "sim_courtesy.png", "sim_realism.png"] {
+        assert!(dir.path().join("evalsim").join(f).is_file(), "{f}");
+    }
+
+    // A malformed threshold is a clear error.
+    let bad = scbg(&[
+        "train",
+        "generator",
+        "--predictor",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("gen2"),
+        "--threshold",
+        "qx",
+    ]);
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--threshold"));
+}
