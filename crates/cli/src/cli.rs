@@ -156,6 +156,12 @@ pub struct DemoArgs {
     /// embedding alone (BENCHMARKS.md, issues 11/12).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub mode_courtesy: bool,
+    /// With `--head modes`: slowed copies of each of B's modes join the generator's choices,
+    /// one per factor (comma-separated, each in (0, 1]): the mode's path, travelled at a speed
+    /// easing from the mode's own to the factor times it at the horizon (yielding, in every
+    /// family). Empty (the default): the modes alone (BENCHMARKS.md, issue 11).
+    #[arg(long, value_delimiter = ',', value_parser = slowdown_factor)]
+    pub mode_slowdowns: Vec<f32>,
     /// Held-out scenes of the closed-loop stage (0 skips it).
     #[arg(long, default_value_t = 60)]
     pub closed_loop_scenes: usize,
@@ -163,6 +169,15 @@ pub struct DemoArgs {
     pub estimator: EstimatorArgs,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+}
+
+/// One `--mode-slowdowns` factor: a number in (0, 1].
+pub(crate) fn slowdown_factor(text: &str) -> Result<f32, String> {
+    text.trim()
+        .parse::<f32>()
+        .ok()
+        .filter(|w| *w > 0.0 && *w <= 1.0)
+        .ok_or_else(|| format!("slowdown {text:?}: expected a number in (0, 1]"))
 }
 
 #[cfg(test)]
@@ -201,5 +216,25 @@ mod tests {
         // The bare flags of earlier versions still mean "on".
         assert_eq!(demo(&["--stepwise", "--lane-frame"]), (true, true, 3));
         assert!(Cli::try_parse_from(["scbg", "demo", "--stepwise", "maybe"]).is_err());
+    }
+
+    #[test]
+    fn mode_slowdowns_are_factors_in_0_1() {
+        let slowdowns = |args: &[&str]| {
+            Cli::try_parse_from(["scbg", "demo"].iter().chain(args).copied()).map(|c| {
+                match c.command {
+                    Command::Demo(d) => d.mode_slowdowns,
+                    _ => unreachable!(),
+                }
+            })
+        };
+        assert_eq!(slowdowns(&[]).unwrap(), Vec::<f32>::new());
+        assert_eq!(
+            slowdowns(&["--mode-slowdowns", "0.75,0.5"]).unwrap(),
+            vec![0.75, 0.5]
+        );
+        for bad in ["0", "1.5", "-0.5", "slow"] {
+            assert!(slowdowns(&["--mode-slowdowns", bad]).is_err(), "{bad}");
+        }
     }
 }

@@ -198,10 +198,12 @@ pub fn marginal_embedding(
 /// predictor's own embedding width, without A's context), for a mode-selecting generator.
 pub fn b_modes_of(predictor: &Multipath, b_embedding: burn::tensor::Tensor<2>) -> crate::BModes {
     let out = predictor.decode(b_embedding);
+    let mixture_modes = out.logits.dims()[1];
     crate::BModes {
         xy: out.xy.detach(),
         log_prob: burn::tensor::activation::log_softmax(out.logits, 1).detach(),
         psi: None,
+        mixture_modes,
     }
 }
 
@@ -218,7 +220,9 @@ pub fn b_modes(predictor: &Multipath, examples: &[&Example], device: &Device) ->
 /// Σ_j π_j E[r | x, μ_j]`, J_φ of the mode mean `μ_k` against the modes' own
 /// probability-weighted mean (the law of total expectation over the mixture's means, the
 /// same estimator in training and inference, and independent of how the labels estimated
-/// E[r | x]). Detached; run it on any device.
+/// E[r | x]). Slowed copies of the modes ([`crate::BModes::with_slowdowns`]) are scored
+/// against the same mean, which only the mixture's own modes form. Detached; run it on any
+/// device.
 ///
 /// # Shapes
 /// `modes.xy: [n, K, T, 2]` (B's frame), `modes.log_prob: [n, K]` → `[n, K]`
@@ -248,7 +252,10 @@ fn mode_courtesy_with(
         predictor, rows, examples, k, reward, a_encoded, device,
     );
     let e_cond = e_cond.reshape([k, n]).swap_dims(0, 1);
-    let mean = (e_cond.clone() * modes.log_prob.clone().exp()).sum_dim(1);
+    let mixture = modes.mixture_modes.clamp(1, k);
+    let mean = (e_cond.clone().narrow(1, 0, mixture)
+        * modes.log_prob.clone().narrow(1, 0, mixture).exp())
+    .sum_dim(1);
     (e_cond - mean).detach()
 }
 
@@ -278,7 +285,7 @@ pub(crate) fn b_modes_with(
     if !generator.selects_modes() {
         return None;
     }
-    let mut modes = b_modes(predictor, examples, device);
+    let mut modes = generator.candidates_of(b_modes(predictor, examples, device));
     if generator.scores_mode_courtesy() {
         let [n, k, _, _] = modes.xy.dims();
         let stored = examples.iter().all(|e| e.mode_psi.len() == k);
@@ -301,16 +308,21 @@ pub(crate) fn b_modes_with(
 }
 
 /// Stores every example's [`Example::mode_psi`] (in chunks of 64 pair roles), so that
-/// training does not recompute J_φ of B's modes at every step. Run it on a plain device.
+/// training does not recompute J_φ of B's modes at every step: of the modes and their
+/// copies slowed by `slowdowns` ([`crate::GeneratorConfig::mode_slowdowns`]; empty: the
+/// modes alone). Run it on a plain device.
 pub fn fill_mode_courtesy(
     predictor: &Multipath,
     examples: &mut [Example],
     reward: scbg_courtesy::Reward,
+    slowdowns: &[f32],
     device: &Device,
 ) {
     for chunk in examples.chunks_mut(64) {
         let refs: Vec<&Example> = chunk.iter().collect();
         let modes = b_modes(predictor, &refs, device);
+        let warp = crate::model::slowdown_warp(slowdowns, modes.xy.dims()[2], device);
+        let modes = modes.with_slowdowns(warp.as_ref());
         let k = modes.log_prob.dims()[1];
         let psi = crate::eval::to_vec(mode_courtesy(predictor, &refs, &modes, reward, device));
         for (e, psi) in chunk.iter_mut().zip(psi.chunks_exact(k)) {

@@ -486,7 +486,10 @@ impl Scbg {
             ),
             None => self.generator.selects_modes().then(|| {
                 let b_width = embedding.dims()[1] - self.generator.a_context_width;
-                crate::b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width))
+                self.generator.candidates_of(crate::b_modes_of(
+                    &self.predictor,
+                    embedding.clone().narrow(1, 0, b_width),
+                ))
             }),
         };
         let psi = match courtesy {

@@ -53,6 +53,50 @@ pub struct GeneratorConfig {
     /// blend) for every generator trained before the option.
     #[serde(default)]
     pub likeliest_mode: bool,
+    /// With `modes > 0`: each of B's `K` modes also joins the choices slowed down, once per
+    /// factor `w` here (in (0, 1]): the same path, travelled at a speed that eases linearly
+    /// from the mode's own at the current step to `w` times it at the horizon
+    /// ([`slowdown_warp`]). Yielding — dropping back, letting A merge or cross first — is
+    /// the courteous manoeuvre of every interaction family, and a predictor's marginal modes
+    /// rarely hold enough of it. The selector then chooses among `K · (1 + S)` candidates
+    /// ([`Self::candidates`]); a slowed copy starts with its mode's log-probability. Empty
+    /// for every generator trained before the option.
+    #[serde(default)]
+    pub mode_slowdowns: Vec<f32>,
+}
+
+/// The `[S, T, T]` time warps of [`GeneratorConfig::mode_slowdowns`]: row `s` of warp `i`
+/// holds the weights of a mode's steps (positions at steps 1‥T, the origin at step 0 is B's
+/// current position, zero in B's frame) in its slowed copy's step `s + 1`. With factor `w`
+/// the slowed copy is at the mode's fractional step `τ(t) = t − (1 − w) t² / (2T)` at step
+/// `t`, linearly interpolated: its speed is the mode's times `1 − (1 − w) t / T`, smooth at
+/// the current step (no jump in speed) and `w` times the mode's at the horizon.
+pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option<Tensor<3>> {
+    if slowdowns.is_empty() || steps == 0 {
+        return None;
+    }
+    let t_max = steps as f32;
+    let mut weights = vec![0.0f32; slowdowns.len() * steps * steps];
+    for (i, &w) in slowdowns.iter().enumerate() {
+        let w = w.clamp(0.0, 1.0);
+        for s in 0..steps {
+            let t = (s + 1) as f32;
+            let tau = (t - (1.0 - w) * t * t / (2.0 * t_max)).clamp(0.0, t_max);
+            let lo = tau.floor() as usize; // 0 = the origin
+            let frac = tau - lo as f32;
+            let row = i * steps * steps + s * steps;
+            if lo >= 1 {
+                weights[row + lo - 1] += 1.0 - frac;
+            }
+            if lo < steps && frac > 0.0 {
+                weights[row + lo] += frac;
+            }
+        }
+    }
+    Some(Tensor::from_data(
+        burn::tensor::TensorData::new(weights, [slowdowns.len(), steps, steps]),
+        device,
+    ))
 }
 
 /// Hidden width of the per-mode courtesy scorer ([`GeneratorConfig::mode_courtesy`]).
@@ -71,6 +115,12 @@ fn one_step() -> usize {
 }
 
 impl GeneratorConfig {
+    /// The choices of a mode-selecting generator: B's `modes` and their slowed copies
+    /// ([`Self::mode_slowdowns`]); 0 for a plain regression.
+    pub fn candidates(&self) -> usize {
+        self.modes * (1 + self.mode_slowdowns.len())
+    }
+
     /// The default decoder for a predictor embedding of `embedding_width`: ψ width 32, hidden
     /// widths 256, 256, 80 steps, `psi_scale` 1 (set it from the labels), 2 Hz knots.
     pub fn new(embedding_width: usize) -> Self {
@@ -85,6 +135,7 @@ impl GeneratorConfig {
             modes: 0,
             mode_courtesy: false,
             likeliest_mode: false,
+            mode_slowdowns: Vec::new(),
         }
     }
 
@@ -105,7 +156,7 @@ impl GeneratorConfig {
         let selector = (self.modes > 0).then(|| {
             let mut sel = vec![dims[0]];
             sel.extend(self.hidden.first());
-            sel.push(self.modes);
+            sel.push(self.candidates());
             Mlp::init(&sel, device)
         });
         let stride = self.knot_stride.max(1);
@@ -140,6 +191,12 @@ impl GeneratorConfig {
             psi_scale: self.psi_scale,
             a_context_width: self.a_context_width,
             likeliest_mode: self.modes > 0 && self.likeliest_mode,
+            mode_warp: if self.modes > 0 {
+                slowdown_warp(&self.mode_slowdowns, self.future_steps, device)
+                    .map(|w| burn::module::Param::from_tensor(w).set_require_grad(false))
+            } else {
+                None
+            },
         }
     }
 }
@@ -168,6 +225,9 @@ pub struct Generator {
     pub a_context_width: usize,
     /// See [`GeneratorConfig::likeliest_mode`].
     pub likeliest_mode: bool,
+    /// `[S, T, T]` fixed warps of [`GeneratorConfig::mode_slowdowns`] (not trained; `None`
+    /// without slowed copies).
+    pub mode_warp: Option<burn::module::Param<Tensor<3>>>,
 }
 
 /// B's predicted marginal modes, the choices of a mode-selecting generator
@@ -181,6 +241,9 @@ pub struct BModes {
     /// `[batch, K]` each mode's courtesy ψ_k ([`crate::mode_courtesy`]); required by a
     /// generator that scores them ([`Generator::scores_mode_courtesy`]).
     pub psi: Option<Tensor<2>>,
+    /// The leading modes that form the predicted mixture (their probabilities sum to 1);
+    /// the rest are copies derived from them ([`BModes::with_slowdowns`]).
+    pub mixture_modes: usize,
 }
 
 impl BModes {
@@ -193,6 +256,37 @@ impl BModes {
             xy: Tensor::cat(vec![self.xy; times], 0),
             log_prob: Tensor::cat(vec![self.log_prob; times], 0),
             psi: self.psi.map(|p| Tensor::cat(vec![p; times], 0)),
+            mixture_modes: self.mixture_modes,
+        }
+    }
+
+    /// The modes followed by their slowed copies ([`GeneratorConfig::mode_slowdowns`]),
+    /// warp by warp, each with its mode's log-probability; unchanged without `warp`. Call it
+    /// before the modes' courtesy is measured.
+    ///
+    /// # Shapes
+    /// `warp: [S, T, T]`; `xy: [batch, K, T, 2]` → `[batch, K · (1 + S), T, 2]`
+    ///
+    /// # Panics
+    /// If the modes' courtesy is already set (it would not cover the copies).
+    pub fn with_slowdowns(self, warp: Option<&Tensor<3>>) -> Self {
+        let Some(warp) = warp else {
+            return self;
+        };
+        assert!(self.psi.is_none(), "slow the modes before scoring them");
+        let [b, k, t, _] = self.xy.dims();
+        let [s, _, _] = warp.dims();
+        let flat = self.xy.clone().reshape([b * k, t, 2]);
+        let mut xy = vec![self.xy];
+        for i in 0..s {
+            let w = warp.clone().narrow(0, i, 1).expand([b * k, t, t]);
+            xy.push(w.matmul(flat.clone()).reshape([b, k, t, 2]));
+        }
+        Self {
+            xy: Tensor::cat(xy, 1),
+            log_prob: Tensor::cat(vec![self.log_prob; 1 + s], 1),
+            psi: None,
+            mixture_modes: self.mixture_modes,
         }
     }
 }
@@ -201,6 +295,12 @@ impl Generator {
     /// Whether [`Self::forward`] needs B's modes.
     pub fn selects_modes(&self) -> bool {
         self.selector.is_some()
+    }
+
+    /// B's modes as this generator chooses among them: with their slowed copies
+    /// ([`GeneratorConfig::mode_slowdowns`]), if any.
+    pub fn candidates_of(&self, modes: BModes) -> BModes {
+        modes.with_slowdowns(self.mode_warp.as_ref().map(|w| w.val()).as_ref())
     }
 
     /// Whether [`Self::forward`] needs each mode's courtesy ([`BModes::psi`]).
@@ -400,6 +500,7 @@ mod tests {
                 &device,
             ),
             psi: None,
+            mixture_modes: 2,
         };
         let want: Vec<f32> = two_modes(&device).into_data().try_to_vec().unwrap();
         for favoured in [0, 1] {
@@ -448,6 +549,7 @@ mod tests {
             xy: two_modes(&device).reshape([1, 2, 80, 2]).repeat_dim(0, n),
             log_prob: Tensor::from_data([[0.0f32, 0.0]], &device).repeat_dim(0, n),
             psi: None,
+            mixture_modes: 2,
         };
         let all = two_modes(&device);
         let target = Tensor::cat((0..n).map(|i| all.clone().narrow(0, i % 2, 1)).collect(), 0);
@@ -518,6 +620,7 @@ mod tests {
                     burn::tensor::TensorData::new(mode_psi.clone(), [n, 2]),
                     &device,
                 )),
+                mixture_modes: 2,
             };
             let mut optim = AdamConfig::new().init();
             for _ in 0..200 {
@@ -555,6 +658,7 @@ mod tests {
             xy: two_modes(&device).reshape([1, 2, 80, 2]),
             log_prob: Tensor::from_data([[0.0f32, 0.0]], &device),
             psi: None,
+            mixture_modes: 2,
         };
         let end_y = |out: Tensor<3>| -> f32 {
             let v: Vec<f32> = out.into_data().try_to_vec().unwrap();
@@ -572,6 +676,100 @@ mod tests {
         );
         let blend = end_y(g.forward_blend(embedding, psi, Some(modes())));
         assert!(blend > 1e-3 && blend < 8.0 - 1e-3, "{blend}");
+    }
+
+    /// A slowed copy keeps its mode's path and eases off smoothly: on a straight mode at
+    /// 1 m a step, factor ½ starts at the mode's speed, ends at half of it and covers
+    /// `T (1 + w) / 2` = 60 m of the mode's 80; factor 1 is the mode itself.
+    #[test]
+    fn slowed_copies_ease_off_along_the_modes_path() {
+        let device = Device::flex();
+        let warp = slowdown_warp(&[1.0, 0.5], 80, &device).unwrap();
+        assert_eq!(warp.dims(), [2, 80, 80]);
+        let modes = BModes {
+            xy: two_modes(&device).reshape([1, 2, 80, 2]),
+            log_prob: Tensor::from_data([[-0.1f32, -2.0]], &device),
+            psi: None,
+            mixture_modes: 2,
+        };
+        let out = modes.with_slowdowns(Some(&warp));
+        assert_eq!(out.xy.dims(), [1, 6, 80, 2]);
+        assert_eq!(out.mixture_modes, 2);
+        let lp: Vec<f32> = out.log_prob.into_data().try_to_vec().unwrap();
+        assert_eq!(lp, vec![-0.1, -2.0, -0.1, -2.0, -0.1, -2.0]);
+        let xy: Vec<f32> = out.xy.into_data().try_to_vec().unwrap();
+        let at = |c: usize, s: usize| [xy[(c * 80 + s) * 2], xy[(c * 80 + s) * 2 + 1]];
+        for s in 0..80 {
+            // Factor 1: the modes themselves.
+            for k in 0..2 {
+                let (a, b) = (at(k, s), at(2 + k, s));
+                assert!((a[0] - b[0]).abs() < 1e-4 && (a[1] - b[1]).abs() < 1e-4);
+            }
+            // Factor ½ of the turning mode stays on its line y = 0.1 x.
+            let p = at(5, s);
+            assert!((p[1] - 0.1 * p[0]).abs() < 1e-4, "{p:?}");
+        }
+        let x = |s: usize| at(4, s)[0];
+        assert!((x(79) - 60.0).abs() < 1e-3, "{}", x(79));
+        assert!((x(0) - (1.0 - 0.5 / 160.0)).abs() < 1e-4, "{}", x(0));
+        let speeds: Vec<f32> = (1..80).map(|s| x(s) - x(s - 1)).collect();
+        assert!(speeds.windows(2).all(|w| w[1] <= w[0] + 1e-4), "eases off");
+        assert!((speeds[78] - 0.5).abs() < 0.02, "{}", speeds[78]);
+    }
+
+    /// A generator with slowed copies chooses among `K · (1 + S)` candidates, and outside
+    /// training its future is one of them (the displacement zeroed).
+    #[test]
+    fn a_generator_chooses_among_the_slowed_copies_too() {
+        let device = Device::flex();
+        let mut config = GeneratorConfig::new(24);
+        config.modes = 2;
+        config.likeliest_mode = true;
+        config.mode_slowdowns = vec![0.5];
+        assert_eq!(config.candidates(), 4);
+        let mut g = config.init(&device);
+        let last = g.decoder.layers.last_mut().unwrap();
+        last.weight = last.weight.clone().map(|w| w.zeros_like());
+        if let Some(bias) = &mut last.bias {
+            *bias = bias.clone().map(|b| b.zeros_like());
+        }
+        let modes = g.candidates_of(BModes {
+            xy: two_modes(&device).reshape([1, 2, 80, 2]),
+            log_prob: Tensor::from_data([[0.0f32, 0.0]], &device),
+            psi: None,
+            mixture_modes: 2,
+        });
+        let all: Vec<f32> = modes.xy.clone().into_data().try_to_vec().unwrap();
+        let out: Vec<f32> = g
+            .forward(
+                Tensor::ones([1, 24], &device),
+                Tensor::from_data([0.3f32], &device),
+                Some(modes),
+            )
+            .into_data()
+            .try_to_vec()
+            .unwrap();
+        // At the knots (every 5th step; linear between them, and a slowed copy is not).
+        let at_knots = |v: &[f32]| -> Vec<f32> {
+            (4..80)
+                .step_by(5)
+                .flat_map(|s| [v[2 * s], v[2 * s + 1]])
+                .collect()
+        };
+        let out = at_knots(&out);
+        assert!(
+            all.chunks_exact(160).any(|c| at_knots(c)
+                .iter()
+                .zip(&out)
+                .all(|(a, b)| (a - b).abs() < 1e-4)),
+            "one of the four candidates"
+        );
+        // Generators saved before the option have no slowed copies.
+        let mut json = serde_json::to_value(&config).unwrap();
+        json.as_object_mut().unwrap().remove("mode_slowdowns");
+        let old: GeneratorConfig = serde_json::from_value(json).unwrap();
+        assert_eq!(old.candidates(), 2);
+        assert!(old.init(&device).mode_warp.is_none());
     }
 
     /// A ψ far outside the labels (here 1000 spreads) is read as the clamp's 20 spreads, so a

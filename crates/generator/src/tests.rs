@@ -404,6 +404,54 @@ fn measured_courtesy_matches_the_courtesy_function() {
     assert!(ranked.corr_quantile.unwrap() > 0.0);
 }
 
+/// Slowed copies of B's modes are scored against the mixture's own mean: adding them leaves
+/// the modes' courtesy as it was, and a copy's courtesy is J_φ of the copy against that mean.
+#[test]
+fn slowed_copies_are_scored_against_the_mixtures_own_mean() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex();
+    device.seed(13);
+    let config = MultipathConfig::cpu_small();
+    let predictor = config.init(&device);
+    let mut plain = labelled(&predictor, 2, 2, Reward::AverageSpeed, 2, &device);
+    let mut slowed = plain.clone();
+    crate::fill_mode_courtesy(&predictor, &mut plain, Reward::AverageSpeed, &[], &device);
+    crate::fill_mode_courtesy(
+        &predictor,
+        &mut slowed,
+        Reward::AverageSpeed,
+        &[0.5],
+        &device,
+    );
+    let k = config.num_modes;
+    for (p, s) in plain.iter().zip(&slowed) {
+        assert_eq!((p.mode_psi.len(), s.mode_psi.len()), (k, 2 * k));
+        assert!(
+            p.mode_psi
+                .iter()
+                .zip(&s.mode_psi)
+                .all(|(a, b)| (a - b).abs() < 1e-5),
+            "{:?} vs {:?}",
+            p.mode_psi,
+            &s.mode_psi[..k]
+        );
+    }
+    // A copy's courtesy by hand: J_φ of the slowed mode minus the modes' π-weighted mean.
+    let refs: Vec<&Example> = slowed.iter().collect();
+    let modes = crate::b_modes(&predictor, &refs, &device);
+    let warp = crate::slowdown_warp(&[0.5], modes.xy.dims()[2], &device);
+    let all = modes.with_slowdowns(warp.as_ref());
+    let psi: Vec<f32> = eval::to_vec(crate::mode_courtesy(
+        &predictor,
+        &refs,
+        &all,
+        Reward::AverageSpeed,
+        &device,
+    ));
+    let stored: Vec<f32> = slowed.iter().flat_map(|e| e.mode_psi.clone()).collect();
+    assert!(psi.iter().zip(&stored).all(|(a, b)| (a - b).abs() < 1e-5));
+}
+
 /// An untrained model (cpu-small predictor, generator told who A is) for the test scenes,
 /// labelling `samples` futures of B; and the ids of A and B of the first scene's first pair.
 fn untrained_scbg(

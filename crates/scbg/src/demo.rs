@@ -88,6 +88,9 @@ pub struct DemoOptions {
     /// With `select_modes`: generators that also score B's modes by their own courtesy
     /// ([`crate::generator::VariantSettings::mode_courtesy`]).
     pub mode_courtesy: bool,
+    /// With `select_modes`: slowed copies of B's modes among the generators' choices
+    /// ([`crate::generator::VariantSettings::mode_slowdowns`]).
+    pub mode_slowdowns: Vec<f32>,
     /// How courtesy is labelled (8 sampled futures per pair role by default).
     pub labels: LabelOptions,
     /// Held-out scenes of the closed-loop stage (0 skips it); WOSAC realism is scored on up
@@ -255,6 +258,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 &predictors.plain,
                 set,
                 options.labels.reward,
+                &options.mode_slowdowns,
                 &predictors.plain_device,
             );
         }
@@ -302,6 +306,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                                         seed,
                                         select_modes: options.select_modes,
                                         mode_courtesy: options.mode_courtesy,
+                                        mode_slowdowns: options.mode_slowdowns.clone(),
                                         ..VariantSettings::new(variant, options.labels)
                                     },
                                     &dir,

@@ -277,6 +277,9 @@ pub struct VariantSettings {
     /// ([`GeneratorConfig::mode_courtesy`]), and B's future is its likeliest mode rather than
     /// the blend outside training ([`GeneratorConfig::likeliest_mode`]).
     pub mode_courtesy: bool,
+    /// With `select_modes`: slowed copies of B's modes join the choices, one per factor
+    /// ([`GeneratorConfig::mode_slowdowns`]; empty: none).
+    pub mode_slowdowns: Vec<f32>,
 }
 
 impl VariantSettings {
@@ -297,6 +300,7 @@ impl VariantSettings {
             world_futures: 0,
             select_modes: true,
             mode_courtesy: true,
+            mode_slowdowns: Vec::new(),
         }
     }
 }
@@ -335,6 +339,7 @@ pub fn train_variant(
         gen_config.modes = p.ckpt.model_config.num_modes;
         gen_config.mode_courtesy = s.mode_courtesy;
         gen_config.likeliest_mode = s.mode_courtesy;
+        gen_config.mode_slowdowns.clone_from(&s.mode_slowdowns);
     }
     // A generator scoring its modes' courtesy reads them at every step: measure them once
     // (callers that train several variants fill their examples first, see
@@ -343,10 +348,16 @@ pub fn train_variant(
     let examples = if gen_config.mode_courtesy
         && examples
             .iter()
-            .any(|e| e.mode_psi.len() != gen_config.modes)
+            .any(|e| e.mode_psi.len() != gen_config.candidates())
     {
         let mut owned = examples.to_vec();
-        scbg_generator::fill_mode_courtesy(&p.plain, &mut owned, s.labels.reward, &p.plain_device);
+        scbg_generator::fill_mode_courtesy(
+            &p.plain,
+            &mut owned,
+            s.labels.reward,
+            &gen_config.mode_slowdowns,
+            &p.plain_device,
+        );
         filled = owned;
         &filled[..]
     } else {
@@ -548,6 +559,7 @@ pub fn train_generator(
             &p.plain,
             &mut examples,
             settings.labels.reward,
+            &settings.mode_slowdowns,
             &p.plain_device,
         );
     }

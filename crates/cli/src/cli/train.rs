@@ -2,6 +2,8 @@
 
 use clap::{Args, Subcommand};
 use scbg::choices::{MarginalEstimate, Reward, Threshold, Variant, Weighting};
+
+use super::slowdown_factor;
 use std::path::PathBuf;
 
 /// How courtesy labels estimate E[r(Y_A) | x] and sample B's futures (shared by `label`,
@@ -161,6 +163,12 @@ pub struct TrainGeneratorArgs {
     /// embedding alone (BENCHMARKS.md, issues 11/12).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub mode_courtesy: bool,
+    /// With `--head modes`: slowed copies of each of B's modes join the generator's choices,
+    /// one per factor (comma-separated, each in (0, 1]): the mode's path, travelled at a speed
+    /// easing from the mode's own to the factor times it at the horizon (yielding, in every
+    /// family). Empty (the default): the modes alone (BENCHMARKS.md, issue 11).
+    #[arg(long, value_delimiter = ',', value_parser = slowdown_factor)]
+    pub mode_slowdowns: Vec<f32>,
 }
 
 /// How the generator forms B's future (`--head`).
