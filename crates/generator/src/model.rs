@@ -465,6 +465,16 @@ mod tests {
         assert_eq!(out.dims(), [3, 80, 2]);
     }
 
+    /// Zeroes the decoder's last layer: the regressed displacement is 0, so a mode-selecting
+    /// generator's future is its (weighted) modes alone.
+    fn zero_displacement(g: &mut Generator) {
+        let last = g.decoder.layers.last_mut().unwrap();
+        last.weight = last.weight.clone().map(|w| w.zeros_like());
+        if let Some(bias) = &mut last.bias {
+            *bias = bias.clone().map(|b| b.zeros_like());
+        }
+    }
+
     /// Two modes of B in a row: a straight one along x and one turning to +y (`[2, 80, 2]`).
     fn two_modes(device: &Device) -> Tensor<3> {
         let xy: Vec<f32> = (0..2)
@@ -485,11 +495,7 @@ mod tests {
         config.modes = 2;
         let mut g = config.init(&device);
         assert!(g.selects_modes());
-        let last = g.decoder.layers.last_mut().unwrap();
-        last.weight = last.weight.clone().map(|w| w.zeros_like());
-        if let Some(bias) = &mut last.bias {
-            *bias = bias.clone().map(|b| b.zeros_like());
-        }
+        zero_displacement(&mut g);
         let modes = |favoured: usize| BModes {
             xy: two_modes(&device).reshape([1, 2, 80, 2]),
             log_prob: Tensor::from_data(
@@ -649,11 +655,7 @@ mod tests {
         config.modes = 2;
         config.likeliest_mode = true;
         let mut g = config.init(&device);
-        let last = g.decoder.layers.last_mut().unwrap();
-        last.weight = last.weight.clone().map(|w| w.zeros_like());
-        if let Some(bias) = &mut last.bias {
-            *bias = bias.clone().map(|b| b.zeros_like());
-        }
+        zero_displacement(&mut g);
         let modes = || BModes {
             xy: two_modes(&device).reshape([1, 2, 80, 2]),
             log_prob: Tensor::from_data([[0.0f32, 0.0]], &device),
@@ -728,11 +730,7 @@ mod tests {
         config.mode_slowdowns = vec![0.5];
         assert_eq!(config.candidates(), 4);
         let mut g = config.init(&device);
-        let last = g.decoder.layers.last_mut().unwrap();
-        last.weight = last.weight.clone().map(|w| w.zeros_like());
-        if let Some(bias) = &mut last.bias {
-            *bias = bias.clone().map(|b| b.zeros_like());
-        }
+        zero_displacement(&mut g);
         let modes = g.candidates_of(BModes {
             xy: two_modes(&device).reshape([1, 2, 80, 2]),
             log_prob: Tensor::from_data([[0.0f32, 0.0]], &device),
