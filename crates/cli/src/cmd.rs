@@ -225,7 +225,6 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     select_modes: a.head == crate::cli::Head::Modes,
                     mode_courtesy: a.mode_courtesy,
                     mode_slowdowns: a.mode_slowdowns.clone(),
-                    straight_through: a.straight_through,
                 },
                 a.condition_on_a,
                 truth.as_deref(),

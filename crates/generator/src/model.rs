@@ -63,13 +63,6 @@ pub struct GeneratorConfig {
     /// for every generator trained before the option.
     #[serde(default)]
     pub mode_slowdowns: Vec<f32>,
-    /// With `modes > 0`: training, too, uses the selector's likeliest candidate
-    /// ([`Generator::forward_blend`] gives the committed future, its gradient reaches the
-    /// logits through the softmax: the straight-through estimator), so that what is trained
-    /// is what [`GeneratorConfig::likeliest_mode`] gives outside training, not a blend of
-    /// candidates. false for every generator trained before the option.
-    #[serde(default)]
-    pub straight_through: bool,
 }
 
 /// The `[S, T, T]` time warps of [`GeneratorConfig::mode_slowdowns`]: row `s` of warp `i`
@@ -143,7 +136,6 @@ impl GeneratorConfig {
             mode_courtesy: false,
             likeliest_mode: false,
             mode_slowdowns: Vec::new(),
-            straight_through: false,
         }
     }
 
@@ -199,7 +191,6 @@ impl GeneratorConfig {
             psi_scale: self.psi_scale,
             a_context_width: self.a_context_width,
             likeliest_mode: self.modes > 0 && self.likeliest_mode,
-            straight_through: self.modes > 0 && self.straight_through,
             mode_warp: if self.modes > 0 {
                 slowdown_warp(&self.mode_slowdowns, self.future_steps, device)
                     .map(|w| burn::module::Param::from_tensor(w).set_require_grad(false))
@@ -234,8 +225,6 @@ pub struct Generator {
     pub a_context_width: usize,
     /// See [`GeneratorConfig::likeliest_mode`].
     pub likeliest_mode: bool,
-    /// See [`GeneratorConfig::straight_through`].
-    pub straight_through: bool,
     /// `[S, T, T]` fixed warps of [`GeneratorConfig::mode_slowdowns`] (not trained; `None`
     /// without slowed copies).
     pub mode_warp: Option<burn::module::Param<Tensor<3>>>,
@@ -413,21 +402,14 @@ impl Generator {
                 .clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
                 logits = logits + scorer.forward(pair).reshape([b, k]);
             }
-            let device = logits.device();
-            let one_hot = |logits: Tensor<2>| {
+            let weights = if likeliest {
+                let device = logits.device();
                 Tensor::<2>::zeros([b, k], &device).scatter(
                     1,
                     logits.argmax(1),
                     Tensor::ones([b, 1], &device),
                     burn::tensor::IndexingUpdateOp::Add,
                 )
-            };
-            let weights = if likeliest {
-                one_hot(logits)
-            } else if self.straight_through {
-                // The committed candidate's value, the softmax's gradient.
-                let soft = burn::tensor::activation::softmax(logits.clone(), 1);
-                one_hot(logits.detach()) + soft.clone() - soft.detach()
             } else {
                 burn::tensor::activation::softmax(logits, 1)
             };
@@ -786,51 +768,6 @@ mod tests {
         let old: GeneratorConfig = serde_json::from_value(json).unwrap();
         assert_eq!(old.candidates(), 2);
         assert!(old.init(&device).mode_warp.is_none());
-    }
-
-    /// Trained straight-through, the training future is the committed candidate itself (not a
-    /// blend), and the trajectory loss still reaches the selector's weights.
-    #[test]
-    fn straight_through_trains_on_the_committed_mode() {
-        let device = scbg_model::device::training_device("flex").unwrap();
-        let _lock = crate::tests::SEED_LOCK
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner);
-        device.seed(5);
-        let mut config = GeneratorConfig::new(8);
-        config.modes = 2;
-        config.hidden = vec![16, 16];
-        config.straight_through = true;
-        let mut g = config.init(&device);
-        zero_displacement(&mut g);
-        let modes = || BModes {
-            xy: two_modes(&device).reshape([1, 2, 80, 2]),
-            log_prob: Tensor::from_data([[0.0f32, 0.0]], &device),
-            psi: None,
-            mixture_modes: 2,
-        };
-        let out = g.forward_blend(
-            Tensor::ones([1, 8], &device),
-            Tensor::from_data([0.4f32], &device),
-            Some(modes()),
-        );
-        let end_y: f32 = out.clone().narrow(1, 79, 1).narrow(2, 1, 1).into_scalar();
-        assert!(end_y.abs() < 1e-4 || (end_y - 8.0).abs() < 1e-4, "{end_y}");
-        let grads = out.powi_scalar(2).mean().backward();
-        let selector = g.selector.as_ref().unwrap();
-        let grad: f32 = selector
-            .layers
-            .iter()
-            .map(|l| {
-                l.weight
-                    .grad(&grads)
-                    .expect("a gradient")
-                    .abs()
-                    .sum()
-                    .into_scalar::<f32>()
-            })
-            .sum();
-        assert!(grad > 0.0);
     }
 
     /// A ψ far outside the labels (here 1000 spreads) is read as the clamp's 20 spreads, so a

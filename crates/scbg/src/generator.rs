@@ -280,9 +280,6 @@ pub struct VariantSettings {
     /// With `select_modes`: slowed copies of B's modes join the choices, one per factor
     /// ([`GeneratorConfig::mode_slowdowns`]; empty: none).
     pub mode_slowdowns: Vec<f32>,
-    /// With `select_modes`: train on the committed candidate (straight-through,
-    /// [`GeneratorConfig::straight_through`]) instead of the blend.
-    pub straight_through: bool,
 }
 
 impl VariantSettings {
@@ -304,7 +301,6 @@ impl VariantSettings {
             select_modes: true,
             mode_courtesy: true,
             mode_slowdowns: Vec::new(),
-            straight_through: false,
         }
     }
 }
@@ -344,7 +340,6 @@ pub fn train_variant(
         gen_config.mode_courtesy = s.mode_courtesy;
         gen_config.likeliest_mode = s.mode_courtesy;
         gen_config.mode_slowdowns.clone_from(&s.mode_slowdowns);
-        gen_config.straight_through = s.straight_through;
     }
     // A generator scoring its modes' courtesy reads them at every step: measure them once
     // (callers that train several variants fill their examples first, see

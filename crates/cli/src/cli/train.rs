@@ -169,11 +169,6 @@ pub struct TrainGeneratorArgs {
     /// family). Empty (the default): the modes alone (BENCHMARKS.md, issue 11).
     #[arg(long, value_delimiter = ',', value_parser = slowdown_factor)]
     pub mode_slowdowns: Vec<f32>,
-    /// With `--head modes`: train the selector on its committed candidate (straight-through
-    /// estimator) instead of the softmax blend of B's modes, so that training sees the future
-    /// that is generated outside it (an experiment, BENCHMARKS.md, issue 11).
-    #[arg(long)]
-    pub straight_through: bool,
 }
 
 /// How the generator forms B's future (`--head`).
