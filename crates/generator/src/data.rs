@@ -321,7 +321,7 @@ pub fn fill_mode_courtesy(
     for chunk in examples.chunks_mut(64) {
         let refs: Vec<&Example> = chunk.iter().collect();
         let modes = b_modes(predictor, &refs, device);
-        let warp = crate::model::slowdown_warp(slowdowns, modes.xy.dims()[2], device);
+        let warp = crate::slowdown_warp(slowdowns, modes.xy.dims()[2], device);
         let modes = modes.with_slowdowns(warp.as_ref());
         let k = modes.log_prob.dims()[1];
         let psi = crate::eval::to_vec(mode_courtesy(predictor, &refs, &modes, reward, device));

@@ -18,6 +18,7 @@ mod data;
 pub mod eval;
 mod infer;
 mod model;
+mod modes;
 mod range;
 pub mod ranked;
 mod train;
@@ -27,7 +28,8 @@ pub use data::{
     build_examples, fill_mode_courtesy, marginal_embedding, mode_courtesy,
 };
 pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Policy, Scbg};
-pub use model::{BModes, Generator, GeneratorConfig, slowdown_warp};
+pub use model::{Generator, GeneratorConfig};
+pub use modes::{BModes, slowdown_warp};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,
     stored_embeddings,

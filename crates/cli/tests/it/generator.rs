@@ -178,22 +178,26 @@ fn train_generator_saves_generator_and_range_predictor() {
     let sid = first["scenario_id"].as_str().unwrap();
     let gen_dir = p("gen");
     // `scbg generate` for this scenario and A, with B and the remaining arguments given.
-    let generate = |b: &str, rest: &[&str]| {
-        let mut args = vec![
-            "generate",
+    // The arguments of `command` that name the generator, the scene and the pair.
+    let pair_args = |command: &'static str, b: &str, rest: &[&str]| -> Vec<String> {
+        [
+            command,
             "--model",
             &gen_dir,
             "--scenario",
             &file,
             "--scenario-id",
             sid,
-            "--a",
-            &a,
-            "--b",
-            b,
-        ];
-        args.extend_from_slice(rest);
-        scbg(&args)
+        ]
+        .into_iter()
+        .chain(["--a", &a, "--b", b])
+        .chain(rest.iter().copied())
+        .map(str::to_string)
+        .collect()
+    };
+    let generate = |b: &str, rest: &[&str]| {
+        let args = pair_args("generate", b, rest);
+        scbg(&args.iter().map(String::as_str).collect::<Vec<_>>())
     };
     let (traj_json, traj_png) = (p("traj.json"), p("traj.png"));
     let ok = generate(
@@ -310,23 +314,9 @@ fn train_generator_saves_generator_and_range_predictor() {
     // `scbg sim`: one rollout as a Scenario file, 32 as a WOSAC shard, in the synthetic world
     // (ground_truth.jsonl beside the file); `scbg eval sim` on the synthetic folder.
     let sim = |out: &str, rest: &[&str]| {
-        let mut args = vec![
-            "sim",
-            "--model",
-            &gen_dir,
-            "--scenario",
-            &file,
-            "--scenario-id",
-            sid,
-            "--a",
-            &a,
-            "--b",
-            &b,
-            "--out",
-            out,
-        ];
-        args.extend_from_slice(rest);
-        scbg(&args)
+        let mut args = pair_args("sim", &b, &["--out", out]);
+        args.extend(rest.iter().map(|r| r.to_string()));
+        scbg(&args.iter().map(String::as_str).collect::<Vec<_>>())
     };
     let ok = sim(&p("sim1"), &["--quantile", "0.8"]);
     assert!(

@@ -1,0 +1,153 @@
+//! B's predicted modes as the choices of a mode-selecting generator, and their slowed copies.
+
+use burn::tensor::{Device, Tensor};
+
+/// B's predicted marginal modes, the choices of a mode-selecting generator
+/// ([`crate::GeneratorConfig::modes`]); see [`crate::b_modes`].
+#[derive(Debug, Clone)]
+pub struct BModes {
+    /// `[batch, K, T, 2]` mode means in B's frame (metres).
+    pub xy: Tensor<4>,
+    /// `[batch, K]` log-probabilities of the modes.
+    pub log_prob: Tensor<2>,
+    /// `[batch, K]` each mode's courtesy ψ_k ([`crate::mode_courtesy`]); required by a
+    /// generator that scores them ([`crate::Generator::scores_mode_courtesy`]).
+    pub psi: Option<Tensor<2>>,
+    /// The leading modes that form the predicted mixture (their probabilities sum to 1);
+    /// the rest are copies derived from them ([`BModes::with_slowdowns`]).
+    pub mixture_modes: usize,
+}
+
+impl BModes {
+    /// The rows repeated `times` times (row `r` of repetition `j` is row `j·batch + r`).
+    pub fn repeat_rows(self, times: usize) -> Self {
+        if times == 1 {
+            return self;
+        }
+        Self {
+            xy: Tensor::cat(vec![self.xy; times], 0),
+            log_prob: Tensor::cat(vec![self.log_prob; times], 0),
+            psi: self.psi.map(|p| Tensor::cat(vec![p; times], 0)),
+            mixture_modes: self.mixture_modes,
+        }
+    }
+
+    /// The modes followed by their slowed copies ([`crate::GeneratorConfig::mode_slowdowns`]),
+    /// warp by warp, each with its mode's log-probability; unchanged without `warp`. Call it
+    /// before the modes' courtesy is measured.
+    ///
+    /// # Shapes
+    /// `warp: [S, T, T]`; `xy: [batch, K, T, 2]` → `[batch, K · (1 + S), T, 2]`
+    ///
+    /// # Panics
+    /// If the modes' courtesy is already set (it would not cover the copies).
+    pub fn with_slowdowns(self, warp: Option<&Tensor<3>>) -> Self {
+        let Some(warp) = warp else {
+            return self;
+        };
+        assert!(self.psi.is_none(), "slow the modes before scoring them");
+        let [b, k, t, _] = self.xy.dims();
+        let [s, _, _] = warp.dims();
+        let flat = self.xy.clone().reshape([b * k, t, 2]);
+        let mut xy = vec![self.xy];
+        for i in 0..s {
+            let w = warp.clone().narrow(0, i, 1).expand([b * k, t, t]);
+            xy.push(w.matmul(flat.clone()).reshape([b, k, t, 2]));
+        }
+        Self {
+            xy: Tensor::cat(xy, 1),
+            log_prob: Tensor::cat(vec![self.log_prob; 1 + s], 1),
+            psi: None,
+            mixture_modes: self.mixture_modes,
+        }
+    }
+}
+
+/// The `[S, T, T]` time warps of [`crate::GeneratorConfig::mode_slowdowns`]: row `s` of warp `i`
+/// holds the weights of a mode's steps (positions at steps 1‥T, the origin at step 0 is B's
+/// current position, zero in B's frame) in its slowed copy's step `s + 1`. With factor `w`
+/// the slowed copy is at the mode's fractional step `τ(t) = t − (1 − w) t² / (2T)` at step
+/// `t`, linearly interpolated: its speed is the mode's times `1 − (1 − w) t / T`, smooth at
+/// the current step (no jump in speed) and `w` times the mode's at the horizon.
+pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option<Tensor<3>> {
+    if slowdowns.is_empty() || steps == 0 {
+        return None;
+    }
+    let t_max = steps as f32;
+    let mut weights = vec![0.0f32; slowdowns.len() * steps * steps];
+    for (i, &w) in slowdowns.iter().enumerate() {
+        let w = w.clamp(0.0, 1.0);
+        for s in 0..steps {
+            let t = (s + 1) as f32;
+            let tau = (t - (1.0 - w) * t * t / (2.0 * t_max)).clamp(0.0, t_max);
+            let lo = tau.floor() as usize; // 0 = the origin
+            let frac = tau - lo as f32;
+            let row = i * steps * steps + s * steps;
+            if lo >= 1 {
+                weights[row + lo - 1] += 1.0 - frac;
+            }
+            if lo < steps && frac > 0.0 {
+                weights[row + lo] += frac;
+            }
+        }
+    }
+    Some(Tensor::from_data(
+        burn::tensor::TensorData::new(weights, [slowdowns.len(), steps, steps]),
+        device,
+    ))
+}
+
+/// Two modes of B in a row: a straight one along x and one turning to +y (`[2, 80, 2]`).
+#[cfg(test)]
+pub(crate) fn two_modes(device: &Device) -> Tensor<3> {
+    let xy: Vec<f32> = (0..2)
+        .flat_map(|k| {
+            (1..=80).flat_map(move |s| [s as f32, if k == 1 { 0.1 * s as f32 } else { 0.0 }])
+        })
+        .collect();
+    Tensor::from_data(burn::tensor::TensorData::new(xy, [2, 80, 2]), device)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A slowed copy keeps its mode's path and eases off smoothly: on a straight mode at
+    /// 1 m a step, factor ½ starts at the mode's speed, ends at half of it and covers
+    /// `T (1 + w) / 2` = 60 m of the mode's 80; factor 1 is the mode itself.
+    #[test]
+    fn slowed_copies_ease_off_along_the_modes_path() {
+        let device = Device::flex();
+        let warp = slowdown_warp(&[1.0, 0.5], 80, &device).unwrap();
+        assert_eq!(warp.dims(), [2, 80, 80]);
+        let modes = BModes {
+            xy: two_modes(&device).reshape([1, 2, 80, 2]),
+            log_prob: Tensor::from_data([[-0.1f32, -2.0]], &device),
+            psi: None,
+            mixture_modes: 2,
+        };
+        let out = modes.with_slowdowns(Some(&warp));
+        assert_eq!(out.xy.dims(), [1, 6, 80, 2]);
+        assert_eq!(out.mixture_modes, 2);
+        let lp: Vec<f32> = out.log_prob.into_data().try_to_vec().unwrap();
+        assert_eq!(lp, vec![-0.1, -2.0, -0.1, -2.0, -0.1, -2.0]);
+        let xy: Vec<f32> = out.xy.into_data().try_to_vec().unwrap();
+        let at = |c: usize, s: usize| [xy[(c * 80 + s) * 2], xy[(c * 80 + s) * 2 + 1]];
+        for s in 0..80 {
+            // Factor 1: the modes themselves.
+            for k in 0..2 {
+                let (a, b) = (at(k, s), at(2 + k, s));
+                assert!((a[0] - b[0]).abs() < 1e-4 && (a[1] - b[1]).abs() < 1e-4);
+            }
+            // Factor ½ of the turning mode stays on its line y = 0.1 x.
+            let p = at(5, s);
+            assert!((p[1] - 0.1 * p[0]).abs() < 1e-4, "{p:?}");
+        }
+        let x = |s: usize| at(4, s)[0];
+        assert!((x(79) - 60.0).abs() < 1e-3, "{}", x(79));
+        assert!((x(0) - (1.0 - 0.5 / 160.0)).abs() < 1e-4, "{}", x(0));
+        let speeds: Vec<f32> = (1..80).map(|s| x(s) - x(s - 1)).collect();
+        assert!(speeds.windows(2).all(|w| w[1] <= w[0] + 1e-4), "eases off");
+        assert!((speeds[78] - 0.5).abs() < 0.02, "{}", speeds[78]);
+    }
+}
