@@ -28,15 +28,15 @@ pub use data::{
     build_examples, fill_mode_courtesy, marginal_embedding, mode_courtesy,
 };
 pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Policy, Scbg};
-pub use model::{Generator, GeneratorConfig};
+pub use model::{CandidateFutures, Generator, GeneratorConfig};
 pub use modes::{BModes, slowdown_warp};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,
     stored_embeddings,
 };
 pub use train::{
-    StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss, threshold_value,
-    train_step,
+    SelectorLoss, StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss,
+    threshold_value, train_step,
 };
 
 #[cfg(test)]

@@ -255,6 +255,41 @@ impl Generator {
         self.forward_with(embedding, psi, modes, false)
     }
 
+    /// B's future for every candidate the selector can choose, with the selector's logits:
+    /// what training with the classification loss needs ([`crate::SelectorLoss::Classify`]).
+    /// The softmax of `logits` weighting `futures` is [`Self::forward_blend`] (the knots'
+    /// interpolation is linear).
+    ///
+    /// # Shapes
+    /// As [`Self::forward_blend`] `-> CandidateFutures` (`logits: [batch, K]`,
+    /// `futures: [batch, K, T, 2]`)
+    ///
+    /// # Panics
+    /// When the generator does not select modes, or as [`Self::forward_blend`].
+    pub fn forward_candidates(
+        &self,
+        embedding: Tensor<2>,
+        psi: Tensor<1>,
+        modes: BModes,
+    ) -> CandidateFutures {
+        let heads = self.heads(embedding, psi, Some(modes));
+        let (logits, at_knots) = heads
+            .choice
+            .expect("forward_candidates needs a mode-selecting generator");
+        let [b, k, knots, _] = at_knots.dims();
+        let knot_xy = heads
+            .knot_xy
+            .reshape([b, 1, knots, 2])
+            .expand([b, k, knots, 2])
+            + at_knots;
+        let futures = self.interpolate(knot_xy.reshape([b * k, knots, 2]));
+        let t = futures.dims()[1];
+        CandidateFutures {
+            logits,
+            futures: futures.reshape([b, k, t, 2]),
+        }
+    }
+
     /// [`Self::forward_blend`], or with `likeliest` the one-hot of the selector's argmax in
     /// place of its softmax weights.
     fn forward_with(
@@ -264,6 +299,46 @@ impl Generator {
         modes: Option<BModes>,
         likeliest: bool,
     ) -> Tensor<3> {
+        let Heads {
+            mut knot_xy,
+            choice,
+        } = self.heads(embedding, psi, modes);
+        if let Some((logits, at_knots)) = choice {
+            let [b, k, knots, _] = at_knots.dims();
+            let weights = if likeliest {
+                let device = logits.device();
+                Tensor::<2>::zeros([b, k], &device).scatter(
+                    1,
+                    logits.argmax(1),
+                    Tensor::ones([b, 1], &device),
+                    burn::tensor::IndexingUpdateOp::Add,
+                )
+            } else {
+                burn::tensor::activation::softmax(logits, 1)
+            };
+            let mixed = weights
+                .reshape([b, 1, k])
+                .matmul(at_knots.reshape([b, k, knots * 2]))
+                .reshape([b, knots, 2]);
+            knot_xy = knot_xy + mixed;
+        }
+        self.interpolate(knot_xy)
+    }
+
+    /// Knot positions `[batch, knots, 2]` interpolated to every step `-> [batch, T, 2]`.
+    fn interpolate(&self, knot_xy: Tensor<3>) -> Tensor<3> {
+        let [b, _, _] = knot_xy.dims();
+        let [t, knots] = self.interpolation.dims();
+        self.interpolation
+            .val()
+            .reshape([1, t, knots])
+            .expand([b, t, knots])
+            .matmul(knot_xy)
+    }
+
+    /// The displacement's knot positions and, for a mode-selecting generator, the selector's
+    /// logits and the candidates at the knots' steps.
+    fn heads(&self, embedding: Tensor<2>, psi: Tensor<1>, modes: Option<BModes>) -> Heads {
         let [b, _] = embedding.dims();
         // In units of the labels' spread, clamped: a ψ far outside every label (a range
         // predictor's extrapolation on a tiny model, a typo) must not drive the MLPs into
@@ -273,9 +348,9 @@ impl Generator {
         let psi = self.psi_mlp.forward(psi_scaled.clone());
         let input = Tensor::cat(vec![embedding, psi], 1);
         let out = self.decoder.forward(input.clone());
-        let [t, knots] = self.interpolation.dims();
-        let mut knot_xy = out.reshape([b, knots, 2]).cumsum(1);
-        if let Some(selector) = &self.selector {
+        let [_, knots] = self.interpolation.dims();
+        let knot_xy = out.reshape([b, knots, 2]).cumsum(1);
+        let choice = self.selector.as_ref().map(|selector| {
             let modes = modes.expect("a mode-selecting generator needs B's modes");
             let [_, k, tm, _] = modes.xy.dims();
             // The modes at the knots' steps, so that the mixture is interpolated like the
@@ -309,29 +384,28 @@ impl Generator {
                 .clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
                 logits = logits + scorer.forward(pair).reshape([b, k]);
             }
-            let weights = if likeliest {
-                let device = logits.device();
-                Tensor::<2>::zeros([b, k], &device).scatter(
-                    1,
-                    logits.argmax(1),
-                    Tensor::ones([b, 1], &device),
-                    burn::tensor::IndexingUpdateOp::Add,
-                )
-            } else {
-                burn::tensor::activation::softmax(logits, 1)
-            };
-            let mixed = weights
-                .reshape([b, 1, k])
-                .matmul(at_knots.reshape([b, k, knots * 2]))
-                .reshape([b, knots, 2]);
-            knot_xy = knot_xy + mixed;
-        }
-        self.interpolation
-            .val()
-            .reshape([1, t, knots])
-            .expand([b, t, knots])
-            .matmul(knot_xy)
+            (logits, at_knots)
+        });
+        Heads { knot_xy, choice }
     }
+}
+
+/// What [`Generator::forward_candidates`] returns.
+#[derive(Debug, Clone)]
+pub struct CandidateFutures {
+    /// `[batch, K]` the selector's logits (the softmax gives the blend's weights).
+    pub logits: Tensor<2>,
+    /// `[batch, K, T, 2]` B's future (positions in B's frame, metres) if the selector chose
+    /// candidate `k`: the candidate plus the displacement.
+    pub futures: Tensor<4>,
+}
+
+/// The generator's heads before the choice: the displacement's `[batch, knots, 2]` knot
+/// positions, and for a mode-selecting generator the `[batch, K]` logits and the
+/// `[batch, K, knots, 2]` candidates at the knots' steps.
+struct Heads {
+    knot_xy: Tensor<3>,
+    choice: Option<(Tensor<2>, Tensor<4>)>,
 }
 
 #[cfg(test)]

@@ -90,6 +90,7 @@ fn step_options(variant: Variant, trajectory_weight: f32) -> StepOptions {
         trajectory_weight,
         reward: Reward::AverageSpeed,
         learning_rate: 3e-3,
+        selector_loss: SelectorLoss::Blend,
     }
 }
 
@@ -161,6 +162,93 @@ fn variants_train_and_losses_fall() {
     let generator = GeneratorConfig::with_a_context(config.embedding_width()).init(&device);
     let losses = assert_courtesy_loss_reaches_generator(&generator, &predictor, &refs, &device);
     assert!(losses.trajectory > 0.0);
+}
+
+/// With the classification loss a mode-selecting generator learns which of B's modes each
+/// logged future is. Each example's logged future is replaced by its least likely mode, so
+/// the modes' probabilities alone pick another: after training, the likeliest candidate of
+/// every example is that mode, and the loss has fallen.
+#[test]
+fn the_classification_loss_picks_the_nearest_mode() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex().autodiff();
+    device.seed(5);
+    let config = MultipathConfig::cpu_small();
+    let predictor = config.init(&device);
+    let mut examples = labelled(&predictor, 3, 3, Reward::AverageSpeed, 1, &device);
+    device.seed(9);
+    let mut gen_config = GeneratorConfig::with_a_context(config.embedding_width());
+    gen_config.modes = config.num_modes;
+    gen_config.likeliest_mode = true;
+    let mut generator = gen_config.init(&device);
+    let to_vec = |t: Tensor<2>| -> Vec<f32> { t.into_data().try_to_vec::<f32>().unwrap() };
+    let (want, mode_xy): (Vec<usize>, Vec<f32>) = {
+        let refs: Vec<&Example> = examples.iter().collect();
+        let modes =
+            crate::b_modes_for(&generator, &predictor, &refs, Reward::AverageSpeed, &device)
+                .expect("a mode-selecting generator");
+        let lp = to_vec(modes.log_prob);
+        let k = config.num_modes;
+        let want = (0..refs.len())
+            .map(|i| {
+                (0..k)
+                    .min_by(|&a, &b| lp[i * k + a].total_cmp(&lp[i * k + b]))
+                    .unwrap()
+            })
+            .collect();
+        (want, modes.xy.into_data().try_to_vec::<f32>().unwrap())
+    };
+    let (k, t) = (config.num_modes, examples[0].logged_valid.len());
+    for (i, e) in examples.iter_mut().enumerate() {
+        e.futures_b[0] = (0..t)
+            .map(|s| {
+                let m = ((i * k + want[i]) * t + s) * 2;
+                [mode_xy[m], mode_xy[m + 1]]
+            })
+            .collect();
+        e.logged_valid = vec![true; t];
+    }
+    let refs: Vec<&Example> = examples.iter().collect();
+    let likeliest = |g: &Generator| -> Vec<usize> {
+        let modes = crate::b_modes_for(g, &predictor, &refs, Reward::AverageSpeed, &device);
+        let psi = Tensor::<1>::from_data(
+            burn::tensor::TensorData::new(refs.iter().map(|e| e.psi[0]).collect(), [refs.len()]),
+            &device,
+        );
+        let c = g.forward_candidates(stored_embeddings(&refs, &device), psi, modes.unwrap());
+        let best: Vec<i64> = c
+            .logits
+            .argmax(1)
+            .into_data()
+            .convert::<i64>()
+            .try_to_vec()
+            .unwrap();
+        best.into_iter().map(|k| k as usize).collect()
+    };
+    assert_ne!(
+        likeliest(&generator),
+        want,
+        "the modes' probabilities alone pick them"
+    );
+    let options = StepOptions {
+        selector_loss: SelectorLoss::Classify,
+        ..step_options(Variant::Baseline, 1.0)
+    };
+    let mut optim = AdamConfig::new().init();
+    let mut losses = Vec::new();
+    for _ in 0..60 {
+        let (g, l) = train_step(generator, &mut optim, &predictor, &refs, &options, &device);
+        generator = g;
+        assert!(l.total.is_finite(), "{l:?}");
+        losses.push(l.total);
+    }
+    assert!(
+        losses[59] < 0.5 * losses[0],
+        "loss {} -> {}",
+        losses[0],
+        losses[59]
+    );
+    assert_eq!(likeliest(&generator), want);
 }
 
 /// The full variant's loss with trajectory weight 0 (the courtesy loss alone): positive, and

@@ -54,6 +54,46 @@ impl std::str::FromStr for Variant {
     }
 }
 
+/// How the trajectory loss trains a mode-selecting generator's choice among B's candidates.
+#[derive(
+    Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
+pub enum SelectorLoss {
+    /// The Huber loss of the softmax blend of the candidates plus the displacement (the
+    /// default, and every generator trained before the option).
+    #[default]
+    Blend,
+    /// MultiPath's: each target future is assigned its nearest candidate (mean distance over
+    /// its valid steps, the candidates' own means without the displacement); the Huber loss of
+    /// that candidate plus the displacement, plus the cross-entropy of the selector's logits
+    /// against the assignment. The selector learns which candidate a future of courtesy ψ
+    /// is, and the likeliest candidate — what B drives outside training — is trained directly
+    /// rather than through a blend. The courtesy loss still acts on the blend.
+    Classify,
+}
+
+impl SelectorLoss {
+    /// The loss's name (`blend`, `classify`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Blend => "blend",
+            Self::Classify => "classify",
+        }
+    }
+}
+
+impl std::str::FromStr for SelectorLoss {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        [Self::Blend, Self::Classify]
+            .into_iter()
+            .find(|v| v.name() == s)
+            .ok_or_else(|| format!("unknown selector loss {s:?} (blend or classify)"))
+    }
+}
+
 /// Which examples count as "high courtesy" for the 50/50 batches. Written `qX` (a quantile)
 /// or a number (m/s), also in `generator.json`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -184,6 +224,9 @@ pub struct StepOptions {
     pub reward: Reward,
     /// Learning rate of the optimizer step.
     pub learning_rate: f64,
+    /// How the trajectory loss trains a mode-selecting generator's choice (ignored by a plain
+    /// regression).
+    pub selector_loss: SelectorLoss,
 }
 
 /// One step: `L = Huber(y⁰, ŷ⁰) + α Σ_m Huber(y^m, ŷ^m) + β Σ_m (ψ_m − J_φ(x, ŷ^m))²`
@@ -268,22 +311,58 @@ pub fn step_loss(
     );
     let modes = crate::b_modes_for(generator, predictor, examples, options.reward, device)
         .map(|m| m.repeat_rows(m_count));
-    let pred = generator.forward_blend(embedding, psi.clone(), modes);
-    let mut traj = huber_trajectory(
-        pred.clone().narrow(0, 0, n),
-        target.clone().narrow(0, 0, n),
-        valid.clone().narrow(0, 0, n),
-        options.huber_delta,
-    );
-    if m_count > 1 {
-        // Σ_m of per-future means = (M) × the mean over the sampled rows (equal valid counts).
-        let sampled = huber_trajectory(
-            pred.clone().narrow(0, n, rows - n),
-            target.narrow(0, n, rows - n),
-            valid.narrow(0, n, rows - n),
+    // The future each row's trajectory loss compares with its target, the blend that J_φ
+    // scores, and (classification) the selector's cross-entropy per row.
+    let (pred, fitted, cross_entropy) = match (options.selector_loss, modes) {
+        (SelectorLoss::Classify, Some(modes)) => {
+            let nearest = nearest_candidates(&modes.xy, &target, &valid);
+            let k = modes.xy.dims()[1];
+            let candidates = generator.forward_candidates(embedding, psi.clone(), modes);
+            let onehot = Tensor::<2>::from_data(
+                TensorData::new(
+                    nearest
+                        .iter()
+                        .flat_map(|&j| (0..k).map(move |c| f32::from(u8::from(c == j))))
+                        .collect(),
+                    [rows, k],
+                ),
+                device,
+            );
+            let futures = candidates.futures;
+            let blend = burn::tensor::activation::softmax(candidates.logits.clone(), 1)
+                .reshape([rows, 1, k])
+                .matmul(futures.clone().reshape([rows, k, t * 2]))
+                .reshape([rows, t, 2]);
+            let chosen = (futures * onehot.clone().reshape([rows, k, 1, 1]))
+                .sum_dim(1)
+                .reshape([rows, t, 2]);
+            let ce = (burn::tensor::activation::log_softmax(candidates.logits, 1) * onehot)
+                .sum_dim(1)
+                .reshape([rows])
+                .neg();
+            (blend, chosen, Some(ce))
+        }
+        (_, modes) => {
+            let pred = generator.forward_blend(embedding, psi.clone(), modes);
+            (pred.clone(), pred, None)
+        }
+    };
+    let part = |start: usize, len: usize| {
+        let huber = huber_trajectory(
+            fitted.clone().narrow(0, start, len),
+            target.clone().narrow(0, start, len),
+            valid.clone().narrow(0, start, len),
             options.huber_delta,
         );
-        traj = traj + sampled * (options.alpha * (m_count - 1) as f32);
+        match &cross_entropy {
+            Some(ce) => huber + ce.clone().narrow(0, start, len).mean(),
+            None => huber,
+        }
+    };
+    let mut traj = part(0, n);
+    if m_count > 1 {
+        // Σ_m of per-future means = (M) × the mean over the sampled rows (equal valid counts).
+        traj = traj + part(n, rows - n) * (options.alpha * (m_count - 1) as f32);
     }
     let court = (options.variant == Variant::Full).then(|| {
         let (achieved, _) =
@@ -313,6 +392,43 @@ pub(crate) fn repeat_rows(x: Tensor<2>, times: usize) -> Tensor<2> {
     } else {
         Tensor::cat(vec![x; times], 0)
     }
+}
+
+/// For each row, the candidate nearest its target: the least mean distance over the row's
+/// valid steps between the candidate's mean (`xy`, without the generator's displacement) and
+/// the target; 0 for a row with no valid step. Computed on the host: an assignment, not a
+/// differentiable quantity.
+///
+/// # Shapes
+/// `xy: [rows, K, T, 2]`, `target: [rows, T, 2]`, `valid: [rows, T]` `-> rows` indices
+pub(crate) fn nearest_candidates(
+    xy: &Tensor<4>,
+    target: &Tensor<3>,
+    valid: &Tensor<2>,
+) -> Vec<usize> {
+    let [rows, k, t, _] = xy.dims();
+    let to_vec = |d: TensorData| d.convert::<f32>().try_to_vec::<f32>().unwrap_or_default();
+    let xy = to_vec(xy.to_data());
+    let target = to_vec(target.to_data());
+    let valid = to_vec(valid.to_data());
+    (0..rows)
+        .map(|r| {
+            let distance = |c: usize| -> f32 {
+                (0..t)
+                    .filter(|&s| valid.get(r * t + s).is_some_and(|&v| v > 0.0))
+                    .map(|s| {
+                        let m = ((r * k + c) * t + s) * 2;
+                        let g = (r * t + s) * 2;
+                        (xy[m] - target[g]).hypot(xy[m + 1] - target[g + 1])
+                    })
+                    .sum()
+            };
+            (0..k)
+                .map(|c| (c, distance(c)))
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .map_or(0, |(c, _)| c)
+        })
+        .collect()
 }
 
 /// A's samples as a batch without any augmentation (the condition is replaced by the caller).
@@ -488,4 +604,40 @@ fn to_frames(pred: Tensor<3>, frames: &[[f32; 3]], device: &Device) -> Tensor<3>
     let xa = x.clone() * cos.clone() - y.clone() * sin.clone() + tx;
     let ya = x * sin + y * cos + ty;
     Tensor::stack::<3>(vec![xa, ya], 2)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each row is assigned the candidate nearest its target over the row's valid steps
+    /// only: a target that follows candidate 1 while valid and candidate 0 afterwards is
+    /// candidate 1's.
+    #[test]
+    fn the_nearest_candidate_counts_valid_steps_only() {
+        let device = Device::flex();
+        let t = 80;
+        let xy = crate::modes::two_modes(&device).reshape([1, 2, t, 2]);
+        // Candidate 0 runs along y = 0, candidate 1 along y = 0.1 x.
+        let target: Vec<f32> = (1..=t)
+            .flat_map(|s| [s as f32, if s <= 30 { 0.1 * s as f32 } else { 0.0 }])
+            .collect();
+        let target = Tensor::<3>::from_data(TensorData::new(target, [1, t, 2]), &device);
+        let mask = |valid_until: usize| {
+            Tensor::<2>::from_data(
+                TensorData::new(
+                    (0..t)
+                        .map(|s| f32::from(u8::from(s < valid_until)))
+                        .collect(),
+                    [1, t],
+                ),
+                &device,
+            )
+        };
+        assert_eq!(nearest_candidates(&xy, &target, &mask(30)), vec![1]);
+        // Every step valid: the 50 steps on y = 0 outweigh the 30 on the turn.
+        assert_eq!(nearest_candidates(&xy, &target, &mask(t)), vec![0]);
+        // No valid step: candidate 0.
+        assert_eq!(nearest_candidates(&xy, &target, &mask(0)), vec![0]);
+    }
 }

@@ -4,7 +4,7 @@
 
 pub use scbg_courtesy::label::{LabelOptions, MarginalEstimate};
 pub use scbg_courtesy::{Audience, Reward, Weighting};
-pub use scbg_generator::{Courtesy, Policy, Threshold, Variant};
+pub use scbg_generator::{Courtesy, Policy, SelectorLoss, Threshold, Variant};
 pub use scbg_model::{Mode, Preset};
 pub use scbg_synth::Family;
 

@@ -11,7 +11,7 @@ use rand::SeedableRng;
 use scbg_courtesy::label::LabelOptions;
 use scbg_features::cache::PreparedDataset;
 use scbg_generator::{
-    Example, GeneratorConfig, RangePredictor, Scbg, StepOptions, Threshold, Variant,
+    Example, GeneratorConfig, RangePredictor, Scbg, SelectorLoss, StepOptions, Threshold, Variant,
 };
 use scbg_model::Multipath;
 use scbg_train::Checkpoint;
@@ -63,6 +63,10 @@ pub struct GeneratorCheckpoint {
     pub alpha: f32,
     /// Weight β of the courtesy loss.
     pub beta: f32,
+    /// How the trajectory loss trained the choice among B's candidates (`blend` for every
+    /// generator trained before the option).
+    #[serde(default)]
+    pub selector_loss: SelectorLoss,
     /// The high-courtesy threshold of the 50/50 batches as given (`q0.8` or m/s).
     pub threshold: Threshold,
     /// That threshold in ψ units: |ψ| above it counted as high courtesy in training.
@@ -280,6 +284,9 @@ pub struct VariantSettings {
     /// With `select_modes`: slowed copies of B's modes join the choices, one per factor
     /// ([`GeneratorConfig::mode_slowdowns`]; empty: none).
     pub mode_slowdowns: Vec<f32>,
+    /// With `select_modes`: how the trajectory loss trains the choice
+    /// ([`SelectorLoss`]; the default blends).
+    pub selector_loss: SelectorLoss,
 }
 
 impl VariantSettings {
@@ -301,6 +308,7 @@ impl VariantSettings {
             select_modes: true,
             mode_courtesy: true,
             mode_slowdowns: Vec::new(),
+            selector_loss: SelectorLoss::Blend,
         }
     }
 }
@@ -389,6 +397,7 @@ pub fn train_variant(
         trajectory_weight: 1.0,
         reward: s.labels.reward,
         learning_rate: s.learning_rate,
+        selector_loss: s.selector_loss,
     };
     let name = s.variant.name();
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(s.seed);
@@ -478,6 +487,7 @@ pub fn train_variant(
         world_futures: s.world_futures,
         alpha: s.alpha,
         beta: s.beta,
+        selector_loss: s.selector_loss,
         threshold: s.threshold,
         threshold_psi: scbg_generator::threshold_value(examples, s.threshold),
         psi_min,

@@ -1,7 +1,7 @@
 //! Arguments of `label` and `train` (and the estimator options `demo` shares).
 
 use clap::{Args, Subcommand};
-use scbg::choices::{MarginalEstimate, Reward, Threshold, Variant, Weighting};
+use scbg::choices::{MarginalEstimate, Reward, SelectorLoss, Threshold, Variant, Weighting};
 
 use super::slowdown_factor;
 use std::path::PathBuf;
@@ -169,6 +169,12 @@ pub struct TrainGeneratorArgs {
     /// family). Empty (the default): the modes alone (BENCHMARKS.md, issue 11).
     #[arg(long, value_delimiter = ',', value_parser = slowdown_factor)]
     pub mode_slowdowns: Vec<f32>,
+    /// With `--head modes`: how the trajectory loss trains the choice among B's modes:
+    /// `blend` (the default) fits the softmax blend of the modes; `classify` fits the mode
+    /// nearest each target future plus the displacement and trains the selector by
+    /// cross-entropy to pick that mode (MultiPath's loss; BENCHMARKS.md, issue 11).
+    #[arg(long, value_enum, default_value_t = SelectorLoss::Blend)]
+    pub selector_loss: SelectorLoss,
 }
 
 /// How the generator forms B's future (`--head`).

@@ -332,3 +332,66 @@ fn generators_saved_before_the_a_context_are_not_told_who_a_is() {
         (24 + crate::A_CONTEXT_WIDTH, crate::A_CONTEXT_WIDTH)
     );
 }
+
+/// The candidates' futures weighted by the softmax of the selector's logits are the blend
+/// the generator trains with, and the likeliest candidate is what it gives outside training.
+#[test]
+fn candidate_futures_make_the_blend_and_the_likeliest_mode() {
+    let _guard = crate::tests::SEED_LOCK
+        .lock()
+        .unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex();
+    device.seed(3);
+    let mut config = GeneratorConfig::new(24);
+    config.modes = 2;
+    config.likeliest_mode = true;
+    config.mode_slowdowns = vec![0.5];
+    let g = config.init(&device);
+    let modes = || {
+        g.candidates_of(BModes {
+            xy: Tensor::cat(vec![two_modes(&device), two_modes(&device) * 0.5], 0)
+                .reshape([2, 2, 80, 2]),
+            log_prob: Tensor::from_data([[-0.3f32, -1.4], [-1.0, -0.5]], &device),
+            psi: None,
+            mixture_modes: 2,
+        })
+    };
+    let embedding = Tensor::<2>::random(
+        [2, 24],
+        burn::tensor::Distribution::Normal(0.0, 1.0),
+        &device,
+    );
+    let psi = Tensor::<1>::from_data([0.3f32, -0.8], &device);
+    let c = g.forward_candidates(embedding.clone(), psi.clone(), modes());
+    assert_eq!(c.logits.dims(), [2, 4]);
+    assert_eq!(c.futures.dims(), [2, 4, 80, 2]);
+    let weights = burn::tensor::activation::softmax(c.logits.clone(), 1);
+    let blend = weights
+        .reshape([2, 1, 4])
+        .matmul(c.futures.clone().reshape([2, 4, 160]))
+        .reshape([2, 80, 2]);
+    let want = g.forward_blend(embedding.clone(), psi.clone(), Some(modes()));
+    let gap: f32 = (blend - want).abs().max().into_scalar();
+    assert!(gap < 1e-4, "blend differs by {gap} m");
+    let best: Vec<i64> = c
+        .logits
+        .argmax(1)
+        .into_data()
+        .convert::<i64>()
+        .try_to_vec()
+        .unwrap();
+    let likeliest = g.forward(embedding, psi, Some(modes()));
+    for (row, &k) in best.iter().enumerate() {
+        let chosen = c
+            .futures
+            .clone()
+            .narrow(0, row, 1)
+            .narrow(1, k as usize, 1)
+            .reshape([1, 80, 2]);
+        let gap: f32 = (chosen - likeliest.clone().narrow(0, row, 1))
+            .abs()
+            .max()
+            .into_scalar();
+        assert!(gap < 1e-4, "row {row}: likeliest differs by {gap} m");
+    }
+}
