@@ -162,6 +162,10 @@ pub struct DemoArgs {
     /// family). Empty (the default): the modes alone (BENCHMARKS.md, issue 11).
     #[arg(long, value_delimiter = ',', value_parser = slowdown_factor)]
     pub mode_slowdowns: Vec<f32>,
+    /// With `--head modes`: how the trajectory loss trains the generators' choice among B's
+    /// modes (`scbg train generator --selector-loss`).
+    #[arg(long, value_enum, default_value_t = scbg::generator::DEFAULT_SELECTOR_LOSS)]
+    pub selector_loss: scbg::choices::SelectorLoss,
     /// Held-out scenes of the closed-loop stage (0 skips it).
     #[arg(long, default_value_t = 60)]
     pub closed_loop_scenes: usize,

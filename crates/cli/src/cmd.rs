@@ -42,6 +42,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     select_modes: a.head == crate::cli::Head::Modes,
                     mode_courtesy: a.mode_courtesy,
                     mode_slowdowns: a.mode_slowdowns.clone(),
+                    selector_loss: a.selector_loss,
                     labels,
                     seed: a.seed,
                 },

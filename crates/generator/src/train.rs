@@ -61,8 +61,8 @@ impl std::str::FromStr for Variant {
 #[serde(rename_all = "lowercase")]
 #[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
 pub enum SelectorLoss {
-    /// The Huber loss of the softmax blend of the candidates plus the displacement (the
-    /// default, and every generator trained before the option).
+    /// The Huber loss of the softmax blend of the candidates plus the displacement (every
+    /// generator trained before the option; what a generator.json without the field means).
     #[default]
     Blend,
     /// MultiPath's: each target future is assigned its nearest candidate (mean distance over

@@ -14,7 +14,7 @@ use std::time::Instant;
 use anyhow::Context;
 use scbg_courtesy::label::LabelOptions;
 use scbg_features::cache::PreparedDataset;
-use scbg_generator::{Threshold, Variant};
+use scbg_generator::{SelectorLoss, Threshold, Variant};
 use scbg_train::data::{Split, split_of};
 
 use crate::data::PrepareOptions;
@@ -91,6 +91,9 @@ pub struct DemoOptions {
     /// With `select_modes`: slowed copies of B's modes among the generators' choices
     /// ([`crate::generator::VariantSettings::mode_slowdowns`]).
     pub mode_slowdowns: Vec<f32>,
+    /// With `select_modes`: how the trajectory loss trains the generators' choice
+    /// ([`crate::generator::VariantSettings::selector_loss`]).
+    pub selector_loss: SelectorLoss,
     /// How courtesy is labelled (8 sampled futures per pair role by default).
     pub labels: LabelOptions,
     /// Held-out scenes of the closed-loop stage (0 skips it); WOSAC realism is scored on up
@@ -307,6 +310,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                                         select_modes: options.select_modes,
                                         mode_courtesy: options.mode_courtesy,
                                         mode_slowdowns: options.mode_slowdowns.clone(),
+                                        selector_loss: options.selector_loss,
                                         ..VariantSettings::new(variant, options.labels)
                                     },
                                     &dir,

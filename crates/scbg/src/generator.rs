@@ -246,6 +246,11 @@ pub fn labelled_split(
     )
 }
 
+/// How `scbg train generator` and the demo train a mode-selecting generator's choice among
+/// B's candidates by default ([`SelectorLoss`]; BENCHMARKS.md, *Training the choice among B's
+/// modes as a classification*).
+pub const DEFAULT_SELECTOR_LOSS: SelectorLoss = SelectorLoss::Classify;
+
 /// Training settings of one variant.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VariantSettings {
@@ -308,7 +313,7 @@ impl VariantSettings {
             select_modes: true,
             mode_courtesy: true,
             mode_slowdowns: Vec::new(),
-            selector_loss: SelectorLoss::Blend,
+            selector_loss: DEFAULT_SELECTOR_LOSS,
         }
     }
 }

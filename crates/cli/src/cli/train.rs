@@ -170,10 +170,11 @@ pub struct TrainGeneratorArgs {
     #[arg(long, value_delimiter = ',', value_parser = slowdown_factor)]
     pub mode_slowdowns: Vec<f32>,
     /// With `--head modes`: how the trajectory loss trains the choice among B's modes:
-    /// `blend` (the default) fits the softmax blend of the modes; `classify` fits the mode
-    /// nearest each target future plus the displacement and trains the selector by
-    /// cross-entropy to pick that mode (MultiPath's loss; BENCHMARKS.md, issue 11).
-    #[arg(long, value_enum, default_value_t = SelectorLoss::Blend)]
+    /// `classify` (the default) fits the mode nearest each target future plus the
+    /// displacement and trains the selector by cross-entropy to pick that mode (MultiPath's
+    /// loss); `blend`, the default before, fits the softmax blend of the modes
+    /// (BENCHMARKS.md, issue 11).
+    #[arg(long, value_enum, default_value_t = scbg::generator::DEFAULT_SELECTOR_LOSS)]
     pub selector_loss: SelectorLoss,
 }
 
