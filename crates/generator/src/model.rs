@@ -400,6 +400,23 @@ pub struct CandidateFutures {
     pub futures: Tensor<4>,
 }
 
+impl CandidateFutures {
+    /// Each row's likeliest candidate (the argmax of its logits): the one
+    /// [`Generator::forward`] commits to.
+    pub fn likeliest(&self) -> Vec<usize> {
+        self.logits
+            .clone()
+            .argmax(1)
+            .into_data()
+            .convert::<i64>()
+            .try_to_vec::<i64>()
+            .unwrap_or_default()
+            .into_iter()
+            .map(|k| k as usize)
+            .collect()
+    }
+}
+
 /// The generator's heads before the choice: the displacement's `[batch, knots, 2]` knot
 /// positions, and for a mode-selecting generator the `[batch, K]` logits and the
 /// `[batch, K, knots, 2]` candidates at the knots' steps.

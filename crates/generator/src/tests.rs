@@ -215,15 +215,8 @@ fn the_classification_loss_picks_the_nearest_mode() {
             burn::tensor::TensorData::new(refs.iter().map(|e| e.psi[0]).collect(), [refs.len()]),
             &device,
         );
-        let c = g.forward_candidates(stored_embeddings(&refs, &device), psi, modes.unwrap());
-        let best: Vec<i64> = c
-            .logits
-            .argmax(1)
-            .into_data()
-            .convert::<i64>()
-            .try_to_vec()
-            .unwrap();
-        best.into_iter().map(|k| k as usize).collect()
+        g.forward_candidates(stored_embeddings(&refs, &device), psi, modes.unwrap())
+            .likeliest()
     };
     assert_ne!(
         likeliest(&generator),

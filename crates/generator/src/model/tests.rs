@@ -373,20 +373,13 @@ fn candidate_futures_make_the_blend_and_the_likeliest_mode() {
     let want = g.forward_blend(embedding.clone(), psi.clone(), Some(modes()));
     let gap: f32 = (blend - want).abs().max().into_scalar();
     assert!(gap < 1e-4, "blend differs by {gap} m");
-    let best: Vec<i64> = c
-        .logits
-        .argmax(1)
-        .into_data()
-        .convert::<i64>()
-        .try_to_vec()
-        .unwrap();
     let likeliest = g.forward(embedding, psi, Some(modes()));
-    for (row, &k) in best.iter().enumerate() {
+    for (row, k) in c.likeliest().into_iter().enumerate() {
         let chosen = c
             .futures
             .clone()
             .narrow(0, row, 1)
-            .narrow(1, k as usize, 1)
+            .narrow(1, k, 1)
             .reshape([1, 80, 2]);
         let gap: f32 = (chosen - likeliest.clone().narrow(0, row, 1))
             .abs()
