@@ -54,6 +54,23 @@ fn stats(scenes: &[PreparedScene]) -> FeatureStats {
 
 /// Labelled examples of the first `n_scenes` test scenes (the paper's direct estimator, B's
 /// futures sampled from the full mixture).
+/// Takes the seed lock, seeds `device` and builds the small predictor on it: the setup of
+/// every test here that draws a predictor's initial weights. Hold the guard for the test.
+fn seeded_predictor(
+    device: &Device,
+    seed: u64,
+) -> (
+    std::sync::MutexGuard<'static, ()>,
+    MultipathConfig,
+    scbg_model::Multipath,
+) {
+    let guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    device.seed(seed);
+    let config = MultipathConfig::cpu_small();
+    let predictor = config.init(device);
+    (guard, config, predictor)
+}
+
 fn labelled(
     predictor: &scbg_model::Multipath,
     n_scenes: u64,
@@ -110,11 +127,8 @@ fn a_context_is_a_in_b_frame() {
 
 #[test]
 fn variants_train_and_losses_fall() {
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex().autodiff();
-    device.seed(5);
-    let config = MultipathConfig::cpu_small();
-    let predictor = config.init(&device);
+    let (_guard, config, predictor) = seeded_predictor(&device, 5);
     let examples = labelled(&predictor, 3, 3, Reward::AverageSpeed, 1, &device);
     assert_eq!(examples.len(), 6, "3 scenes × 1 pair × 2 roles");
     assert!(
@@ -170,11 +184,8 @@ fn variants_train_and_losses_fall() {
 /// every example is that mode, and the loss has fallen.
 #[test]
 fn the_classification_loss_picks_the_nearest_mode() {
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex().autodiff();
-    device.seed(5);
-    let config = MultipathConfig::cpu_small();
-    let predictor = config.init(&device);
+    let (_guard, config, predictor) = seeded_predictor(&device, 5);
     let mut examples = labelled(&predictor, 3, 3, Reward::AverageSpeed, 1, &device);
     device.seed(9);
     let mut gen_config = GeneratorConfig::with_a_context(config.embedding_width());
@@ -277,10 +288,8 @@ fn assert_courtesy_loss_reaches_generator(
 #[test]
 fn balanced_batches_mix_high_and_low() {
     let mut ex = Vec::new();
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
-    device.seed(5);
-    let predictor = MultipathConfig::cpu_small().init(&device);
+    let (_guard, _, predictor) = seeded_predictor(&device, 5);
     let base = labelled(&predictor, 2, 1, Reward::Progress, 1, &device);
     for (i, psi) in [0.1f32, 0.2, 3.0, 0.05, 2.5, 0.0, 0.3, 4.0]
         .iter()
@@ -316,11 +325,8 @@ fn quantile_mapping() {
 
 #[test]
 fn range_predictor_learns_the_quantiles_and_stays_ordered() {
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex().autodiff();
-    device.seed(5);
-    let config = MultipathConfig::cpu_small();
-    let predictor = config.init(&device);
+    let (_guard, config, predictor) = seeded_predictor(&device, 5);
     let mut examples = labelled(&predictor, 2, 1, Reward::Progress, 1, &device);
     // Replace the labels by a known distribution: ψ uniform on 0..10 in every example, so the
     // 0.1 and 0.9 quantiles are 1 and 9 whatever the scene.
@@ -357,11 +363,8 @@ fn range_predictor_learns_the_quantiles_and_stays_ordered() {
 /// frame change through the samples' world poses, and `scbg_courtesy::courtesy`.
 #[test]
 fn measured_courtesy_matches_the_courtesy_function() {
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
-    device.seed(11);
-    let config = MultipathConfig::cpu_small();
-    let predictor = config.init(&device);
+    let (_guard, config, predictor) = seeded_predictor(&device, 11);
     let examples = labelled(&predictor, 3, 2, Reward::AverageSpeed, 3, &device);
     let refs: Vec<&Example> = examples.iter().collect();
     let generator = GeneratorConfig::with_a_context(config.embedding_width()).init(&device);
@@ -492,11 +495,8 @@ fn measured_courtesy_matches_the_courtesy_function() {
 /// the modes' courtesy as it was, and a copy's courtesy is J_φ of the copy against that mean.
 #[test]
 fn slowed_copies_are_scored_against_the_mixtures_own_mean() {
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
-    device.seed(13);
-    let config = MultipathConfig::cpu_small();
-    let predictor = config.init(&device);
+    let (_guard, config, predictor) = seeded_predictor(&device, 13);
     let mut plain = labelled(&predictor, 2, 2, Reward::AverageSpeed, 2, &device);
     let mut slowed = plain.clone();
     crate::fill_mode_courtesy(&predictor, &mut plain, Reward::AverageSpeed, &[], &device);

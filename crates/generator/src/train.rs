@@ -283,39 +283,31 @@ pub fn step_loss(
         ),
         device,
     );
-    let target = Tensor::<3>::from_data(
-        TensorData::new(
-            (0..m_count)
-                .flat_map(|m| {
-                    examples
-                        .iter()
-                        .flat_map(move |e| e.futures_b[m].iter().flat_map(|p| [p[0], p[1]]))
-                })
-                .collect(),
-            [rows, t, 2],
-        ),
-        device,
-    );
-    let valid = Tensor::<2>::from_data(
-        TensorData::new(
-            (0..m_count)
-                .flat_map(|m| {
-                    examples.iter().flat_map(move |e| {
-                        (0..t).map(move |s| f32::from(u8::from(m > 0 || e.logged_valid[s])))
-                    })
-                })
-                .collect(),
-            [rows, t],
-        ),
-        device,
-    );
+    // Row-major `[rows, T, 2]` and `[rows, T]`, kept on the host for the classification's
+    // assignment.
+    let target_xy: Vec<f32> = (0..m_count)
+        .flat_map(|m| {
+            examples
+                .iter()
+                .flat_map(move |e| e.futures_b[m].iter().flat_map(|p| [p[0], p[1]]))
+        })
+        .collect();
+    let valid_steps: Vec<f32> = (0..m_count)
+        .flat_map(|m| {
+            examples.iter().flat_map(move |e| {
+                (0..t).map(move |s| f32::from(u8::from(m > 0 || e.logged_valid[s])))
+            })
+        })
+        .collect();
+    let target = Tensor::<3>::from_data(TensorData::new(target_xy.clone(), [rows, t, 2]), device);
+    let valid = Tensor::<2>::from_data(TensorData::new(valid_steps.clone(), [rows, t]), device);
     let modes = crate::b_modes_for(generator, predictor, examples, options.reward, device)
         .map(|m| m.repeat_rows(m_count));
     // The future each row's trajectory loss compares with its target, the blend that J_φ
     // scores, and (classification) the selector's cross-entropy per row.
     let (pred, fitted, cross_entropy) = match (options.selector_loss, modes) {
         (SelectorLoss::Classify, Some(modes)) => {
-            let nearest = nearest_candidates(&modes.xy, &target, &valid);
+            let nearest = nearest_candidates(&modes.xy, &target_xy, &valid_steps);
             let k = modes.xy.dims()[1];
             let candidates = generator.forward_candidates(embedding, psi.clone(), modes);
             let onehot = Tensor::<2>::from_data(
@@ -394,23 +386,22 @@ pub(crate) fn repeat_rows(x: Tensor<2>, times: usize) -> Tensor<2> {
     }
 }
 
-/// For each row, the candidate nearest its target: the least mean distance over the row's
+/// For each row, the candidate nearest its target: the least total distance over the row's
 /// valid steps between the candidate's mean (`xy`, without the generator's displacement) and
-/// the target; 0 for a row with no valid step. Computed on the host: an assignment, not a
+/// the target (every candidate is measured on the same steps, so also the least mean
+/// distance); 0 for a row with no valid step. Computed on the host: an assignment, not a
 /// differentiable quantity.
 ///
 /// # Shapes
-/// `xy: [rows, K, T, 2]`, `target: [rows, T, 2]`, `valid: [rows, T]` `-> rows` indices
-pub(crate) fn nearest_candidates(
-    xy: &Tensor<4>,
-    target: &Tensor<3>,
-    valid: &Tensor<2>,
-) -> Vec<usize> {
+/// `xy: [rows, K, T, 2]`; `target`: `[rows, T, 2]` and `valid`: `[rows, T]` (1 = valid), row-major
+/// `-> rows` indices
+fn nearest_candidates(xy: &Tensor<4>, target: &[f32], valid: &[f32]) -> Vec<usize> {
     let [rows, k, t, _] = xy.dims();
-    let to_vec = |d: TensorData| d.convert::<f32>().try_to_vec::<f32>().unwrap_or_default();
-    let xy = to_vec(xy.to_data());
-    let target = to_vec(target.to_data());
-    let valid = to_vec(valid.to_data());
+    let xy = xy
+        .to_data()
+        .convert::<f32>()
+        .try_to_vec::<f32>()
+        .unwrap_or_default();
     (0..rows)
         .map(|r| {
             let distance = |c: usize| -> f32 {
@@ -622,17 +613,10 @@ mod tests {
         let target: Vec<f32> = (1..=t)
             .flat_map(|s| [s as f32, if s <= 30 { 0.1 * s as f32 } else { 0.0 }])
             .collect();
-        let target = Tensor::<3>::from_data(TensorData::new(target, [1, t, 2]), &device);
-        let mask = |valid_until: usize| {
-            Tensor::<2>::from_data(
-                TensorData::new(
-                    (0..t)
-                        .map(|s| f32::from(u8::from(s < valid_until)))
-                        .collect(),
-                    [1, t],
-                ),
-                &device,
-            )
+        let mask = |valid_until: usize| -> Vec<f32> {
+            (0..t)
+                .map(|s| f32::from(u8::from(s < valid_until)))
+                .collect()
         };
         assert_eq!(nearest_candidates(&xy, &target, &mask(30)), vec![1]);
         // Every step valid: the 50 steps on y = 0 outweigh the 30 on the turn.

@@ -32,11 +32,8 @@ fn labelled_toward_neighbours(
 
 #[test]
 fn measured_courtesy_toward_an_audience_sums_its_members() {
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex();
-    device.seed(13);
-    let config = MultipathConfig::cpu_small();
-    let predictor = config.init(&device);
+    let (_guard, config, predictor) = seeded_predictor(&device, 13);
     let examples = labelled_toward_neighbours(&predictor, 8, &device);
     let crowded: Vec<&Example> = examples.iter().filter(|e| !e.others.is_empty()).collect();
     assert!(
@@ -149,11 +146,8 @@ fn measured_courtesy_toward_an_audience_sums_its_members() {
 
 #[test]
 fn the_courtesy_loss_toward_an_audience_reaches_the_generator() {
-    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let device = Device::flex().autodiff();
-    device.seed(17);
-    let config = MultipathConfig::cpu_small();
-    let predictor = config.init(&device);
+    let (_guard, config, predictor) = seeded_predictor(&device, 17);
     let examples = labelled_toward_neighbours(&predictor, 8, &device);
     let refs: Vec<&Example> = examples.iter().filter(|e| !e.others.is_empty()).collect();
     assert!(!refs.is_empty());
