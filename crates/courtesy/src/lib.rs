@@ -49,10 +49,11 @@ pub fn expected_reward(
     reward: Reward,
     step_secs: f32,
 ) -> Tensor<1> {
+    // The means and logits only: the estimator does not read the covariances.
     let out = match condition {
         // The marginal prediction needs no condition (nor its encoder).
-        None => model.forward_marginal(batch),
-        Some(c) => model.forward(&batch.clone().with_condition(Some(c))),
+        None => model.forward_marginal_means(batch),
+        Some(c) => model.forward_means(&batch.clone().with_condition(Some(c))),
     };
     mixture_reward(out, reward, step_secs)
 }
@@ -60,8 +61,8 @@ pub fn expected_reward(
 /// Σ_k π_k r(μ_k) of each row's predicted mixture.
 ///
 /// # Shapes
-/// `out: GmmOutput` of `[n, ·]` `-> [n]`
-fn mixture_reward(out: scbg_model::GmmOutput, reward: Reward, step_secs: f32) -> Tensor<1> {
+/// `out: MixtureMeans` of `[n, ·]` `-> [n]`
+fn mixture_reward(out: scbg_model::MixtureMeans, reward: Reward, step_secs: f32) -> Tensor<1> {
     let [n, k, steps, _] = out.xy.dims();
     let probs = softmax(out.logits, 1); // [n, k]
     let r = reward
@@ -116,7 +117,7 @@ pub fn expected_reward_encoded(
         &condition.device(),
     );
     mixture_reward(
-        model.forward_encoded(scene, lane_path, index, condition),
+        model.forward_encoded_means(scene, lane_path, index, condition),
         reward,
         step_secs,
     )

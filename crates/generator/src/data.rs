@@ -197,7 +197,7 @@ pub fn marginal_embedding(
 /// B's marginal modes decoded by the frozen predictor from B's embeddings (`[n, e]`, the
 /// predictor's own embedding width, without A's context), for a mode-selecting generator.
 pub fn b_modes_of(predictor: &Multipath, b_embedding: burn::tensor::Tensor<2>) -> crate::BModes {
-    let out = predictor.decode(b_embedding);
+    let out = predictor.decode_means(b_embedding);
     let mixture_modes = out.logits.dims()[1];
     crate::BModes {
         xy: out.xy.detach(),

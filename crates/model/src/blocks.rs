@@ -42,6 +42,46 @@ impl Mlp {
     }
 }
 
+impl Mlp {
+    /// [`Self::forward`] with the last layer computing only the output columns in `columns`
+    /// (concatenated in that order): the other columns' products are skipped, not computed
+    /// and dropped.
+    ///
+    /// # Shapes
+    /// `[..., d_in] -> [..., Σ column range lengths]`
+    pub fn forward_columns<const D: usize>(
+        &self,
+        x: Tensor<D>,
+        columns: &[std::ops::Range<usize>],
+    ) -> Tensor<D> {
+        let (last, hidden) = self
+            .layers
+            .split_last()
+            .expect("an MLP has at least one layer");
+        let pick = |t: Tensor<2>| {
+            Tensor::cat(
+                columns
+                    .iter()
+                    .map(|r| t.clone().narrow(1, r.start, r.len()))
+                    .collect(),
+                1,
+            )
+        };
+        on_rows(x, |mut x| {
+            for layer in hidden {
+                x = relu(layer.forward(x));
+            }
+            let mut y = x.matmul(pick(last.weight.val()));
+            if let Some(bias) = &last.bias {
+                let b = bias.val();
+                let n = b.dims()[0];
+                y = y + pick(b.reshape([1, n]));
+            }
+            y
+        })
+    }
+}
+
 /// Applies a row-wise `f` with the leading dimensions of `x` folded into rows, so each linear
 /// layer inside is one `[rows, d_in] × [d_in, d_out]` GEMM (forward and backward) rather than a
 /// batched product against a broadcast weight, whose backward sums per-batch weight gradients
@@ -159,6 +199,42 @@ impl Mcg {
         }
         (s_in, c_in)
     }
+
+    /// [`Self::forward`] for one set of elements shared by every row, all valid (the
+    /// decoder's learned anchors): the same outputs up to floating-point rounding, with the
+    /// input projection and the first block's element MLP run once for the set instead of
+    /// once per row (they do not depend on the context; half the decoder MCG's products).
+    ///
+    /// # Shapes
+    /// `s: [n, d_in]`, `c: [batch, d_context]` `-> (s: [batch, n, width], c: [batch, width])`
+    pub fn forward_shared(&self, s: Tensor<2>, c: Tensor<2>) -> (Tensor<3>, Tensor<2>) {
+        let [n, _] = s.dims();
+        let [b, _] = c.dims();
+        let s0 = self.input_s.forward(s);
+        let w = s0.dims()[1];
+        let c_acc = self.input_c.forward(c);
+        let (first, rest) = self
+            .blocks
+            .split_first()
+            .expect("an MCG has at least one block");
+        // The first block on the shared set: its element MLP once, its gate per row.
+        let gate = first.mlp_c.forward(c_acc.clone());
+        let s_out = first.mlp_s.forward(s0.clone()).reshape([1, n, w]) * gate.reshape([b, 1, w]);
+        let c_out = s_out.clone().max_dim(1).reshape([b, w]);
+        let mut s_acc = s_out + s0.reshape([1, n, w]);
+        let mut c_acc = c_acc + c_out;
+        let (mut s_in, mut c_in) = (s_acc.clone() / 2.0, c_acc.clone() / 2.0);
+        let mask = Tensor::ones([b, n], &c_in.device());
+        for (k, block) in rest.iter().enumerate() {
+            let (s_out, c_out) = block.forward(s_in, c_in, mask.clone());
+            s_acc = s_acc + s_out;
+            c_acc = c_acc + c_out;
+            let count = (k + 3) as f64;
+            s_in = s_acc.clone() / count;
+            c_in = c_acc.clone() / count;
+        }
+        (s_in, c_in)
+    }
 }
 
 /// An LSTM that returns its final hidden state, with the four gates fused (`[d_in, 4h]` and
@@ -254,6 +330,71 @@ mod tests {
         );
         let out: Vec<f32> = masked_max(x, mask).into_data().try_to_vec::<f32>().unwrap();
         assert_eq!(out, vec![3.0, 0.0]);
+    }
+
+    /// Computing some output columns gives those columns of the whole output.
+    #[test]
+    fn mlp_columns_are_those_of_the_whole_output() {
+        let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+        let device = Device::flex();
+        device.seed(5);
+        let mlp = Mlp::init(&[4, 6, 9], &device);
+        let x = Tensor::<3>::random([2, 3, 4], burn::tensor::Distribution::Default, &device);
+        let whole = mlp.forward(x.clone());
+        let want = Tensor::cat(
+            vec![whole.clone().narrow(2, 1, 3), whole.narrow(2, 8, 1)],
+            2,
+        );
+        let got = mlp.forward_columns(x, &[1..4, 8..9]);
+        assert_eq!(got.dims(), [2, 3, 4]);
+        let want: Vec<f32> = want.into_data().try_to_vec().unwrap();
+        let got: Vec<f32> = got.into_data().try_to_vec().unwrap();
+        for (w, g) in want.iter().zip(&got) {
+            assert!((w - g).abs() <= 1e-6 * (1.0 + w.abs()), "{w} vs {g}");
+        }
+    }
+
+    /// The shared-set path gives what the general one gives for the set expanded to every
+    /// row, all valid (for one block and for several), and gradients reach the set.
+    #[test]
+    fn mcg_on_a_shared_set_matches_the_expanded_set() {
+        let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+        let device = Device::flex().autodiff();
+        let grad = |s: &Tensor<2>, out: (Tensor<3>, Tensor<2>)| {
+            let loss = out.0.sum() + (out.1 * 0.5).sum();
+            s.grad(&loss.backward()).unwrap().reshape([1, 4, 5])
+        };
+        for blocks in [1, 3] {
+            device.seed(11);
+            let mcg = Mcg::init(5, 3, 8, blocks, &device);
+            let s = Tensor::<2>::random([4, 5], burn::tensor::Distribution::Default, &device)
+                .require_grad();
+            let c = Tensor::<2>::random([2, 3], burn::tensor::Distribution::Default, &device);
+            let expanded = |s: Tensor<2>| s.reshape([1, 4, 5]).expand([2, 4, 5]);
+            let ones = Tensor::ones([2, 4], &device);
+            let (s_a, c_a) = mcg.forward(expanded(s.clone()), c.clone(), ones.clone());
+            let (s_b, c_b) = mcg.forward_shared(s.clone(), c.clone());
+            assert_eq!(s_b.dims(), [2, 4, 8]);
+            assert_eq!(c_b.dims(), [2, 8]);
+            let g_a = grad(&s, mcg.forward(expanded(s.clone()), c.clone(), ones));
+            let g_b = grad(&s, mcg.forward_shared(s.clone(), c));
+            let pairs = [
+                (s_a, s_b),
+                (c_a.reshape([2, 1, 8]), c_b.reshape([2, 1, 8])),
+                (g_a, g_b),
+            ];
+            for (a, b) in pairs {
+                let a: Vec<f32> = a.into_data().try_to_vec().unwrap();
+                let b: Vec<f32> = b.into_data().try_to_vec().unwrap();
+                assert!(a.iter().any(|v| v.abs() > 1e-3), "not all zero");
+                for (x, y) in a.iter().zip(&b) {
+                    assert!(
+                        (x - y).abs() <= 1e-5 * (1.0 + x.abs()),
+                        "{blocks}: {x} vs {y}"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

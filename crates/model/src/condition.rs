@@ -157,17 +157,37 @@ impl FutureEncoder {
         let feats = self.point_features(condition, lane_path);
         let [b, n, f] = feats.dims();
         let device = feats.device();
-        // mask[m][j] = 1 where point j < m.
-        let mask: Vec<f32> = (0..n)
-            .flat_map(|m| (0..n).map(move |j| if j < m { 1.0 } else { 0.0 }))
-            .collect();
-        let mask =
-            Tensor::<2>::from_data(TensorData::new(mask, [n, n]), &device).reshape([1, n, n, 1]);
-        let masked = feats.reshape([b, 1, n, f]).expand([b, n, n, f]) * mask;
+        // The MLP's first layer is linear in the flattened points, so prefix `m`'s first
+        // layer is the sum of points `j < m`'s own contributions (each point has its own block
+        // of the weight) plus the target's and the bias: computed so, rather than as the
+        // first layer of `n` masked copies of every point (the same numbers up to rounding,
+        // a 16th of the products).
+        let (first, rest) = self
+            .mlp
+            .layers
+            .split_first()
+            .expect("an MLP has at least one layer");
+        let weight = first.weight.val(); // [n·f + target_width, h]
+        let [_, h] = weight.dims();
+        let per_point = feats
+            .swap_dims(0, 1)
+            .matmul(weight.clone().narrow(0, 0, n * f).reshape([n, f, h]))
+            .swap_dims(0, 1); // [b, n, h]: point j's contribution
+        let mut before = vec![Tensor::zeros([b, 1, h], &device)]; // entry m: the points j < m
+        if n > 1 {
+            before.push(per_point.cumsum(1).narrow(1, 0, n - 1));
+        }
+        let before = Tensor::cat(before, 1);
         let [_, w] = target.dims();
-        let target = target.reshape([b, 1, w]).expand([b, n, w]);
-        self.mlp
-            .forward(Tensor::cat(vec![masked.reshape([b, n, n * f]), target], 2))
+        let mut fixed = target.matmul(weight.narrow(0, n * f, w));
+        if let Some(bias) = &first.bias {
+            fixed = fixed + bias.val().reshape([1, h]);
+        }
+        let mut x = before + fixed.reshape([b, 1, h]);
+        for layer in rest {
+            x = on_rows(relu(x), |x| layer.forward(x));
+        }
+        x
     }
 }
 
@@ -232,17 +252,20 @@ impl StepwiseCondition {
         }
     }
 
-    /// The corrections of each mode's per-step outputs.
+    /// The corrections of each mode's per-step outputs; with `covariances` false, those of
+    /// the displacements only (what the mixture's means need).
     ///
     /// # Shapes
     /// `modes: [batch, K, decoder_width]` (after the ReLU), `prefixes: [batch, n, future_hidden]`,
-    /// `flag: [batch, 1]` `-> (dxy: [batch, K, n·STRIDE, 2], cov_abc: [batch, K, n·STRIDE, 3])`
+    /// `flag: [batch, 1]`
+    /// `-> (dxy: [batch, K, n·STRIDE, 2], cov_abc: Option<[batch, K, n·STRIDE, 3]>)`
     pub fn forward(
         &self,
         modes: Tensor<3>,
         prefixes: Tensor<3>,
         flag: Tensor<2>,
-    ) -> (Tensor<4>, Tensor<4>) {
+        covariances: bool,
+    ) -> (Tensor<4>, Option<Tensor<4>>) {
         let [b, k, _] = modes.dims();
         let [_, n, _] = prefixes.dims();
         let hm = on_rows(modes, |x| self.mode_proj.forward(x));
@@ -252,8 +275,14 @@ impl StepwiseCondition {
             hm.reshape([b, k, 1, h]).expand([b, k, n, h])
                 + hp.reshape([b, 1, n, h]).expand([b, k, n, h]),
         );
-        let out = self.out.forward(z) * flag.reshape([b, 1, 1, 1]); // [b, k, n, 5·STRIDE]
+        let flag = flag.reshape([b, 1, 1, 1]);
         let t = n * CONDITION_STRIDE;
+        if !covariances {
+            #[allow(clippy::single_range_in_vec_init)] // one range of columns, not a Vec
+            let dxy = self.out.forward_columns(z, &[0..2 * CONDITION_STRIDE]) * flag;
+            return (dxy.reshape([b, k, t, 2]), None);
+        }
+        let out = self.out.forward(z) * flag; // [b, k, n, 5·STRIDE]
         let dxy = out
             .clone()
             .narrow(3, 0, 2 * CONDITION_STRIDE)
@@ -261,7 +290,7 @@ impl StepwiseCondition {
         let cov = out
             .narrow(3, 2 * CONDITION_STRIDE, 3 * CONDITION_STRIDE)
             .reshape([b, k, t, 3]);
-        (dxy, cov)
+        (dxy, Some(cov))
     }
 }
 
@@ -321,6 +350,63 @@ fn lane_frame(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Prefix `m`'s encoding is the encoding of the future with its points from `m` on
+    /// invalid (zeroed from step `5m` on, so that no later point nor its velocity shows):
+    /// the per-point first layer computes the masked MLP.
+    #[test]
+    fn each_prefix_encodes_the_future_cut_after_its_points() {
+        let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+        let device = Device::flex();
+        device.seed(3);
+        let config = MultipathConfig::cpu_small();
+        let encoder = FutureEncoder::init(&config, &device);
+        let (b, t) = (3, config.future_steps);
+        let xy = Tensor::<3>::random(
+            [b, t, 2],
+            burn::tensor::Distribution::Normal(0.0, 20.0),
+            &device,
+        );
+        // Row 1 is invalid after 6 s.
+        let valid: Vec<f32> = (0..b * t)
+            .map(|i| if i / t == 1 && i % t >= 60 { 0.0 } else { 1.0 })
+            .collect();
+        let valid = Tensor::<3>::from_data(TensorData::new(valid, [b, t, 1]), &device);
+        let condition = Tensor::cat(vec![xy * valid.clone(), valid], 2);
+        let target = Tensor::<2>::random(
+            [b, config.target_width],
+            burn::tensor::Distribution::Default,
+            &device,
+        );
+        let prefixes = encoder.forward_prefixes(&condition, None, target.clone());
+        let n = t / CONDITION_STRIDE;
+        assert_eq!(prefixes.dims(), [b, n, config.future_hidden]);
+        for m in [0, 1, 7, n - 1] {
+            let keep: Vec<f32> = (0..t)
+                .map(|s| if s < m * CONDITION_STRIDE { 1.0 } else { 0.0 })
+                .collect();
+            let keep = Tensor::<1>::from_data(TensorData::new(keep, [t]), &device);
+            let cut = condition.clone() * keep.reshape([1, t, 1]);
+            let want: Vec<f32> = encoder
+                .forward(&cut, None, target.clone())
+                .into_data()
+                .try_to_vec()
+                .unwrap();
+            let got: Vec<f32> = prefixes
+                .clone()
+                .narrow(1, m, 1)
+                .into_data()
+                .try_to_vec()
+                .unwrap();
+            assert!(want.iter().any(|v| v.abs() > 1e-3));
+            for (w, g) in want.iter().zip(&got) {
+                assert!(
+                    (w - g).abs() <= 1e-4 * (1.0 + w.abs()),
+                    "prefix {m}: {w} vs {g}"
+                );
+            }
+        }
+    }
 
     /// On a lane curving left (radius 200 m), a point 3.5 m right of the lane 145 m along is
     /// at arc length 145 m and offset −3.5 m in the lane frame, although the target frame puts

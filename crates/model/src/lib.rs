@@ -26,7 +26,7 @@ pub use batch::{Batch, BatchAugment, Mode};
 pub use config::{MultipathConfig, Preset};
 pub use loss::gmm_nll;
 pub use model::{CONDITION_STRIDE, Multipath, SceneEncoding};
-pub use output::{GmmOutput, Mixture};
+pub use output::{GmmOutput, Mixture, MixtureMeans};
 
 /// Draws every lazily initialised parameter of `module` now (burn initialises parameters at
 /// first use): call it right after `init` where the draws must come from a seeded stream.

@@ -14,7 +14,7 @@ pub use crate::condition::{
     STEPWISE_MODE_POINTS, StepwiseCondition,
 };
 use crate::config::MultipathConfig;
-pub use crate::output::{GmmOutput, Mixture};
+pub use crate::output::{GmmOutput, Mixture, MixtureMeans};
 /// Encodes agent histories: LSTM over step features ‖ LSTM over step differences ‖ MCG over
 /// per-step MLP embeddings (features + one-hot time step).
 #[derive(Module, Debug)]
@@ -313,6 +313,15 @@ impl Multipath {
         self.decode_with(embedding, None)
     }
 
+    /// [`Self::decode`] without the covariances ([`MixtureMeans`]).
+    ///
+    /// # Shapes
+    /// `embedding: [batch, e]` `-> MixtureMeans` (`xy: [batch, K, T, 2]`, `logits: [batch, K]`)
+    pub fn decode_means(&self, embedding: Tensor<2>) -> MixtureMeans {
+        let (xy, _, logits) = self.decode_parts(embedding, None, false);
+        MixtureMeans { xy, logits }
+    }
+
     /// [`Self::decode`] with the step-wise corrections of [`Self::stepwise`] from the
     /// conditioning future's prefix encodings and the rows' condition flags (none: marginal).
     ///
@@ -324,33 +333,58 @@ impl Multipath {
         embedding: Tensor<2>,
         stepwise: Option<(Tensor<3>, Tensor<2>)>,
     ) -> GmmOutput {
-        let [b, e] = embedding.dims();
-        let device = embedding.device();
-        let [k, _] = self.anchors.dims();
-        let anchors = self.anchors.val().reshape([1, k, e]).expand([b, k, e]);
-        let (modes, _) =
-            self.decoder_mcg
-                .forward(anchors, embedding.clone(), Tensor::ones([b, k], &device));
+        let (xy, cov_abc, logits) = self.decode_parts(embedding, stepwise, true);
+        GmmOutput {
+            xy,
+            cov_abc: cov_abc.expect("asked for the covariances"),
+            logits,
+        }
+    }
+
+    /// [`Self::decode_with`]: the means, the covariances when `covariances` (else `None`,
+    /// their products skipped) and the mode logits.
+    fn decode_parts(
+        &self,
+        embedding: Tensor<2>,
+        stepwise: Option<(Tensor<3>, Tensor<2>)>,
+        covariances: bool,
+    ) -> (Tensor<4>, Option<Tensor<4>>, Tensor<2>) {
+        // The anchors are the same for every row: the MCG runs their context-free part once.
+        let (modes, _) = self
+            .decoder_mcg
+            .forward_shared(self.anchors.val(), embedding.clone());
+        let [b, k, _] = modes.dims();
         let modes = relu(modes);
-        let out = self.decoder_mlp.forward(modes.clone()); // [b, k, 5T + 1]
         let t = self.future_steps;
-        let mut dxy = out.clone().narrow(2, 0, 2 * t).reshape([b, k, t, 2]);
-        let mut cov_abc = out.clone().narrow(2, 2 * t, 3 * t).reshape([b, k, t, 3]);
+        // Per mode: 2T displacements, 3T covariance parameters, one logit.
+        let (mut dxy, mut cov_abc, logit) = if covariances {
+            let out = self.decoder_mlp.forward(modes.clone()); // [b, k, 5T + 1]
+            (
+                out.clone().narrow(2, 0, 2 * t).reshape([b, k, t, 2]),
+                Some(out.clone().narrow(2, 2 * t, 3 * t).reshape([b, k, t, 3])),
+                out.narrow(2, 5 * t, 1),
+            )
+        } else {
+            let out = self
+                .decoder_mlp
+                .forward_columns(modes.clone(), &[0..2 * t, 5 * t..5 * t + 1]);
+            (
+                out.clone().narrow(2, 0, 2 * t).reshape([b, k, t, 2]),
+                None,
+                out.narrow(2, 2 * t, 1),
+            )
+        };
         if let (Some(block), Some((prefixes, flag))) = (&self.stepwise, stepwise) {
-            let (d, c) = block.forward(modes, prefixes, flag);
+            let (d, c) = block.forward(modes, prefixes, flag, covariances);
             dxy = dxy + d;
-            cov_abc = cov_abc + c;
+            cov_abc = cov_abc.zip(c).map(|(a, c)| a + c);
         }
         // Per-step displacements, integrated: positions are their cumulative sum (paper-era
         // Multipath++ re-implementations predict positions directly; integrating makes smooth,
         // constant-speed futures the easy solution and keeps early training errors small).
         let xy = dxy.cumsum(2);
-        let logits = out.narrow(2, 5 * t, 1).reshape([b, k]) + self.mode_logits.forward(embedding);
-        GmmOutput {
-            xy,
-            cov_abc,
-            logits,
-        }
+        let logits = logit.reshape([b, k]) + self.mode_logits.forward(embedding);
+        (xy, cov_abc, logits)
     }
 
     /// Predicts each target's future as a Gaussian mixture in its frame: [`Self::encode`] then
@@ -364,6 +398,27 @@ impl Multipath {
             embedding,
             prefixes.map(|p| (p, batch.condition_flag.clone())),
         )
+    }
+
+    /// [`Self::forward`] without the covariances ([`MixtureMeans`]): the same means and
+    /// logits, the covariance outputs not computed. Marginal rows of a
+    /// [`crate::Mode::Marginal`] batch may take [`Self::forward_marginal_means`] instead.
+    ///
+    /// # Shapes
+    /// batch tensors `-> MixtureMeans` (`xy: [batch, K, T, 2]`, `logits: [batch, K]`)
+    pub fn forward_means(&self, batch: &Batch) -> MixtureMeans {
+        let (embedding, prefixes) = self.encode_with_prefixes(batch);
+        let stepwise = prefixes.map(|p| (p, batch.condition_flag.clone()));
+        let (xy, _, logits) = self.decode_parts(embedding, stepwise, false);
+        MixtureMeans { xy, logits }
+    }
+
+    /// [`Self::forward_marginal`] without the covariances ([`MixtureMeans`]).
+    ///
+    /// # Shapes
+    /// batch tensors `-> MixtureMeans`
+    pub fn forward_marginal_means(&self, batch: &Batch) -> MixtureMeans {
+        self.decode_means(self.encode_marginal(self.encode_scene(batch)))
     }
 
     /// [`Self::forward`] conditional on `condition` for rows that share their scene: row `r`
@@ -405,6 +460,39 @@ impl Multipath {
         rows: Tensor<1, burn::tensor::Int>,
         condition: Tensor<3>,
     ) -> GmmOutput {
+        let (xy, cov_abc, logits) = self.decode_encoded(scene, lane_path, rows, condition, true);
+        GmmOutput {
+            xy,
+            cov_abc: cov_abc.expect("asked for the covariances"),
+            logits,
+        }
+    }
+
+    /// [`Self::forward_encoded`] without the covariances ([`MixtureMeans`]): J_φ's
+    /// expectation over many futures of B needs only the means and the logits.
+    ///
+    /// # Shapes
+    /// As [`Self::forward_encoded`] `-> MixtureMeans` of `[n, ·]`
+    pub fn forward_encoded_means(
+        &self,
+        scene: SceneEncoding,
+        lane_path: Option<&(Tensor<3>, Tensor<2>)>,
+        rows: Tensor<1, burn::tensor::Int>,
+        condition: Tensor<3>,
+    ) -> MixtureMeans {
+        let (xy, _, logits) = self.decode_encoded(scene, lane_path, rows, condition, false);
+        MixtureMeans { xy, logits }
+    }
+
+    /// [`Self::forward_encoded`]'s parts ([`Self::decode_parts`]).
+    fn decode_encoded(
+        &self,
+        scene: SceneEncoding,
+        lane_path: Option<&(Tensor<3>, Tensor<2>)>,
+        rows: Tensor<1, burn::tensor::Int>,
+        condition: Tensor<3>,
+        covariances: bool,
+    ) -> (Tensor<4>, Option<Tensor<4>>, Tensor<2>) {
         let [n, _, _] = condition.dims();
         let device = condition.device();
         let scene = scene.select(rows.clone());
@@ -417,7 +505,7 @@ impl Multipath {
         let flag = Tensor::ones([n, 1], &device);
         let (embedding, prefixes) =
             self.condition_scene(scene, &condition, lane_path.as_ref(), flag.clone());
-        self.decode_with(embedding, prefixes.map(|p| (p, flag)))
+        self.decode_parts(embedding, prefixes.map(|p| (p, flag)), covariances)
     }
 }
 

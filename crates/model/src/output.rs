@@ -29,6 +29,25 @@ pub struct GmmOutput {
     pub logits: Tensor<2>,
 }
 
+/// The means and mode logits of a predicted mixture, without the covariances: what an
+/// expectation `Σ_k π_k r(μ_k)` over the modes needs ([`crate::Multipath::forward_means`]).
+#[derive(Debug, Clone)]
+pub struct MixtureMeans {
+    /// `[batch, modes, future_steps, 2]` positions in the target frame (metres).
+    pub xy: Tensor<4>,
+    /// `[batch, modes]` unnormalised mode logits.
+    pub logits: Tensor<2>,
+}
+
+impl From<GmmOutput> for MixtureMeans {
+    fn from(out: GmmOutput) -> Self {
+        Self {
+            xy: out.xy,
+            logits: out.logits,
+        }
+    }
+}
+
 /// One agent's predicted mixture as plain arrays (for evaluation, labelling, serving).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Mixture {

@@ -173,9 +173,21 @@ fn marginal_shortcuts_equal_encode_and_forward_of_a_marginal_batch() {
         let got = values(model.encode_marginal(model.encode_scene(&batch)));
         assert_eq!(got, expected, "stepwise {stepwise}");
         let (full, fast) = (model.forward(&batch), model.forward_marginal(&batch));
-        assert_eq!(values(fast.xy), values(full.xy), "stepwise {stepwise}");
+        assert_eq!(
+            values(fast.xy),
+            values(full.xy.clone()),
+            "stepwise {stepwise}"
+        );
         assert_eq!(values(fast.cov_abc), values(full.cov_abc));
-        assert_eq!(values(fast.logits), values(full.logits));
+        assert_eq!(values(fast.logits), values(full.logits.clone()));
+        // The means-only paths: the same means and logits, the covariances skipped.
+        for means in [
+            model.forward_means(&batch),
+            model.forward_marginal_means(&batch),
+        ] {
+            assert_close(&values(means.xy), &values(full.xy.clone()));
+            assert_close(&values(means.logits), &values(full.logits.clone()));
+        }
         // A conditional batch's embedding is another one: the test can tell them apart.
         let conditional = Batch::for_mode(&[&first, &second], crate::Mode::Conditional, &device);
         assert_ne!(got, values(model.encode(&conditional)));
@@ -233,6 +245,18 @@ fn forward_shared_matches_forward_of_the_repeated_rows() {
             dxy < 1e-4 && dcov < 1e-4 && dlogits < 1e-4,
             "stepwise {stepwise}, lane frame {lane_frame}: {dxy} {dcov} {dlogits}"
         );
+        // The means-only paths, shared and not, give the same means and logits.
+        let means = model.forward_encoded_means(
+            model.encode_scene(&base),
+            base.lane_path.as_ref(),
+            index.clone(),
+            full.condition.clone(),
+        );
+        assert_close(&values(means.xy), &values(shared.xy.clone()));
+        assert_close(&values(means.logits), &values(shared.logits.clone()));
+        let means = model.forward_means(&full);
+        assert_close(&values(means.xy), &values(expected.xy.clone()));
+        assert_close(&values(means.logits), &values(expected.logits.clone()));
         // The rows do differ: the test would notice a row taken from the wrong target.
         let rows_differ: f32 = (expected.xy.clone().narrow(0, 0, 1)
             - expected.xy.clone().narrow(0, 1, 1))
@@ -411,4 +435,12 @@ fn a_required_condition_survives_condition_dropout() {
         .try_to_vec::<f32>()
         .unwrap();
     assert_eq!(flags, vec![0.0, 1.0]);
+}
+
+/// Equal up to float rounding (relative 1e-5).
+fn assert_close(got: &[f32], want: &[f32]) {
+    assert_eq!(got.len(), want.len());
+    for (g, w) in got.iter().zip(want) {
+        assert!((g - w).abs() <= 1e-5 * (1.0 + w.abs()), "{g} vs {w}");
+    }
 }
