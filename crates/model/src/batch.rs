@@ -11,13 +11,13 @@ pub struct Batch {
     pub target_history: Tensor<3>,
     /// `[batch, steps - 1, 11]`
     pub target_diffs: Tensor<3>,
-    /// `[batch, agents, steps, 13]`
+    /// `[batch, agents, steps, 13]` (agents: up to the last slot any sample fills)
     pub others_history: Tensor<4>,
     /// `[batch, agents, steps - 1, 11]`
     pub others_diffs: Tensor<4>,
     /// `[batch, agents]`, 1 for a real agent.
     pub others_mask: Tensor<2>,
-    /// `[batch, segments, 27]`
+    /// `[batch, segments, 27]` (segments: up to the last slot any sample fills)
     pub road: Tensor<3>,
     /// `[batch, segments]`
     pub road_mask: Tensor<2>,
@@ -105,8 +105,21 @@ impl Batch {
         assert!(b > 0, "empty batch");
         let s0 = samples[0];
         let steps = s0.target_history.len() / AGENT_FEATURES;
-        let agents = s0.others_valid.len();
-        let segments = s0.road_valid.len();
+        // Trailing agent and road-segment slots that no sample of the batch fills are left
+        // out: every operation over them is masked (per-agent encoders, masked gating and
+        // max-pooling), so they change nothing but the cost — a synthetic scene fills 2–4 of
+        // the 16 agent slots. At least one slot stays (all masked when none is valid).
+        let used = |valid: fn(&AgentSample) -> &[bool]| {
+            samples
+                .iter()
+                .map(|s| valid(s).iter().rposition(|&v| v).map_or(0, |i| i + 1))
+                .max()
+                .unwrap_or(0)
+                .max(1)
+                .min(valid(s0).len())
+        };
+        let agents = used(|s| &s.others_valid);
+        let segments = used(|s| &s.road_valid);
         let future = s0.future_valid.len();
         let mut th = Vec::with_capacity(b * steps * AGENT_FEATURES);
         let mut td = Vec::with_capacity(b * (steps - 1) * DIFF_FEATURES);
@@ -143,11 +156,11 @@ impl Batch {
             }
             th.extend(hist);
             td.extend(diffs);
-            oh.extend_from_slice(&s.others_history);
-            od.extend_from_slice(&s.others_diffs);
-            om.extend(bools(&s.others_valid));
-            road.extend_from_slice(&s.road_segments);
-            rm.extend(bools(&s.road_valid));
+            oh.extend_from_slice(&s.others_history[..agents * steps * AGENT_FEATURES]);
+            od.extend_from_slice(&s.others_diffs[..agents * (steps - 1) * DIFF_FEATURES]);
+            om.extend(bools(&s.others_valid[..agents]));
+            road.extend_from_slice(&s.road_segments[..segments * ROAD_FEATURES]);
+            rm.extend(bools(&s.road_valid[..segments]));
             let keep = s.has_condition()
                 && (s.condition_required
                     || !(augment.condition_dropout > 0.0

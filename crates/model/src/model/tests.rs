@@ -444,3 +444,62 @@ fn assert_close(got: &[f32], want: &[f32]) {
         assert!((g - w).abs() <= 1e-5 * (1.0 + w.abs()), "{g} vs {w}");
     }
 }
+
+/// A batch leaves out the trailing agent and road-segment slots no sample fills, and that
+/// changes no prediction: a sample predicted alone (its two agents and five segments kept)
+/// gets what it gets beside a sample that fills every slot.
+#[test]
+fn unfilled_slots_are_left_out_without_changing_the_prediction() {
+    let _guard = crate::SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let features = small_features();
+    let device = Device::flex();
+    let h = features.history_steps;
+    let per_agent = h * scbg_features::AGENT_FEATURES;
+    let mut sparse = straight_sample(&features, true);
+    let per_diff = (h - 1) * scbg_features::DIFF_FEATURES;
+    // Agent `k`: the target's own history, `dy` to its left.
+    let place = |s: &mut AgentSample, k: usize, dy: f32| {
+        s.others_valid[k] = true;
+        let mut hist = s.target_history.clone();
+        for row in hist.chunks_mut(scbg_features::AGENT_FEATURES) {
+            row[1] = dy;
+        }
+        s.others_history[k * per_agent..(k + 1) * per_agent].copy_from_slice(&hist);
+        let diffs = s.target_diffs.clone();
+        s.others_diffs[k * per_diff..(k + 1) * per_diff].copy_from_slice(&diffs);
+    };
+    place(&mut sparse, 0, 3.5);
+    place(&mut sparse, 1, -3.5);
+    sparse.road_valid[5..].fill(false);
+    let mut full = sparse.clone();
+    place(&mut full, features.max_other_agents - 1, 7.0);
+    full.road_valid.fill(true);
+    for (i, v) in full.road_segments.iter_mut().enumerate() {
+        *v += 0.05 * (i % 5) as f32;
+    }
+    let alone = Batch::for_mode(&[&sparse], crate::Mode::Conditional, &device);
+    assert_eq!(alone.others_history.dims()[1], 2);
+    assert_eq!(alone.road.dims()[1], 5);
+    let beside = Batch::for_mode(&[&sparse, &full], crate::Mode::Conditional, &device);
+    assert_eq!(beside.others_history.dims()[1], features.max_other_agents);
+    assert_eq!(beside.road.dims()[1], features.max_road_segments);
+    for stepwise in [false, true] {
+        let model = seeded_model(stepwise, false, 13, &device);
+        let (a, b) = (model.forward(&alone), model.forward(&beside));
+        assert_close(&values(a.xy), &values(b.xy.clone().narrow(0, 0, 1)));
+        assert_close(&values(a.cov_abc), &values(b.cov_abc.narrow(0, 0, 1)));
+        assert_close(&values(a.logits), &values(b.logits.clone().narrow(0, 0, 1)));
+        // The scene encodings agree too, and the second sample's extra agent and segments
+        // do count for it.
+        let (a, b) = (
+            model.encode_scene(&alone).scene,
+            model.encode_scene(&beside).scene,
+        );
+        assert_close(&values(a), &values(b.clone().narrow(0, 0, 1)));
+        let rows: f32 = (b.clone().narrow(0, 0, 1) - b.narrow(0, 1, 1))
+            .abs()
+            .max()
+            .into_scalar();
+        assert!(rows > 1e-4, "{rows}");
+    }
+}
