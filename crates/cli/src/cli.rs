@@ -156,12 +156,10 @@ pub struct DemoArgs {
     /// embedding alone (BENCHMARKS.md, issues 11/12).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub mode_courtesy: bool,
-    /// With `--head modes`: slowed copies of each of B's modes join the generator's choices,
-    /// one per factor (comma-separated, each in (0, 1]): the mode's path, travelled at a speed
-    /// easing from the mode's own to the factor times it at the horizon (yielding, in every
-    /// family). Empty (the default): the modes alone (BENCHMARKS.md, issue 11).
-    #[arg(long, value_delimiter = ',', value_parser = slowdown_factor)]
-    pub mode_slowdowns: Vec<f32>,
+    /// With `--head modes`: slowed copies of each of B's modes join the generator's choices
+    /// (`scbg train generator --mode-slowdowns`; `none`: the modes alone).
+    #[arg(long, default_value_t = Slowdowns::default())]
+    pub mode_slowdowns: Slowdowns,
     /// With `--head modes`: how the trajectory loss trains the generators' choice among B's
     /// modes (`scbg train generator --selector-loss`).
     #[arg(long, value_enum, default_value_t = scbg::generator::DEFAULT_SELECTOR_LOSS)]
@@ -175,13 +173,45 @@ pub struct DemoArgs {
     pub seed: u64,
 }
 
-/// One `--mode-slowdowns` factor: a number in (0, 1].
-pub(crate) fn slowdown_factor(text: &str) -> Result<f32, String> {
-    text.trim()
-        .parse::<f32>()
-        .ok()
-        .filter(|w| *w > 0.0 && *w <= 1.0)
-        .ok_or_else(|| format!("slowdown {text:?}: expected a number in (0, 1]"))
+/// `--mode-slowdowns`: comma-separated factors, each in (0, 1], or `none`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Slowdowns(pub Vec<f32>);
+
+impl Default for Slowdowns {
+    fn default() -> Self {
+        Self(scbg::generator::DEFAULT_MODE_SLOWDOWNS.to_vec())
+    }
+}
+
+impl std::fmt::Display for Slowdowns {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.0.is_empty() {
+            return f.write_str("none");
+        }
+        let factors: Vec<String> = self.0.iter().map(f32::to_string).collect();
+        f.write_str(&factors.join(","))
+    }
+}
+
+impl std::str::FromStr for Slowdowns {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        if text.trim() == "none" {
+            return Ok(Self(Vec::new()));
+        }
+        let factor = |w: &str| {
+            w.trim()
+                .parse::<f32>()
+                .ok()
+                .filter(|w| *w > 0.0 && *w <= 1.0)
+                .ok_or_else(|| format!("slowdown {w:?}: expected a number in (0, 1], or none"))
+        };
+        text.split(',')
+            .map(factor)
+            .collect::<Result<_, _>>()
+            .map(Self)
+    }
 }
 
 #[cfg(test)]
@@ -232,12 +262,16 @@ mod tests {
                 }
             })
         };
-        assert_eq!(slowdowns(&[]).unwrap(), Vec::<f32>::new());
+        assert_eq!(slowdowns(&[]).unwrap().0, vec![0.75, 0.5]);
         assert_eq!(
-            slowdowns(&["--mode-slowdowns", "0.75,0.5"]).unwrap(),
-            vec![0.75, 0.5]
+            slowdowns(&["--mode-slowdowns", "0.85,0.7"]).unwrap().0,
+            vec![0.85, 0.7]
         );
-        for bad in ["0", "1.5", "-0.5", "slow"] {
+        assert_eq!(
+            slowdowns(&["--mode-slowdowns", "none"]).unwrap().0,
+            Vec::<f32>::new()
+        );
+        for bad in ["0", "1.5", "-0.5", "slow", "0.5,", ""] {
             assert!(slowdowns(&["--mode-slowdowns", bad]).is_err(), "{bad}");
         }
     }

@@ -251,6 +251,11 @@ pub fn labelled_split(
 /// modes as a classification*).
 pub const DEFAULT_SELECTOR_LOSS: SelectorLoss = SelectorLoss::Classify;
 
+/// The slowed copies of B's modes that `scbg train generator` and the demo add to a
+/// mode-selecting generator's choices by default ([`VariantSettings::mode_slowdowns`];
+/// BENCHMARKS.md, *J_φ cheaper per future of B, and the slowed copies by default*).
+pub const DEFAULT_MODE_SLOWDOWNS: [f32; 2] = [0.75, 0.5];
+
 /// Training settings of one variant.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VariantSettings {
@@ -312,7 +317,7 @@ impl VariantSettings {
             world_futures: 0,
             select_modes: true,
             mode_courtesy: true,
-            mode_slowdowns: Vec::new(),
+            mode_slowdowns: DEFAULT_MODE_SLOWDOWNS.to_vec(),
             selector_loss: DEFAULT_SELECTOR_LOSS,
         }
     }

@@ -3,7 +3,7 @@
 use clap::{Args, Subcommand};
 use scbg::choices::{MarginalEstimate, Reward, SelectorLoss, Threshold, Variant, Weighting};
 
-use super::slowdown_factor;
+use super::Slowdowns;
 use std::path::PathBuf;
 
 /// How courtesy labels estimate E[r(Y_A) | x] and sample B's futures (shared by `label`,
@@ -166,9 +166,9 @@ pub struct TrainGeneratorArgs {
     /// With `--head modes`: slowed copies of each of B's modes join the generator's choices,
     /// one per factor (comma-separated, each in (0, 1]): the mode's path, travelled at a speed
     /// easing from the mode's own to the factor times it at the horizon (yielding, in every
-    /// family). Empty (the default): the modes alone (BENCHMARKS.md, issue 11).
-    #[arg(long, value_delimiter = ',', value_parser = slowdown_factor)]
-    pub mode_slowdowns: Vec<f32>,
+    /// family). `none`: the modes alone, the default before 0.75,0.5 (BENCHMARKS.md, issue 11).
+    #[arg(long, default_value_t = Slowdowns::default())]
+    pub mode_slowdowns: Slowdowns,
     /// With `--head modes`: how the trajectory loss trains the choice among B's modes:
     /// `classify` (the default) fits the mode nearest each target future plus the
     /// displacement and trains the selector by cross-entropy to pick that mode (MultiPath's

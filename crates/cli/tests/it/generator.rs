@@ -139,6 +139,11 @@ fn train_generator_saves_generator_and_range_predictor() {
     assert_eq!(saved["variant"], "full");
     // The choice among B's modes is trained as a classification by default.
     assert_eq!(saved["selector_loss"], "classify");
+    // And the modes' slowed copies join the choices by default.
+    assert_eq!(
+        saved["generator"]["mode_slowdowns"],
+        serde_json::json!([0.75, 0.5])
+    );
     assert_eq!(saved["history"].as_array().unwrap().len(), 2);
     assert!(saved["examples"].as_u64().unwrap() > 0);
     assert!(saved["range_loss"].as_f64().unwrap().is_finite());
