@@ -186,18 +186,9 @@ impl Mcg {
     /// `s: [batch, n, d_in]`, `c: [batch, d_context]`, `mask: [batch, n]`
     /// `-> (s: [batch, n, width], c: [batch, width])`
     pub fn forward(&self, s: Tensor<3>, c: Tensor<2>, mask: Tensor<2>) -> (Tensor<3>, Tensor<2>) {
-        let mut s_acc = on_rows(s, |s| self.input_s.forward(s));
-        let mut c_acc = self.input_c.forward(c);
-        let (mut s_in, mut c_in) = (s_acc.clone(), c_acc.clone());
-        for (k, block) in self.blocks.iter().enumerate() {
-            let (s_out, c_out) = block.forward(s_in, c_in, mask.clone());
-            s_acc = s_acc + s_out;
-            c_acc = c_acc + c_out;
-            let count = (k + 2) as f64;
-            s_in = s_acc.clone() / count;
-            c_in = c_acc.clone() / count;
-        }
-        (s_in, c_in)
+        let s_acc = on_rows(s, |s| self.input_s.forward(s));
+        let c_acc = self.input_c.forward(c);
+        continue_stack(&self.blocks, s_acc, c_acc, 1, mask)
     }
 
     /// [`Self::forward`] for one set of elements shared by every row, all valid (the
@@ -221,20 +212,37 @@ impl Mcg {
         let gate = first.mlp_c.forward(c_acc.clone());
         let s_out = first.mlp_s.forward(s0.clone()).reshape([1, n, w]) * gate.reshape([b, 1, w]);
         let c_out = s_out.clone().max_dim(1).reshape([b, w]);
-        let mut s_acc = s_out + s0.reshape([1, n, w]);
-        let mut c_acc = c_acc + c_out;
-        let (mut s_in, mut c_in) = (s_acc.clone() / 2.0, c_acc.clone() / 2.0);
-        let mask = Tensor::ones([b, n], &c_in.device());
-        for (k, block) in rest.iter().enumerate() {
-            let (s_out, c_out) = block.forward(s_in, c_in, mask.clone());
-            s_acc = s_acc + s_out;
-            c_acc = c_acc + c_out;
-            let count = (k + 3) as f64;
-            s_in = s_acc.clone() / count;
-            c_in = c_acc.clone() / count;
-        }
-        (s_in, c_in)
+        let s_acc = s_out + s0.reshape([1, n, w]);
+        let mask = Tensor::ones([b, n], &c_acc.device());
+        continue_stack(rest, s_acc, c_acc + c_out, 2, mask)
     }
+}
+
+/// Runs `blocks` of an MCG on top of the running sums of its first `terms` terms (the stack's
+/// input and the blocks before), each block taking the running mean; returns the means after
+/// the last block (the sums' means when there is none).
+fn continue_stack(
+    blocks: &[ContextGating],
+    mut s_acc: Tensor<3>,
+    mut c_acc: Tensor<2>,
+    terms: usize,
+    mask: Tensor<2>,
+) -> (Tensor<3>, Tensor<2>) {
+    let mean = |s: &Tensor<3>, c: &Tensor<2>, count: usize| {
+        if count == 1 {
+            (s.clone(), c.clone())
+        } else {
+            (s.clone() / count as f64, c.clone() / count as f64)
+        }
+    };
+    let (mut s_in, mut c_in) = mean(&s_acc, &c_acc, terms);
+    for (k, block) in blocks.iter().enumerate() {
+        let (s_out, c_out) = block.forward(s_in, c_in, mask.clone());
+        s_acc = s_acc + s_out;
+        c_acc = c_acc + c_out;
+        (s_in, c_in) = mean(&s_acc, &c_acc, terms + k + 1);
+    }
+    (s_in, c_in)
 }
 
 /// An LSTM that returns its final hidden state, with the four gates fused (`[d_in, 4h]` and
