@@ -318,8 +318,7 @@ impl Multipath {
     /// # Shapes
     /// `embedding: [batch, e]` `-> MixtureMeans` (`xy: [batch, K, T, 2]`, `logits: [batch, K]`)
     pub fn decode_means(&self, embedding: Tensor<2>) -> MixtureMeans {
-        let (xy, _, logits) = self.decode_parts(embedding, None, false);
-        MixtureMeans { xy, logits }
+        self.decode_parts(embedding, None, false).means()
     }
 
     /// [`Self::decode`] with the step-wise corrections of [`Self::stepwise`] from the
@@ -333,12 +332,7 @@ impl Multipath {
         embedding: Tensor<2>,
         stepwise: Option<(Tensor<3>, Tensor<2>)>,
     ) -> GmmOutput {
-        let (xy, cov_abc, logits) = self.decode_parts(embedding, stepwise, true);
-        GmmOutput {
-            xy,
-            cov_abc: cov_abc.expect("asked for the covariances"),
-            logits,
-        }
+        self.decode_parts(embedding, stepwise, true).gmm()
     }
 
     /// [`Self::decode_with`]: the means, the covariances when `covariances` (else `None`,
@@ -348,7 +342,7 @@ impl Multipath {
         embedding: Tensor<2>,
         stepwise: Option<(Tensor<3>, Tensor<2>)>,
         covariances: bool,
-    ) -> (Tensor<4>, Option<Tensor<4>>, Tensor<2>) {
+    ) -> Decoded {
         // The anchors are the same for every row: the MCG runs their context-free part once.
         let (modes, _) = self
             .decoder_mcg
@@ -384,7 +378,11 @@ impl Multipath {
         // constant-speed futures the easy solution and keeps early training errors small).
         let xy = dxy.cumsum(2);
         let logits = logit.reshape([b, k]) + self.mode_logits.forward(embedding);
-        (xy, cov_abc, logits)
+        Decoded {
+            xy,
+            cov_abc,
+            logits,
+        }
     }
 
     /// Predicts each target's future as a Gaussian mixture in its frame: [`Self::encode`] then
@@ -409,8 +407,7 @@ impl Multipath {
     pub fn forward_means(&self, batch: &Batch) -> MixtureMeans {
         let (embedding, prefixes) = self.encode_with_prefixes(batch);
         let stepwise = prefixes.map(|p| (p, batch.condition_flag.clone()));
-        let (xy, _, logits) = self.decode_parts(embedding, stepwise, false);
-        MixtureMeans { xy, logits }
+        self.decode_parts(embedding, stepwise, false).means()
     }
 
     /// [`Self::forward_marginal`] without the covariances ([`MixtureMeans`]).
@@ -460,12 +457,8 @@ impl Multipath {
         rows: Tensor<1, burn::tensor::Int>,
         condition: Tensor<3>,
     ) -> GmmOutput {
-        let (xy, cov_abc, logits) = self.decode_encoded(scene, lane_path, rows, condition, true);
-        GmmOutput {
-            xy,
-            cov_abc: cov_abc.expect("asked for the covariances"),
-            logits,
-        }
+        self.decode_encoded(scene, lane_path, rows, condition, true)
+            .gmm()
     }
 
     /// [`Self::forward_encoded`] without the covariances ([`MixtureMeans`]): J_φ's
@@ -480,8 +473,8 @@ impl Multipath {
         rows: Tensor<1, burn::tensor::Int>,
         condition: Tensor<3>,
     ) -> MixtureMeans {
-        let (xy, _, logits) = self.decode_encoded(scene, lane_path, rows, condition, false);
-        MixtureMeans { xy, logits }
+        self.decode_encoded(scene, lane_path, rows, condition, false)
+            .means()
     }
 
     /// [`Self::forward_encoded`]'s parts ([`Self::decode_parts`]).
@@ -492,7 +485,7 @@ impl Multipath {
         rows: Tensor<1, burn::tensor::Int>,
         condition: Tensor<3>,
         covariances: bool,
-    ) -> (Tensor<4>, Option<Tensor<4>>, Tensor<2>) {
+    ) -> Decoded {
         let [n, _, _] = condition.dims();
         let device = condition.device();
         let scene = scene.select(rows.clone());
@@ -506,6 +499,32 @@ impl Multipath {
         let (embedding, prefixes) =
             self.condition_scene(scene, &condition, lane_path.as_ref(), flag.clone());
         self.decode_parts(embedding, prefixes.map(|p| (p, flag)), covariances)
+    }
+}
+
+/// What [`Multipath::decode_parts`] computes: the covariances only when asked for.
+struct Decoded {
+    xy: Tensor<4>,
+    cov_abc: Option<Tensor<4>>,
+    logits: Tensor<2>,
+}
+
+impl Decoded {
+    /// The whole mixture (decoded with its covariances).
+    fn gmm(self) -> GmmOutput {
+        GmmOutput {
+            xy: self.xy,
+            cov_abc: self.cov_abc.expect("decoded without the covariances"),
+            logits: self.logits,
+        }
+    }
+
+    /// The means and logits.
+    fn means(self) -> MixtureMeans {
+        MixtureMeans {
+            xy: self.xy,
+            logits: self.logits,
+        }
     }
 }
 
