@@ -107,7 +107,7 @@ impl Batch {
         let steps = s0.target_history.len() / AGENT_FEATURES;
         // Trailing agent and road-segment slots that no sample of the batch fills are left
         // out: every operation over them is masked (per-agent encoders, masked gating and
-        // max-pooling), so they change nothing but the cost — a synthetic scene fills 2–4 of
+        // max-pooling), so they change nothing but the cost — a synthetic scene fills 1–4 of
         // the 16 agent slots. At least one slot stays (all masked when none is valid).
         let used = |valid: fn(&AgentSample) -> &[bool]| {
             samples
