@@ -330,3 +330,51 @@ pub fn fill_mode_courtesy(
         }
     }
 }
+
+/// One choice of a mode-selecting generator: a future of B in B's frame and its courtesy.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ScoredCandidate {
+    /// `[T]` positions in B's frame (metres), the steps after the current one.
+    pub xy: Vec<[f32; 2]>,
+    /// Its courtesy by J_φ ([`mode_courtesy`], against the mixture's own mean).
+    pub psi: f32,
+}
+
+/// Every choice `generator` has for each example — B's modes and their slowed copies, as
+/// [`Generator::candidates_of`](crate::Generator::candidates_of) makes them — with J_φ's
+/// courtesy of each (in chunks of 64 examples); `None` for a generator that does not select
+/// modes. What a selector among them could reach is what the generator's mode choice can.
+pub fn scored_candidates(
+    generator: &crate::Generator,
+    predictor: &Multipath,
+    examples: &[&Example],
+    reward: scbg_courtesy::Reward,
+    device: &Device,
+) -> Option<Vec<Vec<ScoredCandidate>>> {
+    if !generator.selects_modes() {
+        return None;
+    }
+    let mut out = Vec::with_capacity(examples.len());
+    for chunk in examples.chunks(64) {
+        let modes = generator.candidates_of(b_modes(predictor, chunk, device));
+        let [_, k, t, _] = modes.xy.dims();
+        let psi = crate::eval::to_vec(mode_courtesy(predictor, chunk, &modes, reward, device));
+        let xy = crate::eval::to_vec(modes.xy);
+        for (i, _) in chunk.iter().enumerate() {
+            out.push(
+                (0..k)
+                    .map(|j| {
+                        let base = (i * k + j) * t * 2;
+                        ScoredCandidate {
+                            xy: (0..t)
+                                .map(|s| [xy[base + 2 * s], xy[base + 2 * s + 1]])
+                                .collect(),
+                            psi: psi[i * k + j],
+                        }
+                    })
+                    .collect(),
+            );
+        }
+    }
+    Some(out)
+}

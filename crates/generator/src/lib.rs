@@ -24,8 +24,9 @@ pub mod ranked;
 mod train;
 
 pub use data::{
-    A_CONTEXT_WIDTH, Example, a_context, a_context_of, a_from_b, b_modes, b_modes_for, b_modes_of,
-    build_examples, fill_mode_courtesy, marginal_embedding, mode_courtesy,
+    A_CONTEXT_WIDTH, Example, ScoredCandidate, a_context, a_context_of, a_from_b, b_modes,
+    b_modes_for, b_modes_of, build_examples, fill_mode_courtesy, marginal_embedding, mode_courtesy,
+    scored_candidates,
 };
 pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Policy, Scbg};
 pub use model::{CandidateFutures, Generator, GeneratorConfig};

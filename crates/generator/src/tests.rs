@@ -535,3 +535,47 @@ fn slowed_copies_are_scored_against_the_mixtures_own_mean() {
     let stored: Vec<f32> = slowed.iter().flat_map(|e| e.mode_psi.clone()).collect();
     assert!(psi.iter().zip(&stored).all(|(a, b)| (a - b).abs() < 1e-5));
 }
+
+/// A mode-selecting generator's scored candidates are its modes and their slowed copies, in
+/// [`crate::BModes`]'s order, each with the courtesy `fill_mode_courtesy` stores for it; a
+/// plain regression has none.
+#[test]
+fn scored_candidates_are_the_modes_and_copies_with_their_courtesy() {
+    let device = Device::flex();
+    let (_guard, config, predictor) = seeded_predictor(&device, 13);
+    let mut examples = labelled(&predictor, 2, 2, Reward::AverageSpeed, 2, &device);
+    crate::fill_mode_courtesy(
+        &predictor,
+        &mut examples,
+        Reward::AverageSpeed,
+        &[0.5],
+        &device,
+    );
+    let refs: Vec<&Example> = examples.iter().collect();
+    let mut gen_config = GeneratorConfig::with_a_context(config.embedding_width());
+    let plain = gen_config.init(&device);
+    assert!(
+        crate::scored_candidates(&plain, &predictor, &refs, Reward::AverageSpeed, &device)
+            .is_none()
+    );
+    gen_config.modes = config.num_modes;
+    gen_config.mode_slowdowns = vec![0.5];
+    let generator = gen_config.init(&device);
+    let scored =
+        crate::scored_candidates(&generator, &predictor, &refs, Reward::AverageSpeed, &device)
+            .expect("a mode-selecting generator");
+    let modes = generator.candidates_of(crate::b_modes(&predictor, &refs, &device));
+    let [n, k, t, _] = modes.xy.dims();
+    assert_eq!((scored.len(), k), (refs.len(), gen_config.candidates()));
+    let xy = eval::to_vec(modes.xy);
+    for (i, (choices, e)) in scored.iter().zip(&examples).enumerate() {
+        assert_eq!(choices.len(), k);
+        for (j, c) in choices.iter().enumerate() {
+            assert!((c.psi - e.mode_psi[j]).abs() < 1e-5, "{i} {j}");
+            assert_eq!(c.xy.len(), t);
+            let base = (i * k + j) * t * 2;
+            assert_eq!(c.xy[t - 1], [xy[base + 2 * t - 2], xy[base + 2 * t - 1]]);
+        }
+    }
+    assert_eq!(n, refs.len());
+}

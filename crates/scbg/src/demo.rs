@@ -462,6 +462,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         truth_control_seed_std: truth_std,
         truth_control_world: scbg.truth_control_world.clone(),
         truth_control_selection: scbg.truth_control_selection.clone(),
+        truth_control_candidates: scbg.truth_control_candidates.clone(),
         scbg_eval: ScbgEvalSummary {
             examples: scbg.examples,
             high_threshold_psi: scbg.high_threshold_psi,

@@ -547,6 +547,21 @@ impl SelectionControl {
             ),
         ]
     }
+
+    /// The same two selectors over a generator's own choices ([`candidate_control`]), with
+    /// the labels their rows carry in the reports.
+    pub fn candidate_yardsticks(&self) -> [(&'static str, &WorldKnob); 2] {
+        [
+            (
+                "choosing among the generator's own candidates (B's modes and their slowed copies) by J_φ (a perfect follower of J_φ)",
+                &self.by_label,
+            ),
+            (
+                "choosing among the generator's own candidates by ψ_true (what they allow)",
+                &self.by_truth,
+            ),
+        ]
+    }
 }
 
 /// [`SelectionControl`] over the ground-truth roles among `examples`; `None` when there is
@@ -556,7 +571,6 @@ pub fn selection_control(
     truth: &TruthIndex<'_>,
 ) -> Option<SelectionControl> {
     use rayon::prelude::*;
-    use scbg_generator::eval::EVAL_QUANTILES;
     // Per scored example: family, and (ψ_label, ψ_true) of every candidate it could score.
     let scored: Vec<(&'static str, Vec<(f64, f64)>)> = examples
         .par_iter()
@@ -575,6 +589,42 @@ pub fn selection_control(
             (pairs.len() >= 2).then_some((t.family.name(), pairs))
         })
         .collect();
+    select_control(&scored)
+}
+
+/// [`SelectionControl`] for a mode-selecting generator's own choices (B's modes and their
+/// slowed copies, [`scbg_generator::scored_candidates`]; `candidates[i]` belongs to
+/// `examples[i]`), ranked by J_φ and by ψ_true: what a perfect follower of J_φ among them
+/// reaches, and what they allow at all. `None` when no example is a ground-truth role.
+pub fn candidate_control(
+    examples: &[&scbg_generator::Example],
+    candidates: &[Vec<scbg_generator::ScoredCandidate>],
+    truth: &TruthIndex<'_>,
+) -> Option<SelectionControl> {
+    use rayon::prelude::*;
+    let scored: Vec<(&'static str, Vec<(f64, f64)>)> = examples
+        .par_iter()
+        .zip(candidates.par_iter())
+        .filter_map(|(e, choices)| {
+            let (t, scenario) = truth_scenario(e, truth)?;
+            let oracle = scenario.oracle();
+            let pairs: Vec<(f64, f64)> = choices
+                .iter()
+                .filter_map(|c| {
+                    let world = world_points(&e.b.world_from_agent, &c.xy);
+                    Some((f64::from(c.psi), oracle.psi_true(&world).ok()?))
+                })
+                .collect();
+            (pairs.len() >= 2).then_some((t.family.name(), pairs))
+        })
+        .collect();
+    select_control(&scored)
+}
+
+/// Per scored example (family, (key, ψ_true) of each candidate), the candidate at rank ⌊q·n⌋
+/// for every input quantile q, ranked by ψ_true and by the key.
+fn select_control(scored: &[(&'static str, Vec<(f64, f64)>)]) -> Option<SelectionControl> {
+    use scbg_generator::eval::EVAL_QUANTILES;
     if scored.is_empty() {
         return None;
     }

@@ -40,6 +40,9 @@ pub struct ScbgEval {
     /// What a selector among the labelled futures of B reaches: ranked by ψ_true (the
     /// candidates' ceiling) and by the labels (a perfect follower of J_φ) — synthetic data only.
     pub truth_control_selection: Option<crate::fidelity::SelectionControl>,
+    /// What a selector among the first mode-selecting variant's own candidates (B's modes and
+    /// their slowed copies) reaches, ranked by ψ_true and by J_φ — synthetic data only.
+    pub truth_control_candidates: Option<crate::fidelity::SelectionControl>,
 }
 
 fn ms_json(m: &Option<MeanStd>) -> serde_json::Value {
@@ -85,6 +88,7 @@ impl ScbgEval {
             truth_control: Vec::new(),
             truth_control_world: None,
             truth_control_selection: None,
+            truth_control_candidates: None,
         }
     }
 
@@ -134,6 +138,7 @@ impl ScbgEval {
             "truth_control": self.truth_control_json(),
             "truth_control_world": self.truth_control_world,
             "truth_control_selection": self.truth_control_selection,
+            "truth_control_candidates": self.truth_control_candidates,
             "examples": self.examples,
             "high_threshold_psi": self.high_threshold_psi,
             "psi_min": self.psi_range.0,
@@ -194,11 +199,15 @@ impl ScbgEval {
             if let Some(w) = &self.truth_control_world {
                 s.push_str(&row("the world's own B at c = q (yardstick)", w, None));
             }
-            for (label, w) in self
+            let selection = self
                 .truth_control_selection
                 .iter()
-                .flat_map(|sel| sel.yardsticks())
-            {
+                .flat_map(|sel| sel.yardsticks());
+            let candidates = self
+                .truth_control_candidates
+                .iter()
+                .flat_map(|sel| sel.candidate_yardsticks());
+            for (label, w) in selection.chain(candidates) {
                 s.push_str(&row(label, w, None));
             }
         }
@@ -339,6 +348,19 @@ pub fn evaluate_examples(
     ) {
         record(scbg_generator::ranked::RANKED, v, &measured);
     }
+    // The choices of the first variant that selects among B's modes, scored by J_φ and by the
+    // oracle (the variants share the predictor, so their modes; only copies could differ).
+    let truth_control_candidates = index.as_ref().and_then(|index| {
+        let l = loaded.iter().find(|l| l.scbg.generator.selects_modes())?;
+        let candidates = scbg_generator::scored_candidates(
+            &l.scbg.generator,
+            &l.scbg.predictor,
+            &refs,
+            l.scbg.labels.reward,
+            &l.device,
+        )?;
+        crate::fidelity::candidate_control(&refs, &candidates, index)
+    });
     let mut written = Vec::new();
     if let Some(dir) = figures {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -358,6 +380,7 @@ pub fn evaluate_examples(
         truth_control_selection: index
             .as_ref()
             .and_then(|index| crate::fidelity::selection_control(&refs, index)),
+        truth_control_candidates,
     })
 }
 

@@ -293,6 +293,28 @@ fn train_generator_saves_generator_and_range_predictor() {
     let responsive = by_truth["responsive_fraction"]["all"].as_f64().unwrap();
     assert!(within >= 0.0 && within <= responsive + 1e-9, "{by_truth}");
     assert_eq!(within > 0.0, responsive > 0.0, "{by_truth}");
+    // The same selectors among the generator's own choices: every role has all of them
+    // (B's modes and their two slowed copies), and ranked by ψ_true the picks rise with q.
+    let candidates = &eval["truth_control_candidates"];
+    let modes = saved["generator"]["modes"].as_u64().unwrap();
+    assert!(modes > 0);
+    assert_eq!(
+        candidates["by_label"]["examples"]["all"].as_u64(),
+        Some(roles),
+        "{eval}"
+    );
+    assert_eq!(
+        candidates["candidates_mean"].as_f64(),
+        Some(3.0 * modes as f64),
+        "{candidates}"
+    );
+    let means: Vec<f64> = candidates["by_truth"]["per_quantile"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|q| q["psi_true_mean"].as_f64().unwrap())
+        .collect();
+    assert!(means.windows(2).all(|w| w[0] <= w[1]), "{means:?}");
     for variant in ["baseline", "full"] {
         let v = &eval["variants"][variant];
         for key in [

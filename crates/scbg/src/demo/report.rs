@@ -93,6 +93,10 @@ pub struct DemoReport {
     /// generators' training candidates) by the labels and by ψ_true
     /// ([`crate::fidelity::SelectionControl`]); `null` without a ground truth.
     pub truth_control_selection: Option<crate::fidelity::SelectionControl>,
+    /// The same two selectors among the full generator's own candidates (B's modes and their
+    /// slowed copies; first generator seed), by J_φ and by ψ_true
+    /// ([`crate::fidelity::candidate_control`]); `null` without a ground truth.
+    pub truth_control_candidates: Option<crate::fidelity::SelectionControl>,
     /// The evaluation's settings and figures.
     pub scbg_eval: ScbgEvalSummary,
     /// The closed-loop stage (full variant, first seed, held-out scenes): realised courtesy,

@@ -147,7 +147,11 @@ impl DemoReport {
             .truth_control_selection
             .iter()
             .flat_map(|sel| sel.yardsticks());
-        for (label, w) in world.chain(selection) {
+        let candidates = self
+            .truth_control_candidates
+            .iter()
+            .flat_map(|sel| sel.candidate_yardsticks());
+        for (label, w) in world.chain(selection).chain(candidates) {
             let rho = |k: &str| {
                 w.spearman_quantile_psi_true
                     .get(k)
