@@ -160,6 +160,11 @@ pub struct DemoArgs {
     /// (`scbg train generator --mode-slowdowns`; `none`: the modes alone).
     #[arg(long, default_value_t = Slowdowns::default())]
     pub mode_slowdowns: Slowdowns,
+    /// With `--head modes`: each of B's modes that leaves its lane also joins the generators'
+    /// choices with the move completed within this many steps (`scbg train generator
+    /// --lane-move-steps`; 0: none).
+    #[arg(long, default_value_t = scbg::generator::DEFAULT_LANE_MOVE_STEPS)]
+    pub lane_move_steps: usize,
     /// With `--head modes`: how the trajectory loss trains the generators' choice among B's
     /// modes (`scbg train generator --selector-loss`).
     #[arg(long, value_enum, default_value_t = scbg::generator::DEFAULT_SELECTOR_LOSS)]

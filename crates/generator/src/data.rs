@@ -285,7 +285,8 @@ pub(crate) fn b_modes_with(
     if !generator.selects_modes() {
         return None;
     }
-    let mut modes = generator.candidates_of(b_modes(predictor, examples, device));
+    let mut modes =
+        generator.candidates_of(b_modes(predictor, examples, device), &lane_paths(examples));
     if generator.scores_mode_courtesy() {
         let [n, k, _, _] = modes.xy.dims();
         let stored = examples.iter().all(|e| e.mode_psi.len() == k);
@@ -307,22 +308,35 @@ pub(crate) fn b_modes_with(
     Some(modes)
 }
 
+/// B's lane path in B's frame for each example ([`crate::lane_path_points`]).
+fn lane_paths(examples: &[&Example]) -> Vec<Vec<[f32; 2]>> {
+    examples
+        .iter()
+        .map(|e| crate::lane_path_points(&e.b))
+        .collect()
+}
+
 /// Stores every example's [`Example::mode_psi`] (in chunks of 64 pair roles), so that
-/// training does not recompute J_φ of B's modes at every step: of the modes and their
-/// copies slowed by `slowdowns` ([`crate::GeneratorConfig::mode_slowdowns`]; empty: the
-/// modes alone). Run it on a plain device.
+/// training does not recompute J_φ of B's modes at every step: of the modes, their copies
+/// slowed by `slowdowns` ([`crate::GeneratorConfig::mode_slowdowns`]; empty: none) and their
+/// lane moves completed within `lane_move_steps` ([`crate::GeneratorConfig::lane_move_steps`];
+/// 0: none), the generator's choices in [`crate::Generator::candidates_of`]'s order. Run it
+/// on a plain device.
 pub fn fill_mode_courtesy(
     predictor: &Multipath,
     examples: &mut [Example],
     reward: scbg_courtesy::Reward,
     slowdowns: &[f32],
+    lane_move_steps: usize,
     device: &Device,
 ) {
     for chunk in examples.chunks_mut(64) {
         let refs: Vec<&Example> = chunk.iter().collect();
         let modes = b_modes(predictor, &refs, device);
         let warp = crate::slowdown_warp(slowdowns, modes.xy.dims()[2], device);
-        let modes = modes.with_slowdowns(warp.as_ref());
+        let modes = modes
+            .with_slowdowns(warp.as_ref())
+            .with_lane_moves(&lane_paths(&refs), lane_move_steps);
         let k = modes.log_prob.dims()[1];
         let psi = crate::eval::to_vec(mode_courtesy(predictor, &refs, &modes, reward, device));
         for (e, psi) in chunk.iter_mut().zip(psi.chunks_exact(k)) {
@@ -340,7 +354,8 @@ pub struct ScoredCandidate {
     pub psi: f32,
 }
 
-/// Every choice `generator` has for each example — B's modes and their slowed copies, as
+/// Every choice `generator` has for each example — B's modes, their slowed copies and lane
+/// moves, as
 /// [`Generator::candidates_of`](crate::Generator::candidates_of) makes them — with J_φ's
 /// courtesy of each (in chunks of 64 examples); `None` for a generator that does not select
 /// modes. What a selector among them could reach is what the generator's mode choice can.
@@ -356,7 +371,7 @@ pub fn scored_candidates(
     }
     let mut out = Vec::with_capacity(examples.len());
     for chunk in examples.chunks(64) {
-        let modes = generator.candidates_of(b_modes(predictor, chunk, device));
+        let modes = generator.candidates_of(b_modes(predictor, chunk, device), &lane_paths(chunk));
         let [_, k, t, _] = modes.xy.dims();
         let psi = crate::eval::to_vec(mode_courtesy(predictor, chunk, &modes, reward, device));
         let xy = crate::eval::to_vec(modes.xy);

@@ -418,7 +418,8 @@ impl Scbg {
         }
         // B's embedding (and A's context when the generator is told who A is), B's pose,
         // and, for a generator scoring its modes' courtesy, the pair's example that J_φ needs.
-        let (embedding, pose, example, a_encoded) = if self.generator.scores_mode_courtesy() {
+        let (embedding, pose, example, a_encoded, b_lane) = if self.generator.scores_mode_courtesy()
+        {
             // A's and B's samples and B's audience, no label: the modes' courtesy is measured
             // against their own mean, so no E[r(Y_A) | x] from B's samples is needed.
             let role = self.labelled_role(scene, window, a_id, b_id, false, device)?;
@@ -449,6 +450,7 @@ impl Scbg {
                 example.b.world_from_agent,
                 Some(example),
                 Some(a_encoded),
+                Vec::new(),
             )
         } else {
             let mut b = SampleBuilder::new(scene, &self.features)
@@ -473,7 +475,8 @@ impl Scbg {
                 burn::tensor::TensorData::new(embedding, [1, e]),
                 device,
             );
-            (embedding, b.world_from_agent, None, None)
+            let b_lane = crate::lane_path_points(&b);
+            (embedding, b.world_from_agent, None, None, b_lane)
         };
         let modes = match &example {
             Some(example) => crate::data::b_modes_with(
@@ -486,10 +489,10 @@ impl Scbg {
             ),
             None => self.generator.selects_modes().then(|| {
                 let b_width = embedding.dims()[1] - self.generator.a_context_width;
-                self.generator.candidates_of(crate::b_modes_of(
-                    &self.predictor,
-                    embedding.clone().narrow(1, 0, b_width),
-                ))
+                self.generator.candidates_of(
+                    crate::b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width)),
+                    &[b_lane],
+                )
             }),
         };
         let psi = match courtesy {

@@ -65,6 +65,14 @@ pub struct GeneratorConfig {
     /// for every generator trained before the option.
     #[serde(default)]
     pub mode_slowdowns: Vec<f32>,
+    /// With `modes > 0` and above 0: each of B's `K` modes also joins the choices with its lane
+    /// move completed ([`crate::lane_move`]): a mode that drifts off B's lane path, moved a
+    /// full lane over within this many steps, its progress along the lane kept (a mode that
+    /// keeps its lane repeats itself). Moving over for a faster A, or out of its way, is the
+    /// courteous lane change, and a predictor's mode means rarely complete it. The copies
+    /// follow the slowed ones; 0 (none) for every generator trained before the option.
+    #[serde(default)]
+    pub lane_move_steps: usize,
 }
 
 /// Hidden width of the per-mode courtesy scorer ([`GeneratorConfig::mode_courtesy`]).
@@ -86,7 +94,7 @@ impl GeneratorConfig {
     /// The choices of a mode-selecting generator: B's `modes` and their slowed copies
     /// ([`Self::mode_slowdowns`]); 0 for a plain regression.
     pub fn candidates(&self) -> usize {
-        self.modes * (1 + self.mode_slowdowns.len())
+        self.modes * (1 + self.mode_slowdowns.len() + usize::from(self.lane_move_steps > 0))
     }
 
     /// The default decoder for a predictor embedding of `embedding_width`: ψ width 32, hidden
@@ -104,6 +112,7 @@ impl GeneratorConfig {
             mode_courtesy: false,
             likeliest_mode: false,
             mode_slowdowns: Vec::new(),
+            lane_move_steps: 0,
         }
     }
 
@@ -165,6 +174,11 @@ impl GeneratorConfig {
             } else {
                 None
             },
+            lane_move_steps: if self.modes > 0 {
+                self.lane_move_steps
+            } else {
+                0
+            },
         }
     }
 }
@@ -196,6 +210,8 @@ pub struct Generator {
     /// `[S, T, T]` fixed warps of [`GeneratorConfig::mode_slowdowns`] (not trained; `None`
     /// without slowed copies).
     pub mode_warp: Option<burn::module::Param<Tensor<3>>>,
+    /// [`GeneratorConfig::lane_move_steps`] (0: no lane moves among the choices).
+    pub lane_move_steps: usize,
 }
 
 impl Generator {
@@ -205,9 +221,13 @@ impl Generator {
     }
 
     /// B's modes as this generator chooses among them: with their slowed copies
-    /// ([`GeneratorConfig::mode_slowdowns`]), if any.
-    pub fn candidates_of(&self, modes: BModes) -> BModes {
-        modes.with_slowdowns(self.mode_warp.as_ref().map(|w| w.val()).as_ref())
+    /// ([`GeneratorConfig::mode_slowdowns`]) and their lane moves
+    /// ([`GeneratorConfig::lane_move_steps`], along `lane_paths[row]`, B's lane path in B's
+    /// frame, [`crate::lane_path_points`]; a row without one repeats its modes), if any.
+    pub fn candidates_of(&self, modes: BModes, lane_paths: &[Vec<[f32; 2]>]) -> BModes {
+        modes
+            .with_slowdowns(self.mode_warp.as_ref().map(|w| w.val()).as_ref())
+            .with_lane_moves(lane_paths, self.lane_move_steps)
     }
 
     /// Whether [`Self::forward`] needs each mode's courtesy ([`BModes::psi`]).

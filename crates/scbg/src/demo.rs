@@ -91,6 +91,9 @@ pub struct DemoOptions {
     /// With `select_modes`: slowed copies of B's modes among the generators' choices
     /// ([`crate::generator::VariantSettings::mode_slowdowns`]).
     pub mode_slowdowns: Vec<f32>,
+    /// With `select_modes`: lane moves of B's modes among the generators' choices, completed
+    /// within this many steps ([`crate::generator::VariantSettings::lane_move_steps`]; 0: none).
+    pub lane_move_steps: usize,
     /// With `select_modes`: how the trajectory loss trains the generators' choice
     /// ([`crate::generator::VariantSettings::selector_loss`]).
     pub selector_loss: SelectorLoss,
@@ -262,6 +265,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 set,
                 options.labels.reward,
                 &options.mode_slowdowns,
+                options.lane_move_steps,
                 &predictors.plain_device,
             );
         }
@@ -310,6 +314,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                                         select_modes: options.select_modes,
                                         mode_courtesy: options.mode_courtesy,
                                         mode_slowdowns: options.mode_slowdowns.clone(),
+                                        lane_move_steps: options.lane_move_steps,
                                         selector_loss: options.selector_loss,
                                         ..VariantSettings::new(variant, options.labels)
                                     },

@@ -256,6 +256,13 @@ pub const DEFAULT_SELECTOR_LOSS: SelectorLoss = SelectorLoss::Classify;
 /// BENCHMARKS.md, *J_φ cheaper per future of B, and the slowed copies by default*).
 pub const DEFAULT_MODE_SLOWDOWNS: [f32; 2] = [0.75, 0.5];
 
+/// The lane moves of B's modes that `scbg train generator` and the demo add to a
+/// mode-selecting generator's choices by default: none (0). With 30 (3 s) they lift what the
+/// choices allow in truth, but the trained generators follow the truth less
+/// ([`VariantSettings::lane_move_steps`]; BENCHMARKS.md, *Lane moves among the generator's
+/// choices*).
+pub const DEFAULT_LANE_MOVE_STEPS: usize = 0;
+
 /// Training settings of one variant.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VariantSettings {
@@ -294,6 +301,10 @@ pub struct VariantSettings {
     /// With `select_modes`: slowed copies of B's modes join the choices, one per factor
     /// ([`GeneratorConfig::mode_slowdowns`]; empty: none).
     pub mode_slowdowns: Vec<f32>,
+    /// With `select_modes`: each of B's modes that leaves its lane also joins the choices with
+    /// the move completed within this many steps ([`GeneratorConfig::lane_move_steps`]; 0:
+    /// none).
+    pub lane_move_steps: usize,
     /// With `select_modes`: how the trajectory loss trains the choice
     /// ([`SelectorLoss`]; the default blends).
     pub selector_loss: SelectorLoss,
@@ -318,6 +329,7 @@ impl VariantSettings {
             select_modes: true,
             mode_courtesy: true,
             mode_slowdowns: DEFAULT_MODE_SLOWDOWNS.to_vec(),
+            lane_move_steps: DEFAULT_LANE_MOVE_STEPS,
             selector_loss: DEFAULT_SELECTOR_LOSS,
         }
     }
@@ -358,6 +370,7 @@ pub fn train_variant(
         gen_config.mode_courtesy = s.mode_courtesy;
         gen_config.likeliest_mode = s.mode_courtesy;
         gen_config.mode_slowdowns.clone_from(&s.mode_slowdowns);
+        gen_config.lane_move_steps = s.lane_move_steps;
     }
     // A generator scoring its modes' courtesy reads them at every step: measure them once
     // (callers that train several variants fill their examples first, see
@@ -374,6 +387,7 @@ pub fn train_variant(
             &mut owned,
             s.labels.reward,
             &gen_config.mode_slowdowns,
+            gen_config.lane_move_steps,
             &p.plain_device,
         );
         filled = owned;
@@ -580,6 +594,7 @@ pub fn train_generator(
             &mut examples,
             settings.labels.reward,
             &settings.mode_slowdowns,
+            settings.lane_move_steps,
             &p.plain_device,
         );
     }

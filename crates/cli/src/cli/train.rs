@@ -169,6 +169,13 @@ pub struct TrainGeneratorArgs {
     /// family). `none`: the modes alone, the default before 0.75,0.5 (BENCHMARKS.md, issue 11).
     #[arg(long, default_value_t = Slowdowns::default())]
     pub mode_slowdowns: Slowdowns,
+    /// With `--head modes`: each of B's modes that drifts off B's lane path also joins the
+    /// generator's choices with the move completed: a full lane (3.5 m) over within this many
+    /// 0.1 s steps, its progress along the lane kept (moving over for A, or out of its way,
+    /// done at once; 30 is 3 s). 0: none, the default: the moves lift what the choices allow
+    /// in truth, but the trained generator follows the truth less (BENCHMARKS.md, issue 11).
+    #[arg(long, default_value_t = scbg::generator::DEFAULT_LANE_MOVE_STEPS)]
+    pub lane_move_steps: usize,
     /// With `--head modes`: how the trajectory loss trains the choice among B's modes:
     /// `classify` (the default) fits the mode nearest each target future plus the
     /// displacement and trains the selector by cross-entropy to pick that mode (MultiPath's

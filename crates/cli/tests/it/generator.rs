@@ -144,6 +144,8 @@ fn train_generator_saves_generator_and_range_predictor() {
         saved["generator"]["mode_slowdowns"],
         serde_json::json!([0.75, 0.5])
     );
+    // The lane moves of B's modes are an option, off by default.
+    assert_eq!(saved["generator"]["lane_move_steps"], 0);
     assert_eq!(saved["history"].as_array().unwrap().len(), 2);
     assert!(saved["examples"].as_u64().unwrap() > 0);
     assert!(saved["range_loss"].as_f64().unwrap().is_finite());

@@ -254,12 +254,15 @@ fn a_generator_chooses_among_the_slowed_copies_too() {
     assert_eq!(config.candidates(), 4);
     let mut g = config.init(&device);
     zero_displacement(&mut g);
-    let modes = g.candidates_of(BModes {
-        xy: two_modes(&device).reshape([1, 2, 80, 2]),
-        log_prob: Tensor::from_data([[0.0f32, 0.0]], &device),
-        psi: None,
-        mixture_modes: 2,
-    });
+    let modes = g.candidates_of(
+        BModes {
+            xy: two_modes(&device).reshape([1, 2, 80, 2]),
+            log_prob: Tensor::from_data([[0.0f32, 0.0]], &device),
+            psi: None,
+            mixture_modes: 2,
+        },
+        &[],
+    );
     let all: Vec<f32> = modes.xy.clone().into_data().try_to_vec().unwrap();
     let out: Vec<f32> = g
         .forward(
@@ -348,13 +351,16 @@ fn candidate_futures_make_the_blend_and_the_likeliest_mode() {
     config.mode_slowdowns = vec![0.5];
     let g = config.init(&device);
     let modes = || {
-        g.candidates_of(BModes {
-            xy: Tensor::cat(vec![two_modes(&device), two_modes(&device) * 0.5], 0)
-                .reshape([2, 2, 80, 2]),
-            log_prob: Tensor::from_data([[-0.3f32, -1.4], [-1.0, -0.5]], &device),
-            psi: None,
-            mixture_modes: 2,
-        })
+        g.candidates_of(
+            BModes {
+                xy: Tensor::cat(vec![two_modes(&device), two_modes(&device) * 0.5], 0)
+                    .reshape([2, 2, 80, 2]),
+                log_prob: Tensor::from_data([[-0.3f32, -1.4], [-1.0, -0.5]], &device),
+                psi: None,
+                mixture_modes: 2,
+            },
+            &[],
+        )
     };
     let embedding = Tensor::<2>::random(
         [2, 24],
