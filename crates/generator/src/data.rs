@@ -355,10 +355,10 @@ pub struct ScoredCandidate {
 }
 
 /// Every choice `generator` has for each example — B's modes, their slowed copies and lane
-/// moves, as
-/// [`Generator::candidates_of`](crate::Generator::candidates_of) makes them — with J_φ's
-/// courtesy of each (in chunks of 64 examples); `None` for a generator that does not select
-/// modes. What a selector among them could reach is what the generator's mode choice can.
+/// moves, as [`b_modes_for`] gives them — with J_φ's courtesy of each (the examples' stored
+/// [`Example::mode_psi`] when there is one, else measured here; in chunks of 64 examples);
+/// `None` for a generator that does not select modes. What a selector among them could
+/// reach is what the generator's mode choice can.
 pub fn scored_candidates(
     generator: &crate::Generator,
     predictor: &Multipath,
@@ -371,9 +371,13 @@ pub fn scored_candidates(
     }
     let mut out = Vec::with_capacity(examples.len());
     for chunk in examples.chunks(64) {
-        let modes = generator.candidates_of(b_modes(predictor, chunk, device), &lane_paths(chunk));
+        let mut modes = b_modes_for(generator, predictor, chunk, reward, device)?;
         let [_, k, t, _] = modes.xy.dims();
-        let psi = crate::eval::to_vec(mode_courtesy(predictor, chunk, &modes, reward, device));
+        let psi = match modes.psi.take() {
+            Some(psi) => psi,
+            None => mode_courtesy(predictor, chunk, &modes, reward, device),
+        };
+        let psi = crate::eval::to_vec(psi);
         let xy = crate::eval::to_vec(modes.xy);
         for (i, _) in chunk.iter().enumerate() {
             out.push(

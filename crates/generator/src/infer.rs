@@ -416,10 +416,10 @@ impl Scbg {
                 })
                 .collect());
         }
-        // B's embedding (and A's context when the generator is told who A is), B's pose,
-        // and, for a generator scoring its modes' courtesy, the pair's example that J_φ needs.
-        let (embedding, pose, example, a_encoded, b_lane) = if self.generator.scores_mode_courtesy()
-        {
+        // B's embedding (and A's context when the generator is told who A is), B's pose, and
+        // the choices of a mode-selecting generator (scored by J_φ, from the pair's example,
+        // for a generator scoring its modes' courtesy).
+        let (embedding, pose, modes) = if self.generator.scores_mode_courtesy() {
             // A's and B's samples and B's audience, no label: the modes' courtesy is measured
             // against their own mean, so no E[r(Y_A) | x] from B's samples is needed.
             let role = self.labelled_role(scene, window, a_id, b_id, false, device)?;
@@ -444,14 +444,15 @@ impl Scbg {
                 example.a_context.clear();
             }
             let embedding = crate::stored_embeddings(&[&example], device);
-            let a_encoded = (encoded.narrow(1, 1), a_lane_path);
-            (
-                embedding,
-                example.b.world_from_agent,
-                Some(example),
-                Some(a_encoded),
-                Vec::new(),
-            )
+            let modes = crate::data::b_modes_with(
+                &self.generator,
+                &self.predictor,
+                &[&example],
+                self.labels.reward,
+                Some((encoded.narrow(1, 1), a_lane_path)),
+                device,
+            );
+            (embedding, example.b.world_from_agent, modes)
         } else {
             let mut b = SampleBuilder::new(scene, &self.features)
                 .sample(window, ib, None)
@@ -475,25 +476,14 @@ impl Scbg {
                 burn::tensor::TensorData::new(embedding, [1, e]),
                 device,
             );
-            let b_lane = crate::lane_path_points(&b);
-            (embedding, b.world_from_agent, None, None, b_lane)
-        };
-        let modes = match &example {
-            Some(example) => crate::data::b_modes_with(
-                &self.generator,
-                &self.predictor,
-                &[example],
-                self.labels.reward,
-                a_encoded,
-                device,
-            ),
-            None => self.generator.selects_modes().then(|| {
+            let modes = self.generator.selects_modes().then(|| {
                 let b_width = embedding.dims()[1] - self.generator.a_context_width;
                 self.generator.candidates_of(
                     crate::b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width)),
-                    &[b_lane],
+                    &[crate::lane_path_points(&b)],
                 )
-            }),
+            });
+            (embedding, b.world_from_agent, modes)
         };
         let psi = match courtesy {
             Courtesy::Psi(p) => p,

@@ -91,8 +91,9 @@ fn one_step() -> usize {
 }
 
 impl GeneratorConfig {
-    /// The choices of a mode-selecting generator: B's `modes` and their slowed copies
-    /// ([`Self::mode_slowdowns`]); 0 for a plain regression.
+    /// The choices of a mode-selecting generator: B's `modes`, their slowed copies
+    /// ([`Self::mode_slowdowns`]) and their lane moves ([`Self::lane_move_steps`]); 0 for a
+    /// plain regression.
     pub fn candidates(&self) -> usize {
         self.modes * (1 + self.mode_slowdowns.len() + usize::from(self.lane_move_steps > 0))
     }

@@ -62,9 +62,7 @@ impl BModes {
             mixture_modes: self.mixture_modes,
         }
     }
-}
 
-impl BModes {
     /// The choices followed by one *lane move* per mixture mode ([`lane_move`]): a mode that
     /// drifts off B's lane path, with that move completed to a full lane within `steps` steps
     /// along `paths[row]` (B's lane path in B's frame, [`lane_path_points`]); a mode that keeps
@@ -144,9 +142,9 @@ pub fn lane_path_points(sample: &scbg_features::AgentSample) -> Vec<[f32; 2]> {
 /// along the lane path `path` (arc length of its projection), and its offset from the path
 /// eases (half a cosine) from B's offset at the current step to [`LANE_MOVE_M`] beyond it, on
 /// the side the mode drifts to (or the mode's own offset at the horizon if that is further),
-/// within `steps` steps. The courteous lane change of every family — moving over for a
-/// faster A, or out of its way — done at once and fully; a predictor's mode mean, an average
-/// of moves at many moments, often ends half a lane over, where A still has B ahead. The
+/// within `steps` steps. The courteous lane change — moving over for a faster A, or out of
+/// its way — done at once and fully; a predictor's mode mean, an average of moves at many
+/// moments, often ends half a lane over, where A still has B ahead. The
 /// offset is taken from the path, not from B's frame, so the copy follows the road's
 /// curvature. `None` when the mode keeps its lane (drifts less than 1 m), turns off it
 /// (drifts more than 5 m: a turn at a junction is not a lane change) or `path` has fewer than

@@ -546,7 +546,8 @@ fn slowed_copies_are_scored_against_the_mixtures_own_mean() {
 
 /// A mode-selecting generator's scored candidates are its modes, their slowed copies and lane
 /// moves, in [`crate::Generator::candidates_of`]'s order, each with the courtesy
-/// `fill_mode_courtesy` stores for it; a plain regression has none.
+/// `fill_mode_courtesy` stores for it (measured alike when none is stored); a plain
+/// regression has none.
 #[test]
 fn scored_candidates_are_the_modes_and_copies_with_their_courtesy() {
     let device = Device::flex();
@@ -571,9 +572,34 @@ fn scored_candidates_are_the_modes_and_copies_with_their_courtesy() {
     gen_config.mode_slowdowns = vec![0.5];
     gen_config.lane_move_steps = 30;
     let generator = gen_config.init(&device);
-    let scored =
+    // Measured here for examples without a stored courtesy of their choices; read back
+    // where there is one.
+    let bare: Vec<Example> = examples
+        .iter()
+        .cloned()
+        .map(|mut e| {
+            e.mode_psi.clear();
+            e
+        })
+        .collect();
+    let bare_refs: Vec<&Example> = bare.iter().collect();
+    let scored = crate::scored_candidates(
+        &generator,
+        &predictor,
+        &bare_refs,
+        Reward::AverageSpeed,
+        &device,
+    )
+    .expect("a mode-selecting generator");
+    let stored =
         crate::scored_candidates(&generator, &predictor, &refs, Reward::AverageSpeed, &device)
             .expect("a mode-selecting generator");
+    for (a, b) in scored.iter().zip(&stored) {
+        for (a, b) in a.iter().zip(b) {
+            assert_eq!(a.xy, b.xy);
+            assert!((a.psi - b.psi).abs() < 1e-5);
+        }
+    }
     let lanes: Vec<_> = refs.iter().map(|e| crate::lane_path_points(&e.b)).collect();
     let modes = generator.candidates_of(crate::b_modes(&predictor, &refs, &device), &lanes);
     let [n, k, t, _] = modes.xy.dims();

@@ -553,7 +553,7 @@ impl SelectionControl {
     pub fn candidate_yardsticks(&self) -> [(&'static str, &WorldKnob); 2] {
         [
             (
-                "choosing among the generator's own candidates (B's modes and their slowed copies) by J_φ (a perfect follower of J_φ)",
+                "choosing among the generator's own candidates (B's modes and their copies) by J_φ (a perfect follower of J_φ)",
                 &self.by_label,
             ),
             (
@@ -570,38 +570,35 @@ pub fn selection_control(
     examples: &[&scbg_generator::Example],
     truth: &TruthIndex<'_>,
 ) -> Option<SelectionControl> {
-    use rayon::prelude::*;
-    // Per scored example: family, and (ψ_label, ψ_true) of every candidate it could score.
-    let scored: Vec<(&'static str, Vec<(f64, f64)>)> = examples
-        .par_iter()
-        .filter_map(|e| {
-            let (t, scenario) = truth_scenario(e, truth)?;
-            let oracle = scenario.oracle();
-            let pairs: Vec<(f64, f64)> = e
-                .futures_b
+    // Each example's labelled futures with their labels ψ_label.
+    let labelled: Vec<Vec<scbg_generator::ScoredCandidate>> = examples
+        .iter()
+        .map(|e| {
+            e.futures_b
                 .iter()
                 .zip(&e.psi)
-                .filter_map(|(future, &label)| {
-                    let world = world_points(&e.b.world_from_agent, future);
-                    Some((f64::from(label), oracle.psi_true(&world).ok()?))
+                .map(|(future, &psi)| scbg_generator::ScoredCandidate {
+                    xy: future.clone(),
+                    psi,
                 })
-                .collect();
-            (pairs.len() >= 2).then_some((t.family.name(), pairs))
+                .collect()
         })
         .collect();
-    select_control(&scored)
+    candidate_control(examples, &labelled, truth)
 }
 
-/// [`SelectionControl`] for a mode-selecting generator's own choices (B's modes and their
-/// slowed copies, [`scbg_generator::scored_candidates`]; `candidates[i]` belongs to
-/// `examples[i]`), ranked by J_φ and by ψ_true: what a perfect follower of J_φ among them
-/// reaches, and what they allow at all. `None` when no example is a ground-truth role.
+/// [`SelectionControl`] for any choices of B with their courtesy by J_φ (`candidates[i]`
+/// belongs to `examples[i]`; a mode-selecting generator's own, B's modes and their copies,
+/// from [`scbg_generator::scored_candidates`]), ranked by J_φ and by ψ_true: what a perfect
+/// follower of J_φ among them reaches, and what they allow at all. `None` when no example is
+/// a ground-truth role with two choices the oracle can score.
 pub fn candidate_control(
     examples: &[&scbg_generator::Example],
     candidates: &[Vec<scbg_generator::ScoredCandidate>],
     truth: &TruthIndex<'_>,
 ) -> Option<SelectionControl> {
     use rayon::prelude::*;
+    // Per scored example: family, and (ψ by J_φ, ψ_true) of every choice it could score.
     let scored: Vec<(&'static str, Vec<(f64, f64)>)> = examples
         .par_iter()
         .zip(candidates.par_iter())

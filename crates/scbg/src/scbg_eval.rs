@@ -41,7 +41,7 @@ pub struct ScbgEval {
     /// candidates' ceiling) and by the labels (a perfect follower of J_φ) — synthetic data only.
     pub truth_control_selection: Option<crate::fidelity::SelectionControl>,
     /// What a selector among the first mode-selecting variant's own candidates (B's modes and
-    /// their slowed copies) reaches, ranked by ψ_true and by J_φ — synthetic data only.
+    /// their copies) reaches, ranked by ψ_true and by J_φ — synthetic data only.
     pub truth_control_candidates: Option<crate::fidelity::SelectionControl>,
 }
 

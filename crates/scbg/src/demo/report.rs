@@ -94,7 +94,7 @@ pub struct DemoReport {
     /// ([`crate::fidelity::SelectionControl`]); `null` without a ground truth.
     pub truth_control_selection: Option<crate::fidelity::SelectionControl>,
     /// The same two selectors among the full generator's own candidates (B's modes and their
-    /// slowed copies; first generator seed), by J_φ and by ψ_true
+    /// copies; first generator seed), by J_φ and by ψ_true
     /// ([`crate::fidelity::candidate_control`]); `null` without a ground truth.
     pub truth_control_candidates: Option<crate::fidelity::SelectionControl>,
     /// The evaluation's settings and figures.
