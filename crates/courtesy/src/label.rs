@@ -81,14 +81,15 @@ pub fn change_frame(points: &[[f32; 2]], from: &Pose2, to: &Pose2) -> Vec<[f32; 
 /// ψ and both expectations for several futures of B, for one target A (or B's audience).
 #[derive(Debug, Clone, PartialEq)]
 pub struct PairLabels {
-    /// `[1 + M]`: index 0 is the logged future, 1.. the sampled ones. With an audience
+    /// `[1 + M + L]`: index 0 is the logged future, 1..=M the sampled ones, then the L lane
+    /// moves of the sampled ones ([`LabelOptions::lane_move_steps`]; none by default). With an audience
     /// ([`crate::Audience::Neighbours`]), the weighted sum over its members.
     pub psi: Vec<f32>,
-    /// `[1 + M]` E[r(Y_A) | x, y_B] of each future (weighted sum over the audience).
+    /// `[1 + M + L]` E[r(Y_A) | x, y_B] of each future (weighted sum over the audience).
     pub e_cond: Vec<f32>,
     /// E[r(Y_A) | x] as estimated (weighted sum over the audience).
     pub e_marg: f32,
-    /// The futures of B in A's frame (`[1 + M][T]`; the logged one has its invalid steps at 0).
+    /// The futures of B in A's frame (`[1 + M + L][T]`; the logged one has its invalid steps at 0).
     pub futures_in_a: Vec<Vec<[f32; 2]>>,
     /// Each audience member's weight and E[r(Y_j) | x]: entry 0 is A, then the role's
     /// [`LabelledRole::others`] in order (one entry, weight 1, for the paper's pair).
@@ -242,6 +243,18 @@ pub struct LabelOptions {
     /// config without the field) averages over the labelled futures only.
     #[serde(default)]
     pub baseline_samples: usize,
+    /// Above 0: each of the `samples` sampled futures of B that drifts off B's lane path (1–5 m
+    /// at the horizon) also joins the labelled futures with its lane move completed within
+    /// this many steps along that path ([`scbg_features::lane_move`]), after the sampled ones,
+    /// if it leaves A room where it enters A's lane ([`scbg_features::leaves_room`], A driving
+    /// on at its current velocity). A predictor's samples of a lane change are often half a lane over, where A still has B
+    /// ahead; the completed move is the courteous one, and a generator that chooses among
+    /// completed moves ([`scbg_features::lane_move`] again) needs such labelled targets to
+    /// learn when to pick them. They are not samples of B's marginal, so they never enter
+    /// E[r(Y_A) | x]. Needs B's lane path ([`scbg_features::FeatureConfig::lane_path`]); none
+    /// without one. 0 (the default, and every config serialised before the option): none.
+    #[serde(default)]
+    pub lane_move_steps: usize,
 }
 
 impl LabelOptions {
@@ -297,13 +310,34 @@ pub fn label_role(
         .collect();
     let t = a.0.condition_future_valid.len();
     let mut sampled = b_mixture.sample(samples, sample_noise, rng);
-    // The labelled futures: the logged one and the first `samples` sampled ones.
+    // The labelled futures: the logged one, the first `samples` sampled ones, and the lane
+    // moves (scored after the baseline's extra futures, which are not kept).
     let n = 1 + sampled.len();
+    let moves: Vec<Vec<[f32; 2]>> = if options.lane_move_steps > 0 {
+        let path = scbg_features::lane_path_points(b);
+        // A at the current step in B's frame, driving on at its current velocity: a move must
+        // leave A room when it enters A's lane.
+        let a_pose = &a.0.world_from_agent;
+        let v = a.0.current_velocity_mps;
+        let a_now = change_frame(&[[0.0, 0.0], v], a_pose, &b.world_from_agent);
+        let a_velocity = [a_now[1][0] - a_now[0][0], a_now[1][1] - a_now[0][1]];
+        sampled
+            .iter()
+            .filter_map(|f| scbg_features::lane_move(f, &path, options.lane_move_steps))
+            .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity))
+            .collect()
+    } else {
+        Vec::new()
+    };
     if options.baseline_futures() > 0 {
         sampled.extend(b_mixture.sample(options.baseline_futures(), sample_noise, rng));
     }
-    // Every future scored, the baseline's extra ones included.
+    // The futures that sample B's marginal: the logged one and every sampled one.
+    let n_marginal = 1 + sampled.len();
+    sampled.extend(moves);
+    // Every future scored.
     let n_all = 1 + sampled.len();
+    let kept = |i: usize| i < n || i >= n_marginal;
     let mut cond = Vec::with_capacity(members.len() * n_all * t * 3);
     let mut futures_in_a = Vec::new();
     for (j, &(s, _)) in members.iter().enumerate() {
@@ -332,8 +366,12 @@ pub fn label_role(
             }
         }
         if j == 0 {
-            futures.truncate(n);
-            futures_in_a = futures;
+            futures_in_a = futures
+                .into_iter()
+                .enumerate()
+                .filter(|&(i, _)| kept(i))
+                .map(|(_, f)| f)
+                .collect();
         }
     }
     let rows = members.len() * n_all;
@@ -349,27 +387,29 @@ pub fn label_role(
             .into_data()
             .try_to_vec::<f32>()
             .expect("f32");
-    let e_marg_members: Vec<f32> = if marginal == MarginalEstimate::ConditionalAverage && n_all > 1
-    {
-        e_cond_all
-            .chunks(n_all)
-            .map(|e| e[1..].iter().sum::<f32>() / (n_all - 1) as f32)
-            .collect()
-    } else {
-        expected_reward(model, &base, None, reward, 0.1)
-            .into_data()
-            .try_to_vec::<f32>()
-            .expect("f32")
-    };
-    let mut psi = vec![0.0f32; n];
-    let mut e_cond = vec![0.0f32; n];
+    let e_marg_members: Vec<f32> =
+        if marginal == MarginalEstimate::ConditionalAverage && n_marginal > 1 {
+            e_cond_all
+                .chunks(n_all)
+                .map(|e| e[1..n_marginal].iter().sum::<f32>() / (n_marginal - 1) as f32)
+                .collect()
+        } else {
+            expected_reward(model, &base, None, reward, 0.1)
+                .into_data()
+                .try_to_vec::<f32>()
+                .expect("f32")
+        };
+    let n_kept = futures_in_a.len();
+    let mut psi = vec![0.0f32; n_kept];
+    let mut e_cond = vec![0.0f32; n_kept];
     let mut e_marg = 0.0f32;
     let mut terms = Vec::with_capacity(members.len());
     for (j, &(_, weight)) in members.iter().enumerate() {
-        let ej = &e_cond_all[j * n_all..j * n_all + n];
-        for k in 0..n {
-            psi[k] += weight * (ej[k] - e_marg_members[j]);
-            e_cond[k] += weight * ej[k];
+        let ej = &e_cond_all[j * n_all..(j + 1) * n_all];
+        let kept_e = (0..n_all).filter(|&i| kept(i)).map(|i| ej[i]);
+        for (k, e) in kept_e.enumerate() {
+            psi[k] += weight * (e - e_marg_members[j]);
+            e_cond[k] += weight * e;
         }
         e_marg += weight * e_marg_members[j];
         terms.push(AudienceTerm {

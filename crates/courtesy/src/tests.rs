@@ -356,6 +356,7 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
             sample_noise: 1.0,
             audience,
             baseline_samples: 0,
+            lane_move_steps: 0,
         };
         let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(9);
         let all = label_role(
@@ -430,6 +431,7 @@ fn baseline_samples_widen_the_marginal_estimate_and_label_only_the_first_futures
         sample_noise: 1.0,
         audience: Audience::Pair,
         baseline_samples,
+        lane_move_steps: 0,
     };
     let label = |o| {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
@@ -456,6 +458,83 @@ fn baseline_samples_widen_the_marginal_estimate_and_label_only_the_first_futures
     let mean3 = narrow.e_cond[1..].iter().sum::<f32>() / 3.0;
     assert!((narrow.e_marg - mean3).abs() < 1e-5 * (1.0 + mean3.abs()));
     assert_ne!(narrow.e_marg, wide.e_marg);
+}
+
+/// With lane moves, the sampled futures that drift off B's lane path are labelled once more,
+/// completed, after the sampled ones; the logged and sampled futures keep their labels and
+/// E[r(Y_A) | x] is still the mean over the sampled futures alone.
+#[test]
+fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
+    use crate::label::{LabelOptions, MarginalEstimate, SampleMixture, change_frame, label_pair};
+    let (_guard, device, model) = seeded_cpu_small(6);
+    let (scene, cfg) = audience_setup();
+    let (a, mut b, _, mixture) = standardised_pair(&model, &scene, &cfg, &device);
+    let options = |lane_move_steps| LabelOptions {
+        samples: 4,
+        reward: Reward::AverageSpeed,
+        marginal: MarginalEstimate::ConditionalAverage,
+        sample_noise: 1.0,
+        audience: Audience::Pair,
+        baseline_samples: 3,
+        lane_move_steps,
+    };
+    let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(11);
+    // The futures label_pair draws (the same stream), in B's frame.
+    let drawn = mixture.sample(4, 1.0, &mut rng());
+    // B's lane path: a straight line through B, turned so that the drawn future reaching
+    // furthest ends up to 2.5 m to its left (a drift a lane move completes; an untrained
+    // predictor's futures are short).
+    let end = drawn
+        .iter()
+        .map(|f| *f.last().unwrap())
+        .max_by(|p, q| p[0].hypot(p[1]).total_cmp(&q[0].hypot(q[1])))
+        .unwrap();
+    let reach = end[0].hypot(end[1]);
+    let drift = (0.7 * reach).min(2.5);
+    assert!(drift > 1.1, "the sampled futures go nowhere: {drawn:?}");
+    let heading = end[1].atan2(end[0]) - (drift / reach).asin();
+    let (sin, cos) = heading.sin_cos();
+    b.lane_path_xy_m = (0..40)
+        .flat_map(|k| {
+            let s = k as f32 * 5.0 - 20.0;
+            [s * cos, s * sin]
+        })
+        .collect();
+    b.lane_path_valid = vec![true; 40];
+    let path = scbg_features::lane_path_points(&b);
+    // Those that leave A room where they enter its lane (A driving on at its velocity).
+    let a_now = change_frame(
+        &[[0.0, 0.0], a.current_velocity_mps],
+        &a.world_from_agent,
+        &b.world_from_agent,
+    );
+    let a_velocity = [a_now[1][0] - a_now[0][0], a_now[1][1] - a_now[0][1]];
+    let moved: Vec<_> = drawn
+        .iter()
+        .filter_map(|f| scbg_features::lane_move(f, &path, 30))
+        .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity))
+        .collect();
+    assert!(!moved.is_empty() && moved.len() <= 4);
+    let plain = label_pair(&model, &a, &b, &mixture, options(0), &mut rng(), &device);
+    let with = label_pair(&model, &a, &b, &mixture, options(30), &mut rng(), &device);
+    assert_eq!(plain.psi.len(), 5);
+    assert_eq!(with.psi.len(), 5 + moved.len());
+    assert_eq!(with.futures_in_a.len(), with.psi.len());
+    assert_eq!(with.e_cond.len(), with.psi.len());
+    assert_eq!(with.futures_in_a[..5], plain.futures_in_a[..]);
+    assert_eq!(with.e_marg, plain.e_marg);
+    for k in 0..5 {
+        assert!((with.psi[k] - plain.psi[k]).abs() < 1e-5, "future {k}");
+    }
+    for (m, in_a) in moved.iter().zip(&with.futures_in_a[5..]) {
+        let want = change_frame(m, &b.world_from_agent, &a.world_from_agent);
+        for (p, q) in want.iter().zip(in_a) {
+            assert!((p[0] - q[0]).abs() < 1e-4 && (p[1] - q[1]).abs() < 1e-4);
+        }
+    }
+    for k in 0..with.psi.len() {
+        assert!((with.psi[k] - (with.e_cond[k] - with.e_marg)).abs() < 1e-5);
+    }
 }
 
 #[test]
@@ -490,6 +569,7 @@ fn an_ensemble_scores_the_first_members_futures_with_every_member_and_averages()
         sample_noise: 1.0,
         audience: Audience::Pair,
         baseline_samples: 0,
+        lane_move_steps: 0,
     };
     let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(4);
     let label = |members: &[(&Multipath, &FeatureStats)]| {

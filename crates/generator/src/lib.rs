@@ -30,11 +30,12 @@ pub use data::{
 };
 pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Policy, Scbg};
 pub use model::{CandidateFutures, Generator, GeneratorConfig};
-pub use modes::{BModes, LANE_MOVE_M, lane_move, lane_path_points, slowdown_warp};
+pub use modes::{BModes, slowdown_warp};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,
     stored_embeddings,
 };
+pub use scbg_features::{LANE_MOVE_M, lane_move, lane_path_points};
 pub use train::{
     SelectorLoss, StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss,
     threshold_value, train_step,

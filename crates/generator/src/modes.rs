@@ -1,7 +1,8 @@
 //! B's predicted modes as the choices of a mode-selecting generator, their slowed copies and
-//! their lane moves completed.
+//! their lane moves completed ([`scbg_features::lane_move`]).
 
 use burn::tensor::{Device, Tensor};
+use scbg_features::lane_move;
 
 /// B's predicted marginal modes, the choices of a mode-selecting generator
 /// ([`crate::GeneratorConfig::modes`]); see [`crate::b_modes`].
@@ -114,106 +115,6 @@ impl BModes {
     }
 }
 
-/// How far a completed lane move ends from B's offset at the current step, metres: about a
-/// lane's width (3.4–3.8 m in the synthetic world, 3.7 m on a US freeway).
-pub const LANE_MOVE_M: f32 = 3.5;
-
-/// A mode leaves B's lane when its offset from B's lane path at the horizon differs from B's
-/// at the current step by at least this much, metres.
-const LANE_LEAVING_M: f32 = 1.0;
-
-/// A mode whose offset at the horizon differs by more than this, metres, has turned off B's
-/// lane path (at a junction, onto another road) rather than changed lanes: no lane move.
-const LANE_MOVE_MAX_DRIFT_M: f32 = 5.0;
-
-/// The valid points of a sample's lane path ([`scbg_features::AgentSample::lane_path_xy_m`]),
-/// in its frame; empty when it has none.
-pub fn lane_path_points(sample: &scbg_features::AgentSample) -> Vec<[f32; 2]> {
-    sample
-        .lane_path_xy_m
-        .chunks_exact(2)
-        .zip(&sample.lane_path_valid)
-        .filter(|(_, valid)| **valid)
-        .map(|(p, _)| [p[0], p[1]])
-        .collect()
-}
-
-/// A mode that leaves its lane, with the move completed: each step keeps the mode's progress
-/// along the lane path `path` (arc length of its projection), and its offset from the path
-/// eases (half a cosine) from B's offset at the current step to [`LANE_MOVE_M`] beyond it, on
-/// the side the mode drifts to (or the mode's own offset at the horizon if that is further),
-/// within `steps` steps. The courteous lane change — moving over for a faster A, or out of
-/// its way — done at once and fully; a predictor's mode mean, an average of moves at many
-/// moments, often ends half a lane over, where A still has B ahead. The
-/// offset is taken from the path, not from B's frame, so the copy follows the road's
-/// curvature. `None` when the mode keeps its lane (drifts less than 1 m), turns off it
-/// (drifts more than 5 m: a turn at a junction is not a lane change) or `path` has fewer than
-/// two points.
-///
-/// `mode`: `[T]` positions in B's frame; `path`: the lane path in the same frame.
-pub fn lane_move(mode: &[[f32; 2]], path: &[[f32; 2]], steps: usize) -> Option<Vec<[f32; 2]>> {
-    if path.len() < 2 || mode.is_empty() {
-        return None;
-    }
-    // Per segment: start, unit tangent, length, and arc length at its start.
-    let mut segments = Vec::with_capacity(path.len() - 1);
-    let mut arc = 0.0f32;
-    for w in path.windows(2) {
-        let d = [w[1][0] - w[0][0], w[1][1] - w[0][1]];
-        let len = d[0].hypot(d[1]).max(1e-6);
-        segments.push((w[0], [d[0] / len, d[1] / len], len, arc));
-        arc += len;
-    }
-    let last = segments.len() - 1;
-    // (arc length, signed offset, left positive) of a point's projection on the path; the
-    // first and last segments extend beyond the path's ends.
-    let project = |p: [f32; 2]| {
-        let mut best = (f32::INFINITY, 0.0f32, 0.0f32);
-        for (i, &(a, t, len, s0)) in segments.iter().enumerate() {
-            let v = [p[0] - a[0], p[1] - a[1]];
-            let lo = if i == 0 { f32::NEG_INFINITY } else { 0.0 };
-            let hi = if i == last { f32::INFINITY } else { len };
-            let u = (v[0] * t[0] + v[1] * t[1]).clamp(lo, hi);
-            let dist = (v[0] - u * t[0]).hypot(v[1] - u * t[1]);
-            if dist < best.0 {
-                best = (dist, s0 + u, t[0] * v[1] - t[1] * v[0]);
-            }
-        }
-        (best.1, best.2)
-    };
-    let place = |s: f32, offset: f32| {
-        let i = segments
-            .iter()
-            .position(|seg| s < seg.3 + seg.2)
-            .unwrap_or(last);
-        let (a, t, _, s0) = segments[i];
-        let u = s - s0;
-        [
-            a[0] + u * t[0] - offset * t[1],
-            a[1] + u * t[1] + offset * t[0],
-        ]
-    };
-    let along: Vec<(f32, f32)> = mode.iter().map(|&p| project(p)).collect();
-    let (_, start) = project([0.0, 0.0]);
-    let drift = along.last()?.1 - start;
-    if !(LANE_LEAVING_M..=LANE_MOVE_MAX_DRIFT_M).contains(&drift.abs()) {
-        return None;
-    }
-    let end = start + drift.signum() * drift.abs().max(LANE_MOVE_M);
-    let steps = steps.max(1) as f32;
-    Some(
-        along
-            .iter()
-            .enumerate()
-            .map(|(i, &(s, _))| {
-                let u = ((i + 1) as f32 / steps).min(1.0);
-                let w = 0.5 * (1.0 - (std::f32::consts::PI * u).cos());
-                place(s, start + (end - start) * w)
-            })
-            .collect(),
-    )
-}
-
 /// The `[S, T, T]` time warps of [`crate::GeneratorConfig::mode_slowdowns`]: row `s` of warp `i`
 /// holds the weights of a mode's steps (positions at steps 1‥T, the origin at step 0 is B's
 /// current position, zero in B's frame) in its slowed copy's step `s + 1`. With factor `w`
@@ -302,55 +203,16 @@ mod tests {
         assert!((speeds[78] - 0.5).abs() < 0.02, "{}", speeds[78]);
     }
 
-    /// A lane path curving left at 1/200 m⁻¹ (points every 5 m from 20 m behind), and the
-    /// point `offset` metres left of it at arc length `s`.
-    fn curved_lane() -> (Vec<[f32; 2]>, impl Fn(f32, f32) -> [f32; 2]) {
-        let kappa = 1.0f32 / 200.0;
-        let at = move |s: f32, offset: f32| {
-            let (r, a) = (1.0 / kappa - offset, s * kappa);
-            [r * a.sin(), 1.0 / kappa - r * a.cos()]
-        };
-        let path = (0..80).map(|k| at(k as f32 * 5.0 - 20.0, 0.0)).collect();
-        (path, at)
-    }
-
-    /// A mode that drifts 1.5 m right along a curved lane comes out of `lane_move` a full
-    /// lane over within the given steps, on the lane's curve, at the mode's own progress;
-    /// a mode that keeps its lane, or a missing path, gives none.
-    #[test]
-    fn a_lane_move_completes_the_drift_along_the_lanes_curve() {
-        let (path, at) = curved_lane();
-        let progress = |t: usize| 2.0 * (t + 1) as f32;
-        let drifting: Vec<[f32; 2]> = (0..80)
-            .map(|t| at(progress(t), -1.5 * ((t + 1) as f32 / 40.0).min(1.0)))
-            .collect();
-        let moved = lane_move(&drifting, &path, 30).expect("the mode leaves its lane");
-        assert_eq!(moved.len(), 80);
-        for (t, p) in moved.iter().enumerate() {
-            let u = ((t + 1) as f32 / 30.0).min(1.0);
-            let offset = -LANE_MOVE_M * 0.5 * (1.0 - (std::f32::consts::PI * u).cos());
-            let want = at(progress(t), offset);
-            let err = (p[0] - want[0]).hypot(p[1] - want[1]);
-            // The path is a polyline of 5 m chords: within its sagitta of the arc.
-            assert!(err < 0.05, "step {t}: {p:?} against {want:?}");
-        }
-        // On the curve 3.5 m right of the lane at the horizon, far from B's frame's
-        // straight line (the lane has turned by 0.8 rad there).
-        assert!(moved[79][1] > 20.0, "{:?}", moved[79]);
-        let keeping: Vec<[f32; 2]> = (0..80).map(|t| at(progress(t), 0.3)).collect();
-        assert_eq!(lane_move(&keeping, &path, 30), None);
-        let turning: Vec<[f32; 2]> = (0..80).map(|t| at(progress(t), -0.2 * t as f32)).collect();
-        assert_eq!(lane_move(&turning, &path, 30), None);
-        assert_eq!(lane_move(&drifting, &path[..1], 30), None);
-    }
-
     /// `with_lane_moves` appends one copy per mixture mode with its log-probability: the
     /// completed move for a mode that leaves its lane, the mode itself otherwise and on a
     /// row without a lane path; no copies at 0 steps.
     #[test]
     fn lane_moves_join_the_choices_after_the_copies() {
         let device = Device::flex();
-        let (path, at) = curved_lane();
+        // A straight lane along x (points every 5 m from 20 m behind); the point `offset`
+        // metres left of it at arc length `s`. `lane_move`'s own tests cover curved lanes.
+        let path: Vec<[f32; 2]> = (0..80).map(|k| [k as f32 * 5.0 - 20.0, 0.0]).collect();
+        let at = |s: f32, offset: f32| [s, offset];
         let row = |drift: f32| -> Vec<f32> {
             (0..80)
                 .flat_map(|t| at(2.0 * (t + 1) as f32, drift * (t + 1) as f32 / 80.0))

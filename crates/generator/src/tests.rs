@@ -92,6 +92,7 @@ fn labelled(
             sample_noise: 1.0,
             audience: Default::default(),
             baseline_samples: 0,
+            lane_move_steps: 0,
         },
         seed,
         device,

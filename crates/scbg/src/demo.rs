@@ -428,7 +428,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         .collect();
     let fidelity = truth
         .as_deref()
-        .and_then(|t| crate::fidelity::fidelity(&held_out_rows, t));
+        .and_then(|t| crate::fidelity::fidelity(&held_out_rows, t, options.labels.samples));
     let check_list = acceptance_checks(
         &variants_mean,
         &truth_mean,

@@ -72,15 +72,18 @@ pub fn psi_true_of_role(truth: &GroundTruth, role: &LabelledRole) -> Vec<Option<
 }
 
 /// Reaction siblings of a ground-truth role: for each of B's first `per_role` *sampled*
-/// futures (the logged one is the scene itself), the scene replayed with B following that
-/// future and A and the others reacting by the synthetic world's rule
-/// ([`scbg_synth::ClosedLoop::replayed_scene`], id `<scene>~rx<k>`). As training data they show the
-/// conditional predictor what A does when B drives the kind of future B's marginal samples
-/// are — the futures whose labels the generators rank. Empty for a role the ground truth
-/// does not describe; a future the oracle cannot replay is skipped.
+/// futures (the logged one is the scene itself), and each of its first `per_role` lane moves
+/// (the labelled futures after the `samples` sampled ones,
+/// [`scbg_courtesy::label::LabelOptions::lane_move_steps`]), the scene replayed with B
+/// following that future and A and the others reacting by the synthetic world's rule
+/// ([`scbg_synth::ClosedLoop::replayed_scene`], id `<scene>~rx<k>`, `k` the future's index). As
+/// training data they show the conditional predictor what A does when B drives the kind of
+/// future B's marginal samples are — the futures whose labels the generators rank. Empty for
+/// a role the ground truth does not describe; a future the oracle cannot replay is skipped.
 pub fn reaction_scenes(
     truth: &GroundTruth,
     role: &LabelledRole,
+    samples: usize,
     per_role: usize,
 ) -> Vec<scbg_scene::Scene> {
     if per_role == 0 || !is_truth_role(truth, role.window_step, role.a_id, role.b_id) {
@@ -90,12 +93,11 @@ pub fn reaction_scenes(
         return Vec::new();
     };
     let world = scenario.closed_loop();
-    role.labels
-        .futures_in_a
-        .iter()
-        .enumerate()
-        .skip(1)
-        .take(per_role)
+    let futures = role.labels.futures_in_a.iter().enumerate();
+    let sampled = futures.clone().skip(1).take(per_role.min(samples));
+    let moves = futures.skip(1 + samples).take(per_role);
+    sampled
+        .chain(moves)
         .filter_map(|(k, f)| {
             let future = world_points(&role.a.world_from_agent, f);
             world.replayed_scene(&future, &format!("rx{k}")).ok()
@@ -148,6 +150,10 @@ pub struct Fidelity {
     pub logged: BTreeMap<String, Agreement>,
     /// The same over B's futures sampled from its marginal prediction.
     pub sampled: BTreeMap<String, Agreement>,
+    /// The same over the lane moves of the sampled futures
+    /// ([`scbg_courtesy::label::LabelOptions::lane_move_steps`]); absent without them.
+    #[serde(skip_serializing_if = "BTreeMap::is_empty")]
+    pub lane_moves: BTreeMap<String, Agreement>,
     /// Spearman(ψ_label of the logged future, latent courtesy c), per family and pooled.
     pub spearman_label_latent: BTreeMap<String, Option<f64>>,
     /// Spearman(ψ_true of the logged future, latent courtesy c): how much of c the oracle
@@ -162,11 +168,13 @@ pub struct Fidelity {
 struct Columns {
     logged: (Vec<f64>, Vec<f64>),
     sampled: (Vec<f64>, Vec<f64>),
+    lane_moves: (Vec<f64>, Vec<f64>),
     latent: (Vec<f64>, Vec<f64>, Vec<f64>),
 }
 
-/// The fidelity report of `rows` against `truth`; `None` when no row has a ψ_true.
-pub fn fidelity(rows: &[LabelRow], truth: &[GroundTruth]) -> Option<Fidelity> {
+/// The fidelity report of `rows` against `truth`, labelled with `samples` sampled futures per
+/// role (the futures after them are lane moves); `None` when no row has a ψ_true.
+pub fn fidelity(rows: &[LabelRow], truth: &[GroundTruth], samples: usize) -> Option<Fidelity> {
     let index = TruthIndex::new(truth);
     let mut by: BTreeMap<String, Columns> = BTreeMap::new();
     for r in rows {
@@ -175,10 +183,10 @@ pub fn fidelity(rows: &[LabelRow], truth: &[GroundTruth]) -> Option<Fidelity> {
         };
         for key in [t.family.name(), POOLED] {
             let c = by.entry(key.to_string()).or_default();
-            let (l, tr) = if r.sample == 0 {
-                &mut c.logged
-            } else {
-                &mut c.sampled
+            let (l, tr) = match r.sample as usize {
+                0 => &mut c.logged,
+                k if k <= samples => &mut c.sampled,
+                _ => &mut c.lane_moves,
             };
             l.push(f64::from(r.psi));
             tr.push(f64::from(pt));
@@ -209,6 +217,11 @@ pub fn fidelity(rows: &[LabelRow], truth: &[GroundTruth]) -> Option<Fidelity> {
         sampled: by
             .iter()
             .map(|(k, c)| (k.clone(), agreement(&c.sampled.0, &c.sampled.1)))
+            .collect(),
+        lane_moves: by
+            .iter()
+            .filter(|(_, c)| !c.lane_moves.0.is_empty())
+            .map(|(k, c)| (k.clone(), agreement(&c.lane_moves.0, &c.lane_moves.1)))
             .collect(),
         spearman_label_latent: by
             .iter()
@@ -248,6 +261,17 @@ impl Fidelity {
                 self.oracle_consistency
                     .get(k)
                     .map_or("-".into(), |(p, n)| format!("{:.1} % of {n}", 100.0 * p)),
+            );
+        }
+        if !self.lane_moves.is_empty() {
+            let moves: Vec<String> = self
+                .lane_moves
+                .iter()
+                .map(|(k, a)| format!("{k} {} ({})", f(a.spearman), a.n))
+                .collect();
+            s += &format!(
+                "\nSpearman(ψ_label, ψ_true) on the lane moves of the sampled futures: {}\n",
+                moves.join(", ")
             );
         }
         s

@@ -377,6 +377,11 @@ pub struct LabelSummary {
     /// More futures of B sampled per pair role for the estimate of E[r(Y_A) | x] alone
     /// ([`LabelOptions::baseline_futures`]: 0 with the direct estimate).
     pub baseline_samples: usize,
+    /// Steps of the lane moves labelled after the sampled futures
+    /// ([`LabelOptions::lane_move_steps`]; 0: none).
+    pub lane_move_steps: usize,
+    /// Lane moves labelled (rows after the sampled futures of their role).
+    pub lane_moves: usize,
     /// The reward r(y_A).
     pub reward: Reward,
     /// How E[r(Y_A) | x] was estimated.
@@ -423,6 +428,11 @@ impl LabelSummary {
             pairs_roles: logged.len(),
             samples_per_pair: options.samples,
             baseline_samples: options.baseline_futures(),
+            lane_move_steps: options.lane_move_steps,
+            lane_moves: rows
+                .iter()
+                .filter(|r| r.sample as usize > options.samples)
+                .count(),
             reward: options.reward,
             marginal: options.marginal,
             sample_noise: options.sample_noise,
@@ -454,7 +464,7 @@ impl LabelSummary {
             // The oracle scores ψ toward A alone: no fidelity for another audience.
             fidelity: truth
                 .filter(|_| options.audience == scbg_courtesy::Audience::Pair)
-                .and_then(|t| crate::fidelity::fidelity(rows, t)),
+                .and_then(|t| crate::fidelity::fidelity(rows, t, options.samples)),
             fidelity_held_out: None,
         }
     }
@@ -559,6 +569,7 @@ pub fn label_options(
         sample_noise,
         audience: Default::default(),
         baseline_samples: 0,
+        lane_move_steps: 0,
     })
 }
 
@@ -618,6 +629,7 @@ fn write_reaction_siblings(
     shard: usize,
     scenes: &[&SceneLabels],
     truth: &crate::fidelity::TruthIndex<'_>,
+    samples: usize,
     per_role: usize,
 ) -> anyhow::Result<()> {
     use rayon::prelude::*;
@@ -629,7 +641,7 @@ fn write_reaction_siblings(
             s.roles
                 .iter()
                 .flat_map(move |r| {
-                    t.map(|t| crate::fidelity::reaction_scenes(t, r, per_role))
+                    t.map(|t| crate::fidelity::reaction_scenes(t, r, samples, per_role))
                         .unwrap_or_default()
                 })
                 .collect::<Vec<_>>()
@@ -675,7 +687,8 @@ fn finish_labels(
             .filter(|r| split_of(&r.scenario_id, vf) == Split::Validation)
             .cloned()
             .collect();
-        summary.fidelity_held_out = crate::fidelity::fidelity(&held_out, truth);
+        summary.fidelity_held_out =
+            crate::fidelity::fidelity(&held_out, truth, summary.samples_per_pair);
     }
     if let (Some(truth), Some(_)) = (truth, &summary.fidelity) {
         crate::fidelity::write_scatter(rows, truth, &out.join("psi_fidelity.png"))?;
@@ -760,7 +773,7 @@ pub fn label_cache(
         )?;
         let scenes: Vec<&SceneLabels> = labelled.iter().collect();
         if let (Some((dir, per_role)), Some(index)) = (&run.reaction_siblings, index.as_ref()) {
-            write_reaction_siblings(dir, si, &scenes, index, *per_role)?;
+            write_reaction_siblings(dir, si, &scenes, index, run.options.samples, *per_role)?;
         }
         let shard_rows = scored_rows(&scenes, index.as_ref());
         write_label_table(&path, &shard_rows)?;

@@ -38,6 +38,11 @@ pub struct EstimatorArgs {
     /// (BENCHMARKS.md).
     #[arg(long, default_value_t = 24)]
     pub baseline_samples: usize,
+    /// Above 0: each sampled future of B that drifts off B's lane path (1–5 m) is also
+    /// labelled with its lane move completed within this many steps (after the sampled ones,
+    /// not in E[r(Y_A) | x]; with reaction siblings, they are replayed too). 0: none.
+    #[arg(long, default_value_t = 0)]
+    pub label_lane_move_steps: usize,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -107,6 +107,35 @@ fn label_writes_parquet_and_resumes() {
     assert_eq!(summary["audience"]["weighting"], "proximity", "{summary}");
     assert!(summary["audience_size_mean"].as_f64().unwrap() >= 1.0);
     assert!(summary["fidelity"].is_null(), "{summary}");
+    // With lane moves: the logged and sampled futures as before, then the moves of the
+    // sampled ones, scored by the oracle apart from them.
+    scbg_ok(&[
+        "label",
+        "--model",
+        &p("model"),
+        "--data",
+        &p("cache"),
+        "--out",
+        &p("labels_moves"),
+        "--samples",
+        "3",
+        "--label-lane-move-steps",
+        "30",
+        "--ground-truth",
+        &gt,
+    ]);
+    let summary: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("labels_moves/summary.json")).unwrap(),
+    )
+    .unwrap();
+    assert_eq!(summary["lane_move_steps"], 30, "{summary}");
+    let moves = summary["lane_moves"].as_u64().unwrap();
+    assert_eq!(summary["rows"].as_u64().unwrap(), 20 * 2 * 4 + moves);
+    let fidelity = &summary["fidelity"];
+    assert_eq!(fidelity["sampled"]["all"]["n"], 60, "{summary}");
+    // Only the ground-truth roles' moves are scored (half of the roles).
+    let scored = fidelity["lane_moves"]["all"]["n"].as_u64().unwrap_or(0);
+    assert!(scored <= moves, "{summary}");
 }
 
 #[test]

@@ -24,6 +24,7 @@ fn labelled_toward_neighbours(
             sample_noise: 1.0,
             audience,
             baseline_samples: 0,
+            lane_move_steps: 0,
         },
         4,
         device,

@@ -33,6 +33,7 @@ fn untrained_scbg(
             sample_noise: 1.0,
             audience: Default::default(),
             baseline_samples: 0,
+            lane_move_steps: 0,
         },
         policy,
     };

@@ -1,0 +1,252 @@
+//! Completed lane moves: a future of an agent that drifts off its lane path, moved a full
+//! lane over along that path (the courteous lane change done at once and fully). Plain
+//! geometry on points in the agent's frame; the labels add such futures to B's sampled ones
+//! and the generator to its choices.
+
+use crate::AgentSample;
+
+/// How far a completed lane move ends from B's offset at the current step, metres: about a
+/// lane's width (3.4–3.8 m in the synthetic world, 3.7 m on a US freeway).
+pub const LANE_MOVE_M: f32 = 3.5;
+
+/// A mode leaves B's lane when its offset from B's lane path at the horizon differs from B's
+/// at the current step by at least this much, metres.
+const LANE_LEAVING_M: f32 = 1.0;
+
+/// A mode whose offset at the horizon differs by more than this, metres, has turned off B's
+/// lane path (at a junction, onto another road) rather than changed lanes: no lane move.
+const LANE_MOVE_MAX_DRIFT_M: f32 = 5.0;
+
+/// The valid points of a sample's lane path ([`AgentSample::lane_path_xy_m`]),
+/// in its frame; empty when it has none.
+pub fn lane_path_points(sample: &AgentSample) -> Vec<[f32; 2]> {
+    sample
+        .lane_path_xy_m
+        .chunks_exact(2)
+        .zip(&sample.lane_path_valid)
+        .filter(|(_, valid)| **valid)
+        .map(|(p, _)| [p[0], p[1]])
+        .collect()
+}
+
+/// A mode that leaves its lane, with the move completed: each step keeps the mode's progress
+/// along the lane path `path` (arc length of its projection), and its offset from the path
+/// eases (half a cosine) from B's offset at the current step to [`LANE_MOVE_M`] beyond it, on
+/// the side the mode drifts to (or the mode's own offset at the horizon if that is further),
+/// within `steps` steps. The courteous lane change — moving over for a faster A, or out of
+/// its way — done at once and fully; a predictor's mode mean, an average of moves at many
+/// moments, often ends half a lane over, where A still has B ahead. The
+/// offset is taken from the path, not from B's frame, so the copy follows the road's
+/// curvature. `None` when the mode keeps its lane (drifts less than 1 m), turns off it
+/// (drifts more than 5 m: a turn at a junction is not a lane change) or `path` has fewer than
+/// two points.
+///
+/// `mode`: `[T]` positions in B's frame; `path`: the lane path in the same frame.
+pub fn lane_move(mode: &[[f32; 2]], path: &[[f32; 2]], steps: usize) -> Option<Vec<[f32; 2]>> {
+    if path.len() < 2 || mode.is_empty() {
+        return None;
+    }
+    // Per segment: start, unit tangent, length, and arc length at its start.
+    let mut segments = Vec::with_capacity(path.len() - 1);
+    let mut arc = 0.0f32;
+    for w in path.windows(2) {
+        let d = [w[1][0] - w[0][0], w[1][1] - w[0][1]];
+        let len = d[0].hypot(d[1]).max(1e-6);
+        segments.push((w[0], [d[0] / len, d[1] / len], len, arc));
+        arc += len;
+    }
+    let last = segments.len() - 1;
+    // (arc length, signed offset, left positive) of a point's projection on the path; the
+    // first and last segments extend beyond the path's ends.
+    let project = |p: [f32; 2]| {
+        let mut best = (f32::INFINITY, 0.0f32, 0.0f32);
+        for (i, &(a, t, len, s0)) in segments.iter().enumerate() {
+            let v = [p[0] - a[0], p[1] - a[1]];
+            let lo = if i == 0 { f32::NEG_INFINITY } else { 0.0 };
+            let hi = if i == last { f32::INFINITY } else { len };
+            let u = (v[0] * t[0] + v[1] * t[1]).clamp(lo, hi);
+            let dist = (v[0] - u * t[0]).hypot(v[1] - u * t[1]);
+            if dist < best.0 {
+                best = (dist, s0 + u, t[0] * v[1] - t[1] * v[0]);
+            }
+        }
+        (best.1, best.2)
+    };
+    let place = |s: f32, offset: f32| {
+        let i = segments
+            .iter()
+            .position(|seg| s < seg.3 + seg.2)
+            .unwrap_or(last);
+        let (a, t, _, s0) = segments[i];
+        let u = s - s0;
+        [
+            a[0] + u * t[0] - offset * t[1],
+            a[1] + u * t[1] + offset * t[0],
+        ]
+    };
+    let along: Vec<(f32, f32)> = mode.iter().map(|&p| project(p)).collect();
+    let (_, start) = project([0.0, 0.0]);
+    let drift = along.last()?.1 - start;
+    if !(LANE_LEAVING_M..=LANE_MOVE_MAX_DRIFT_M).contains(&drift.abs()) {
+        return None;
+    }
+    let end = start + drift.signum() * drift.abs().max(LANE_MOVE_M);
+    let steps = steps.max(1) as f32;
+    Some(
+        along
+            .iter()
+            .enumerate()
+            .map(|(i, &(s, _))| {
+                let u = ((i + 1) as f32 / steps).min(1.0);
+                let w = 0.5 * (1.0 - (std::f32::consts::PI * u).cos());
+                place(s, start + (end - start) * w)
+            })
+            .collect(),
+    )
+}
+
+/// The hardest braking a lane move may ask of a follower in its new lane, m/s² (MOBIL's
+/// safe deceleration, Kesting, Treiber and Helbing 2007).
+pub const SAFE_BRAKING_MPS2: f32 = 4.0;
+
+/// A follower's reaction time in [`leaves_room`], seconds.
+const FOLLOWER_REACTION_S: f32 = 1.0;
+
+/// A move has entered another vehicle's lane when their centres are less than this apart
+/// sideways: two boxes about 2 m wide are then less than half a metre apart, and one passing
+/// the other touches it at the slightest swerve.
+const SAME_LANE_M: f32 = 2.5;
+
+/// Centre to centre, bumper to bumper is zero at about a car's length, metres.
+const CAR_LENGTH_M: f32 = 5.0;
+
+/// Whether a future `mine` (positions at 0.1 s steps from step 1, in a frame whose origin is
+/// the current position) leaves room to another vehicle at `other_xy` driving at constant
+/// velocity `other_velocity_mps` (same frame) when it enters that vehicle's lane: at the first
+/// step it moves from outside the other's lane into it, it must not be beside it (within a
+/// car's length), and if it is ahead, the other must be able to stay behind by braking at
+/// most [`SAFE_BRAKING_MPS2`] after [`FOLLOWER_REACTION_S`] (from the closing speed Δv it
+/// needs `Δv · t_r + Δv² / 2b` of gap). MOBIL's safety criterion at the moment of the lane
+/// change, asked of a completed lane move toward the one vehicle the labels know (A): a move
+/// that cuts in slowly just ahead of a fast A is not a driver's choice but a crash. What
+/// happens after the move is the follower's to handle; a future that never enters the other's
+/// lane (or is in it already at the current step) always leaves room.
+pub fn leaves_room(mine: &[[f32; 2]], other_xy: [f32; 2], other_velocity_mps: [f32; 2]) -> bool {
+    const STEP_S: f32 = 0.1;
+    let speed = other_velocity_mps[0].hypot(other_velocity_mps[1]);
+    // A standing vehicle's heading is unknown here: take the frame's x axis.
+    let u = if speed > 0.5 {
+        [other_velocity_mps[0] / speed, other_velocity_mps[1] / speed]
+    } else {
+        [1.0, 0.0]
+    };
+    // (along, beside) of my position `p` relative to the other at time `t`.
+    let relative = |p: [f32; 2], t: f32| {
+        let d = [
+            p[0] - other_xy[0] - other_velocity_mps[0] * t,
+            p[1] - other_xy[1] - other_velocity_mps[1] * t,
+        ];
+        (d[0] * u[0] + d[1] * u[1], (u[0] * d[1] - u[1] * d[0]).abs())
+    };
+    let mut previous = [0.0f32, 0.0];
+    let mut in_lane = relative(previous, 0.0).1 < SAME_LANE_M;
+    for (i, &p) in mine.iter().enumerate() {
+        let (along, beside) = relative(p, (i + 1) as f32 * STEP_S);
+        let my_speed = ((p[0] - previous[0]) * u[0] + (p[1] - previous[1]) * u[1]) / STEP_S;
+        previous = p;
+        let entering = !in_lane && beside < SAME_LANE_M;
+        in_lane = beside < SAME_LANE_M;
+        if !entering {
+            continue;
+        }
+        if along.abs() < CAR_LENGTH_M {
+            return false;
+        }
+        if along > 0.0 && speed > my_speed {
+            let closing = speed - my_speed;
+            let needed =
+                closing * FOLLOWER_REACTION_S + closing * closing / (2.0 * SAFE_BRAKING_MPS2);
+            if along - CAR_LENGTH_M < needed {
+                return false;
+            }
+        }
+        // Entered with room: what follows is the follower's to handle.
+        return true;
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A lane path curving left at 1/200 m⁻¹ (points every 5 m from 20 m behind), and the
+    /// point `offset` metres left of it at arc length `s`.
+    fn curved_lane() -> (Vec<[f32; 2]>, impl Fn(f32, f32) -> [f32; 2]) {
+        let kappa = 1.0f32 / 200.0;
+        let at = move |s: f32, offset: f32| {
+            let (r, a) = (1.0 / kappa - offset, s * kappa);
+            [r * a.sin(), 1.0 / kappa - r * a.cos()]
+        };
+        let path = (0..80).map(|k| at(k as f32 * 5.0 - 20.0, 0.0)).collect();
+        (path, at)
+    }
+
+    /// A lane move just ahead of a faster follower in its new lane leaves it no room; the same
+    /// move far enough ahead, or with the follower slower, does.
+    #[test]
+    fn a_lane_move_must_leave_the_follower_room() {
+        // Mine: 10 m/s along x, moving 3.5 m left over 3 s (into the follower's lane).
+        let mine: Vec<[f32; 2]> = (1..=80)
+            .map(|i| {
+                let u = (i as f32 / 30.0).min(1.0);
+                let w = 0.5 * (1.0 - (std::f32::consts::PI * u).cos());
+                [i as f32, LANE_MOVE_M * w]
+            })
+            .collect();
+        // A follower in the left lane 40 m behind at 25 m/s: when the move enters its lane
+        // (1.1 s, 2.5 m beside it) the gap is 18.5 m, and closing at 15 m/s it needs 43 m.
+        assert!(!leaves_room(&mine, [-40.0, LANE_MOVE_M], [25.0, 0.0]));
+        // 150 m behind at 25 m/s: it has time.
+        assert!(leaves_room(&mine, [-150.0, LANE_MOVE_M], [25.0, 0.0]));
+        // 15 m behind at 10 m/s: no closing speed, and 15 m apart.
+        assert!(leaves_room(&mine, [-15.0, LANE_MOVE_M], [10.0, 0.0]));
+        // Alongside at my speed: the move runs into it.
+        assert!(!leaves_room(&mine, [0.0, LANE_MOVE_M], [10.0, 0.0]));
+        // In the lane to the right, whatever it does, it is not in my way.
+        assert!(leaves_room(&mine, [-15.0, -LANE_MOVE_M], [25.0, 0.0]));
+        // Leaving the follower's lane (starting in it, 10 m ahead) is no entry.
+        let leaving: Vec<[f32; 2]> = mine.iter().map(|p| [p[0], -p[1]]).collect();
+        assert!(leaves_room(&leaving, [-10.0, 0.0], [25.0, 0.0]));
+    }
+
+    /// A mode that drifts 1.5 m right along a curved lane comes out of `lane_move` a full
+    /// lane over within the given steps, on the lane's curve, at the mode's own progress;
+    /// a mode that keeps its lane, or a missing path, gives none.
+    #[test]
+    fn a_lane_move_completes_the_drift_along_the_lanes_curve() {
+        let (path, at) = curved_lane();
+        let progress = |t: usize| 2.0 * (t + 1) as f32;
+        let drifting: Vec<[f32; 2]> = (0..80)
+            .map(|t| at(progress(t), -1.5 * ((t + 1) as f32 / 40.0).min(1.0)))
+            .collect();
+        let moved = lane_move(&drifting, &path, 30).expect("the mode leaves its lane");
+        assert_eq!(moved.len(), 80);
+        for (t, p) in moved.iter().enumerate() {
+            let u = ((t + 1) as f32 / 30.0).min(1.0);
+            let offset = -LANE_MOVE_M * 0.5 * (1.0 - (std::f32::consts::PI * u).cos());
+            let want = at(progress(t), offset);
+            let err = (p[0] - want[0]).hypot(p[1] - want[1]);
+            // The path is a polyline of 5 m chords: within its sagitta of the arc.
+            assert!(err < 0.05, "step {t}: {p:?} against {want:?}");
+        }
+        // On the curve 3.5 m right of the lane at the horizon, far from B's frame's
+        // straight line (the lane has turned by 0.8 rad there).
+        assert!(moved[79][1] > 20.0, "{:?}", moved[79]);
+        let keeping: Vec<[f32; 2]> = (0..80).map(|t| at(progress(t), 0.3)).collect();
+        assert_eq!(lane_move(&keeping, &path, 30), None);
+        let turning: Vec<[f32; 2]> = (0..80).map(|t| at(progress(t), -0.2 * t as f32)).collect();
+        assert_eq!(lane_move(&turning, &path, 30), None);
+        assert_eq!(lane_move(&drifting, &path[..1], 30), None);
+    }
+}
