@@ -310,9 +310,6 @@ pub fn label_role(
         .collect();
     let t = a.0.condition_future_valid.len();
     let mut sampled = b_mixture.sample(samples, sample_noise, rng);
-    // The labelled futures: the logged one, the first `samples` sampled ones, and the lane
-    // moves (scored after the baseline's extra futures, which are not kept).
-    let n = 1 + sampled.len();
     let moves: Vec<Vec<[f32; 2]>> = if options.lane_move_steps > 0 {
         let path = scbg_features::lane_path_points(b);
         // A at the current step in B's frame, driving on at its current velocity: a move must
@@ -329,15 +326,16 @@ pub fn label_role(
     } else {
         Vec::new()
     };
+    // B's futures in scoring order: the sampled ones and their lane moves (the first `n`
+    // futures, with the logged one, are labelled and kept), then the baseline's extra samples.
+    let n_sampled = sampled.len();
+    let n = 1 + n_sampled + moves.len();
+    sampled.extend(moves);
     if options.baseline_futures() > 0 {
         sampled.extend(b_mixture.sample(options.baseline_futures(), sample_noise, rng));
     }
-    // The futures that sample B's marginal: the logged one and every sampled one.
-    let n_marginal = 1 + sampled.len();
-    sampled.extend(moves);
     // Every future scored.
     let n_all = 1 + sampled.len();
-    let kept = |i: usize| i < n || i >= n_marginal;
     let mut cond = Vec::with_capacity(members.len() * n_all * t * 3);
     let mut futures_in_a = Vec::new();
     for (j, &(s, _)) in members.iter().enumerate() {
@@ -366,12 +364,8 @@ pub fn label_role(
             }
         }
         if j == 0 {
-            futures_in_a = futures
-                .into_iter()
-                .enumerate()
-                .filter(|&(i, _)| kept(i))
-                .map(|(_, f)| f)
-                .collect();
+            futures.truncate(n);
+            futures_in_a = futures;
         }
     }
     let rows = members.len() * n_all;
@@ -387,11 +381,13 @@ pub fn label_role(
             .into_data()
             .try_to_vec::<f32>()
             .expect("f32");
+    // The samples of B's marginal: the labelled ones and the baseline's, not the lane moves.
+    let n_marginal = n_sampled + (n_all - n);
     let e_marg_members: Vec<f32> =
-        if marginal == MarginalEstimate::ConditionalAverage && n_marginal > 1 {
+        if marginal == MarginalEstimate::ConditionalAverage && n_marginal > 0 {
             e_cond_all
                 .chunks(n_all)
-                .map(|e| e[1..n_marginal].iter().sum::<f32>() / (n_marginal - 1) as f32)
+                .map(|e| e[1..=n_sampled].iter().chain(&e[n..]).sum::<f32>() / n_marginal as f32)
                 .collect()
         } else {
             expected_reward(model, &base, None, reward, 0.1)
@@ -399,17 +395,15 @@ pub fn label_role(
                 .try_to_vec::<f32>()
                 .expect("f32")
         };
-    let n_kept = futures_in_a.len();
-    let mut psi = vec![0.0f32; n_kept];
-    let mut e_cond = vec![0.0f32; n_kept];
+    let mut psi = vec![0.0f32; n];
+    let mut e_cond = vec![0.0f32; n];
     let mut e_marg = 0.0f32;
     let mut terms = Vec::with_capacity(members.len());
     for (j, &(_, weight)) in members.iter().enumerate() {
-        let ej = &e_cond_all[j * n_all..(j + 1) * n_all];
-        let kept_e = (0..n_all).filter(|&i| kept(i)).map(|i| ej[i]);
-        for (k, e) in kept_e.enumerate() {
-            psi[k] += weight * (e - e_marg_members[j]);
-            e_cond[k] += weight * e;
+        let ej = &e_cond_all[j * n_all..j * n_all + n];
+        for k in 0..n {
+            psi[k] += weight * (ej[k] - e_marg_members[j]);
+            e_cond[k] += weight * ej[k];
         }
         e_marg += weight * e_marg_members[j];
         terms.push(AudienceTerm {

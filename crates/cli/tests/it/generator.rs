@@ -10,23 +10,30 @@ fn label_writes_parquet_and_resumes() {
     let p = |s: &str| dir.path().join(s).display().to_string();
     tiny_trained_model(dir.path(), 20, 8);
     let gt = format!("{}/ground_truth.jsonl", p("synth"));
-    scbg_ok(&[
-        "label",
-        "--model",
-        &p("model"),
-        "--data",
-        &p("cache"),
-        "--out",
-        &p("labels"),
-        "--samples",
-        "3",
-        "--ground-truth",
-        &gt,
-    ]);
-    let summary: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("labels/summary.json")).unwrap(),
-    )
-    .unwrap();
+    // `scbg label` of the tiny model's cache with 3 sampled futures and the ground truth, and
+    // more flags; its summary.json.
+    let label = |out: &str, more: &[&str]| -> Value {
+        let (out_dir, model, cache) = (p(out), p("model"), p("cache"));
+        let mut args = vec![
+            "label",
+            "--model",
+            &model,
+            "--data",
+            &cache,
+            "--out",
+            &out_dir,
+            "--samples",
+            "3",
+        ];
+        args.extend_from_slice(more);
+        args.extend(["--ground-truth", gt.as_str()]);
+        scbg_ok(&args);
+        serde_json::from_str(
+            &std::fs::read_to_string(dir.path().join(out).join("summary.json")).unwrap(),
+        )
+        .unwrap()
+    };
+    let summary = label("labels", &[]);
     // 20 scenarios × 1 labelled pair × 2 roles × (1 logged + 3 sampled).
     assert_eq!(summary["rows"], 20 * 2 * 4);
     assert_eq!(summary["pairs_roles"], 40);
@@ -81,27 +88,15 @@ fn label_writes_parquet_and_resumes() {
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && err.contains("radius 0"), "{err}");
     assert!(!dir.path().join("labels_bad").exists());
-    scbg_ok(&[
-        "label",
-        "--model",
-        &p("model"),
-        "--data",
-        &p("cache"),
-        "--out",
-        &p("labels_neighbours"),
-        "--samples",
-        "3",
-        "--audience",
-        "neighbours",
-        "--audience-weighting",
-        "proximity",
-        "--ground-truth",
-        &gt,
-    ]);
-    let summary: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("labels_neighbours/summary.json")).unwrap(),
-    )
-    .unwrap();
+    let summary = label(
+        "labels_neighbours",
+        &[
+            "--audience",
+            "neighbours",
+            "--audience-weighting",
+            "proximity",
+        ],
+    );
     assert_eq!(summary["rows"], 20 * 2 * 4);
     assert_eq!(summary["audience"]["kind"], "neighbours", "{summary}");
     assert_eq!(summary["audience"]["weighting"], "proximity", "{summary}");
@@ -109,25 +104,7 @@ fn label_writes_parquet_and_resumes() {
     assert!(summary["fidelity"].is_null(), "{summary}");
     // With lane moves: the logged and sampled futures as before, then the moves of the
     // sampled ones, scored by the oracle apart from them.
-    scbg_ok(&[
-        "label",
-        "--model",
-        &p("model"),
-        "--data",
-        &p("cache"),
-        "--out",
-        &p("labels_moves"),
-        "--samples",
-        "3",
-        "--label-lane-move-steps",
-        "30",
-        "--ground-truth",
-        &gt,
-    ]);
-    let summary: Value = serde_json::from_str(
-        &std::fs::read_to_string(dir.path().join("labels_moves/summary.json")).unwrap(),
-    )
-    .unwrap();
+    let summary = label("labels_moves", &["--label-lane-move-steps", "30"]);
     assert_eq!(summary["lane_move_steps"], 30, "{summary}");
     let moves = summary["lane_moves"].as_u64().unwrap();
     assert_eq!(summary["rows"].as_u64().unwrap(), 20 * 2 * 4 + moves);
