@@ -1,6 +1,7 @@
 //! The safety guard's rules for an agent following a plan: crossing conflicts along its path
 //! (another agent at constant velocity in the plan's corridor while the agent's box is there,
-//! never stopping inside a crossing agent's way) and steering bounds beside another agent.
+//! never stopping inside a crossing agent's way) and steering bounds beside another agent
+//! (and gap acceptance: none toward the lane of a follower that could not stay behind).
 //! The rollout caps the tracker's acceleration by IDM toward the nearest conflict (with the
 //! corridor leader of [`crate::idm`]) and clamps its steering to the bounds.
 
@@ -228,11 +229,34 @@ const SIDE_CATCH_UP_S: f64 = 3.0;
 /// A catching-up agent whose box overlaps mine sideways by more than this is behind me in my
 /// lane, not in the next one, m.
 const SIDE_SAME_LANE_M: f64 = 0.5;
+/// An agent whose box is less than this far from mine sideways is in the next lane, m (two
+/// cars about 2 m wide in lanes 3.5–3.7 m apart are 1.5–1.8 m apart; two lanes over, 5 m).
+const NEXT_LANE_CLEARANCE_M: f64 = 2.5;
+/// The hardest braking an agent moving into the next lane may ask of a follower there to
+/// stay behind it, m/s² (the synthetic world's least courteous B accepts 7 m/s²; MOBIL's
+/// safety criterion, `scbg_synth`'s cut-in family).
+const CUT_IN_MAX_BRAKE_MPS2: f64 = 7.0;
+/// The follower's reaction time in that criterion, s (the synthetic world's).
+const CUT_IN_REACTION_S: f64 = 0.5;
+
+/// Whether moving in front of a follower that is `gap_m` behind my rear bumper and closes on
+/// me at `closing_mps` would ask it to brake harder than [`CUT_IN_MAX_BRAKE_MPS2`] after
+/// [`CUT_IN_REACTION_S`] to stay behind me: the constant deceleration that matches my speed
+/// in the gap left after its reaction, `Δv² / 2 (gap − Δv·t_r)`.
+fn cut_in_unsafe(gap_m: f64, closing_mps: f64) -> bool {
+    if closing_mps <= 0.0 {
+        return false;
+    }
+    let room_m = (gap_m - closing_mps * CUT_IN_REACTION_S).max(0.1);
+    closing_mps * closing_mps / (2.0 * room_m) > CUT_IN_MAX_BRAKE_MPS2
+}
 
 /// Steering bounds `(min, max)` (rad, positive left) that keep an agent from turning toward
 /// another one alongside it: an agent heading within 30° of its heading whose centre is within
 /// half the two lengths plus 1 m along it (behind it, plus what the other closes on it in
-/// 3 s) and whose box is less than 0.8 m away to one side (more while drifting toward it).
+/// 3 s) and whose box is less than 0.8 m away to one side (more while drifting toward it) —
+/// or a follower in the next lane (its box less than 2.5 m from mine across its heading),
+/// however far behind, that could not stay behind me braking at 7 m/s² ([`cut_in_unsafe`]).
 /// Toward such an agent the steering may at most turn the agent parallel to it with a time
 /// constant of 0.5 s, shorter while drifting toward it ([`SIDE_ALIGN_S`]; the bicycle's yaw
 /// rate `v·tan δ / wheelbase`). `None` when nobody is alongside.
@@ -257,17 +281,37 @@ pub(crate) fn side_steer_bounds(
         // SIDE_CATCH_UP_S: turning toward it then would put me in its way as it arrives.
         // (Only one in the next lane: one behind me in mine is for the leader rule.)
         let alongside = 0.5 * f64::from(me.length_m + o.length_m) + 1.0;
-        let reach = if along < -alongside && clearance > -SIDE_SAME_LANE_M {
-            let closing =
-                f64::from(o.velocity_x_mps) * cs + f64::from(o.velocity_y_mps) * sn - speed_mps;
+        let closing =
+            f64::from(o.velocity_x_mps) * cs + f64::from(o.velocity_y_mps) * sn - speed_mps;
+        let behind_next_lane = along < -alongside && clearance > -SIDE_SAME_LANE_M;
+        let reach = if behind_next_lane {
             alongside + closing.max(0.0) * SIDE_CATCH_UP_S
         } else {
             alongside
         };
         // My lateral speed toward it (my heading turned toward its side of its heading).
         let toward_mps = speed_mps * (-rel * left.signum()).sin();
-        let trigger = SIDE_CLEARANCE_M.max(SIDE_KEEP_M + toward_mps * SIDE_ALIGN_S);
-        if along.abs() > reach || clearance > trigger {
+        let mut trigger = SIDE_CLEARANCE_M.max(SIDE_KEEP_M + toward_mps * SIDE_ALIGN_S);
+        // Gap acceptance: a follower in the next lane that could not stay behind me without
+        // braking harder than the least courteous driver asks keeps me out of its lane
+        // altogether, however far behind (moving in slowly ahead of a fast one, then braking,
+        // was side-swiped; BENCHMARKS.md).
+        // (Measured along its heading, its lane's direction: in my frame, turned toward it, a
+        // follower far behind seems farther to the side than it is.)
+        let (sn_o, cs_o) = f64::from(o.heading_rad).sin_cos();
+        let ahead_of_it = -(dx * cs_o + dy * sn_o);
+        let clearance_o = (dx * sn_o - dy * cs_o).abs() - 0.5 * f64::from(me.width_m + o.width_m);
+        let unsafe_gap = behind_next_lane
+            && clearance_o < NEXT_LANE_CLEARANCE_M
+            && cut_in_unsafe(
+                ahead_of_it - 0.5 * f64::from(me.length_m + o.length_m),
+                closing,
+            );
+        if unsafe_gap {
+            trigger = NEXT_LANE_CLEARANCE_M;
+        }
+        let clearance = if unsafe_gap { clearance_o } else { clearance };
+        if (along.abs() > reach && !unsafe_gap) || clearance > trigger {
             continue;
         }
         // The steering that turns me parallel to it, with the time constant whose drift keeps
@@ -575,6 +619,45 @@ mod tests {
         };
         assert_eq!(bounds(&[&behind(10.0)]), None);
         assert_eq!(bounds(&[&behind(20.0)]), Some((f64::NEG_INFINITY, 0.0)));
+    }
+
+    #[test]
+    fn a_follower_that_could_not_stay_behind_keeps_me_out_of_its_lane() {
+        // The rule of the least courteous synthetic B: A may have to brake at up to 7 m/s²
+        // after 0.5 s. 13.9 m ahead of its bumper, 10.5 m/s slower: 6.4 m/s², accepted;
+        // 12.8 m and 11.3 m/s slower: 8.9 m/s², refused; bumper to bumper, 2 m/s slower,
+        // refused too. A follower no faster never is.
+        assert!(!cut_in_unsafe(13.9, 10.5));
+        assert!(cut_in_unsafe(12.8, 11.3));
+        assert!(!cut_in_unsafe(1.0, 0.0));
+        assert!(cut_in_unsafe(0.0, 2.0));
+        // Me at 12 m/s, turned 5° toward the next lane on my left; A there 17 m behind at
+        // 23.3 m/s (a side-swipe of the lane moves; BENCHMARKS.md). In my turned frame A is
+        // 4.9 m to the side; in its lane's, 3.6 m (1.7 m between the boxes): in the next
+        // lane, and too close for its speed, so I may turn no further toward it.
+        let me = AgentState {
+            heading_rad: 5f32.to_radians(),
+            velocity_x_mps: 12.0 * 5f32.to_radians().cos(),
+            velocity_y_mps: 12.0 * 5f32.to_radians().sin(),
+            ..me_along_x()
+        };
+        let a_at = |x_m: f64| AgentState {
+            x_m,
+            y_m: 3.6,
+            velocity_x_mps: 23.3,
+            ..me_along_x()
+        };
+        let (lo, hi) = side_steer_bounds(&me, 12.0, 2.7, &[&a_at(-17.3)]).expect("bounded");
+        assert_eq!(lo, f64::NEG_INFINITY);
+        assert!(hi < 0.0, "turning back parallel to A: {hi}");
+        // 40 m behind it needs 2.1 m/s²: room enough, and I may move over.
+        assert_eq!(side_steer_bounds(&me, 12.0, 2.7, &[&a_at(-40.0)]), None);
+        // Two lanes over (7.2 m) it is none of my business.
+        let far = AgentState {
+            y_m: 7.2,
+            ..a_at(-17.3)
+        };
+        assert_eq!(side_steer_bounds(&me, 12.0, 2.7, &[&far]), None);
     }
 
     #[test]

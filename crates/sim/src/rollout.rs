@@ -108,8 +108,10 @@ pub struct SimConfig {
     /// the way of another crossing agent in between; a follower behind counts only while it is
     /// faster and in the next lane; [`crate::guard`]),
     /// and the steering is bounded so as not to turn toward an agent alongside, or one coming
-    /// up from behind in the next lane ([`crate::guard`]'s `side_steer_bounds`), so a plan that
-    /// runs into another agent is followed at a safe distance instead. On by default.
+    /// up from behind in the next lane, or into the lane of a follower there that could not
+    /// stay behind it braking at 7 m/s² (gap acceptance; [`crate::guard`]'s
+    /// `side_steer_bounds`), so a plan that runs into another agent is followed at a safe
+    /// distance instead. On by default.
     pub safety_guard: bool,
     /// Lane keeping of the controlled agents' plans ([`crate::lanes`]): every plan point is
     /// pulled to within this many metres of the nearest car-lane centre line before it is
