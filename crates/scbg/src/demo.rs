@@ -60,6 +60,8 @@ pub struct DemoOptions {
     /// this-many sampled futures of B in each are replayed in the synthetic world with A
     /// reacting ([`crate::fidelity::reaction_scenes`]), and they join the training for those
     /// epochs ([`scbg_train::TrainConfig::reaction_from_epoch`]; BENCHMARKS.md, issue 11).
+    /// Those labels have no lane moves ([`LabelOptions::lane_move_steps`]): the siblings are
+    /// B's samples alone, so the moves leave the predictor as it was.
     pub reaction_siblings: usize,
     /// The last this-many of the predictor's `epochs` train with the reaction siblings.
     pub reaction_epochs: usize,

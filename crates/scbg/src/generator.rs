@@ -345,6 +345,21 @@ fn psi_spread(examples: &[Example]) -> f32 {
     scbg_generator::eval::MeanStd::of(&all).map_or(1.0, |m| m.std.max(1e-6) as f32)
 }
 
+/// `examples` with B's logged and `samples` sampled futures alone: the labelled lane moves
+/// after them ([`LabelOptions::lane_move_steps`]) are not samples of B's marginal, so the
+/// generator and range predictor do not learn from them (sample and rank chooses among them).
+fn without_lane_moves(examples: &[Example], samples: usize) -> std::borrow::Cow<'_, [Example]> {
+    if examples.iter().all(|e| e.psi.len() <= 1 + samples) {
+        return std::borrow::Cow::Borrowed(examples);
+    }
+    let mut owned = examples.to_vec();
+    for e in &mut owned {
+        e.psi.truncate(1 + samples);
+        e.futures_b.truncate(1 + samples);
+    }
+    std::borrow::Cow::Owned(owned)
+}
+
 /// Trains one generator variant and the range predictor on `examples` and saves them in `out`.
 pub fn train_variant(
     p: &Predictors,
@@ -355,6 +370,7 @@ pub fn train_variant(
 ) -> anyhow::Result<GeneratorCheckpoint> {
     let started = std::time::Instant::now();
     ensure_request!(!examples.is_empty(), "no labelled pairs to train on");
+    let examples = &*without_lane_moves(examples, s.labels.samples);
     let device = &p.device;
     // Examples with A's context train a generator and range predictor that read
     // B's embedding ‖ A's context.

@@ -452,6 +452,12 @@ pub fn label_options(
     })
 }
 
+/// The lane moves that `scbg label` and the demo label after B's sampled futures by default:
+/// completed within 30 steps (3 s; [`LabelOptions::lane_move_steps`]). The generator trains
+/// without them; sample and rank chooses among them (BENCHMARKS.md, *Lane moves in the
+/// labels by default*).
+pub const DEFAULT_LABEL_LANE_MOVE_STEPS: usize = 30;
+
 /// The label table's file for cache shard `index`.
 pub fn shard_table_name(index: usize) -> String {
     format!("labels-{index:05}.parquet")

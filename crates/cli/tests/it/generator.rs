@@ -33,7 +33,7 @@ fn label_writes_parquet_and_resumes() {
         )
         .unwrap()
     };
-    let summary = label("labels", &[]);
+    let summary = label("labels", &["--label-lane-move-steps", "0"]);
     // 20 scenarios × 1 labelled pair × 2 roles × (1 logged + 3 sampled).
     assert_eq!(summary["rows"], 20 * 2 * 4);
     assert_eq!(summary["pairs_roles"], 40);
@@ -65,6 +65,8 @@ fn label_writes_parquet_and_resumes() {
         &p("labels"),
         "--samples",
         "3",
+        "--label-lane-move-steps",
+        "0",
     ]);
     assert_eq!(
         std::fs::metadata(&parquet).unwrap().modified().unwrap(),
@@ -95,6 +97,8 @@ fn label_writes_parquet_and_resumes() {
             "neighbours",
             "--audience-weighting",
             "proximity",
+            "--label-lane-move-steps",
+            "0",
         ],
     );
     assert_eq!(summary["rows"], 20 * 2 * 4);
@@ -102,9 +106,9 @@ fn label_writes_parquet_and_resumes() {
     assert_eq!(summary["audience"]["weighting"], "proximity", "{summary}");
     assert!(summary["audience_size_mean"].as_f64().unwrap() >= 1.0);
     assert!(summary["fidelity"].is_null(), "{summary}");
-    // With lane moves: the logged and sampled futures as before, then the moves of the
-    // sampled ones, scored by the oracle apart from them.
-    let summary = label("labels_moves", &["--label-lane-move-steps", "30"]);
+    // With lane moves (the default): the logged and sampled futures as before, then the
+    // moves of the sampled ones, scored by the oracle apart from them.
+    let summary = label("labels_moves", &[]);
     assert_eq!(summary["lane_move_steps"], 30, "{summary}");
     let moves = summary["lane_moves"].as_u64().unwrap();
     assert_eq!(summary["rows"].as_u64().unwrap(), 20 * 2 * 4 + moves);

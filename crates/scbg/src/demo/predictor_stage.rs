@@ -156,7 +156,10 @@ fn make_reaction_siblings(
             ensemble: Vec::new(),
             data: cache.to_path_buf(),
             out: root.join("labels_stage1"),
-            options: options.labels,
+            options: crate::choices::LabelOptions {
+                lane_move_steps: 0,
+                ..options.labels
+            },
             seed: options.seed,
             ground_truth: Some(root.join("synth").join(GROUND_TRUTH_FILE)),
             shard_index: 0,

@@ -130,6 +130,32 @@ fn label_train_and_generate_through_the_library() {
     )
     .unwrap();
     assert_eq!(saved.format_version, generator::GENERATOR_FORMAT_VERSION);
+    // Labelled lane moves after the sampled futures (here stand-ins: each role's first
+    // sampled future again, with a ψ far out) are for sample and rank: the generator and
+    // range predictor train without them, so its ψ scale (the labels' spread) is unchanged.
+    let with_moves: Vec<_> = examples
+        .iter()
+        .cloned()
+        .map(|mut e| {
+            e.futures_b.push(e.futures_b[1].clone());
+            e.psi.push(e.psi[1] + 50.0);
+            e
+        })
+        .collect();
+    let saved_moves = generator::train_variant(
+        &predictors,
+        &with_moves,
+        &generator::VariantSettings {
+            epochs: 1,
+            batch_size: 8,
+            range_steps: 10,
+            ..generator::VariantSettings::new(Variant::Full, options)
+        },
+        &p("gen_moves"),
+        &Quiet,
+    )
+    .unwrap();
+    assert_eq!(saved_moves.generator.psi_scale, saved.generator.psi_scale);
 
     let model = generator::load_scbg(&p("gen"), None).unwrap();
     assert_eq!(
