@@ -350,8 +350,13 @@ impl LabelSummary {
 
     /// The lines `scbg label` prints.
     pub fn to_text(&self) -> String {
+        let moves = if self.lane_moves > 0 {
+            format!(", then {} lane moves of them", self.lane_moves)
+        } else {
+            String::new()
+        };
         let mut s = format!(
-            "labelled {} futures ({} pair roles × {} each); ψ of logged futures: mean {:.3}, std {:.3}; std within a pair role {:.3}; |ψ| > 2 for {:.1} % of all",
+            "labelled {} futures ({} pair roles × {} each{moves}); ψ of logged futures: mean {:.3}, std {:.3}; std within a pair role {:.3}; |ψ| > 2 for {:.1} % of all",
             self.rows,
             self.pairs_roles,
             1 + self.samples_per_pair,
