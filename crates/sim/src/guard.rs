@@ -6,7 +6,7 @@
 //! corridor leader of [`crate::idm`]) and clamps its steering to the bounds.
 
 use scbg_scene::AgentState;
-use scbg_synth::{RefPath, closer};
+use scbg_synth::{CUT_IN_REACTION_S, LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2, RefPath, closer};
 
 use crate::idm::LOOKAHEAD_M;
 
@@ -232,23 +232,33 @@ const SIDE_SAME_LANE_M: f64 = 0.5;
 /// An agent whose box is less than this far from mine sideways is in the next lane, m (two
 /// cars about 2 m wide in lanes 3.5–3.7 m apart are 1.5–1.8 m apart; two lanes over, 5 m).
 const NEXT_LANE_CLEARANCE_M: f64 = 2.5;
-/// The hardest braking an agent moving into the next lane may ask of a follower there to
-/// stay behind it, m/s² (the synthetic world's least courteous B accepts 7 m/s²; MOBIL's
-/// safety criterion, `scbg_synth`'s cut-in family).
-const CUT_IN_MAX_BRAKE_MPS2: f64 = 7.0;
-/// The follower's reaction time in that criterion, s (the synthetic world's).
-const CUT_IN_REACTION_S: f64 = 0.5;
 
 /// Whether moving in front of a follower that is `gap_m` behind my rear bumper and closes on
-/// me at `closing_mps` would ask it to brake harder than [`CUT_IN_MAX_BRAKE_MPS2`] after
-/// [`CUT_IN_REACTION_S`] to stay behind me: the constant deceleration that matches my speed
-/// in the gap left after its reaction, `Δv² / 2 (gap − Δv·t_r)`.
+/// me at `closing_mps` would ask it to brake harder than the synthetic world's least
+/// courteous B asks of A ([`LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2`], after its
+/// [`CUT_IN_REACTION_S`]; MOBIL's safety criterion) to stay behind me: the constant
+/// deceleration that matches my speed in the gap left after its reaction,
+/// `Δv² / 2 (gap − Δv·t_r)`.
 fn cut_in_unsafe(gap_m: f64, closing_mps: f64) -> bool {
     if closing_mps <= 0.0 {
         return false;
     }
     let room_m = (gap_m - closing_mps * CUT_IN_REACTION_S).max(0.1);
-    closing_mps * closing_mps / (2.0 * room_m) > CUT_IN_MAX_BRAKE_MPS2
+    closing_mps * closing_mps / (2.0 * room_m) > LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2
+}
+
+/// Gap acceptance toward `o` behind me in the next lane, closing on me at `closing_mps`: the
+/// clearance between our boxes across *its* heading (its lane's direction; in my frame,
+/// turned toward it, a follower far behind seems farther to the side than it is) when it is
+/// in the next lane ([`NEXT_LANE_CLEARANCE_M`]) and could not stay behind me
+/// ([`cut_in_unsafe`]); `None` when it could.
+fn refused_gap(me: &AgentState, o: &AgentState, closing_mps: f64) -> Option<f64> {
+    let (dx, dy) = (o.x_m - me.x_m, o.y_m - me.y_m);
+    let (sn, cs) = f64::from(o.heading_rad).sin_cos();
+    let ahead_of_it = -(dx * cs + dy * sn);
+    let clearance = (dx * sn - dy * cs).abs() - 0.5 * f64::from(me.width_m + o.width_m);
+    let gap = ahead_of_it - 0.5 * f64::from(me.length_m + o.length_m);
+    (clearance < NEXT_LANE_CLEARANCE_M && cut_in_unsafe(gap, closing_mps)).then_some(clearance)
 }
 
 /// Steering bounds `(min, max)` (rad, positive left) that keep an agent from turning toward
@@ -291,27 +301,19 @@ pub(crate) fn side_steer_bounds(
         };
         // My lateral speed toward it (my heading turned toward its side of its heading).
         let toward_mps = speed_mps * (-rel * left.signum()).sin();
-        let mut trigger = SIDE_CLEARANCE_M.max(SIDE_KEEP_M + toward_mps * SIDE_ALIGN_S);
+        let trigger = SIDE_CLEARANCE_M.max(SIDE_KEEP_M + toward_mps * SIDE_ALIGN_S);
         // Gap acceptance: a follower in the next lane that could not stay behind me without
         // braking harder than the least courteous driver asks keeps me out of its lane
         // altogether, however far behind (moving in slowly ahead of a fast one, then braking,
         // was side-swiped; BENCHMARKS.md).
-        // (Measured along its heading, its lane's direction: in my frame, turned toward it, a
-        // follower far behind seems farther to the side than it is.)
-        let (sn_o, cs_o) = f64::from(o.heading_rad).sin_cos();
-        let ahead_of_it = -(dx * cs_o + dy * sn_o);
-        let clearance_o = (dx * sn_o - dy * cs_o).abs() - 0.5 * f64::from(me.width_m + o.width_m);
-        let unsafe_gap = behind_next_lane
-            && clearance_o < NEXT_LANE_CLEARANCE_M
-            && cut_in_unsafe(
-                ahead_of_it - 0.5 * f64::from(me.length_m + o.length_m),
-                closing,
-            );
-        if unsafe_gap {
-            trigger = NEXT_LANE_CLEARANCE_M;
-        }
-        let clearance = if unsafe_gap { clearance_o } else { clearance };
-        if (along.abs() > reach && !unsafe_gap) || clearance > trigger {
+        let (clearance, trigger, reach) = match behind_next_lane
+            .then(|| refused_gap(me, o, closing))
+            .flatten()
+        {
+            Some(across_its_lane) => (across_its_lane, NEXT_LANE_CLEARANCE_M, f64::INFINITY),
+            None => (clearance, trigger, reach),
+        };
+        if along.abs() > reach || clearance > trigger {
             continue;
         }
         // The steering that turns me parallel to it, with the time constant whose drift keeps

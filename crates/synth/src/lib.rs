@@ -21,7 +21,7 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::{PredictionDifficulty, PredictionTarget, Scene};
 
-pub use families::{A_ID, B_ID, NUM_STEPS};
+pub use families::{A_ID, B_ID, CUT_IN_REACTION_S, LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2, NUM_STEPS};
 pub use path::RefPath;
 pub use sim::{Idm, STEP_SECS, boxes_overlap, closer};
 

@@ -43,7 +43,7 @@ pub struct EstimatorArgs {
     /// (after the sampled ones, not in E[r(Y_A) | x]; sample and rank chooses among them, the
     /// generator trains without them; with `scbg label --reaction-siblings`, they are replayed
     /// too). 0: none (the default before the thirty-second session). Over four data seeds,
-    /// sample and rank's control in truth rose from 0.43 to 0.51 with them (BENCHMARKS.md).
+    /// sample and rank's control in truth rose from 0.43 to 0.49 with them (BENCHMARKS.md).
     #[arg(long, default_value_t = scbg::labels::DEFAULT_LABEL_LANE_MOVE_STEPS)]
     pub label_lane_move_steps: usize,
 }

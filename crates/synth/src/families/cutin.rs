@@ -12,6 +12,13 @@ use crate::sim::{Agent, Idm, STEP_SECS, closer};
 /// How far back a fully courteous B looks for a faster A to make way for.
 const MAKE_WAY_LOOKBACK_M: f64 = 200.0;
 
+/// The hardest braking the least courteous B (c = 0) asks of A when it cuts in ahead of it,
+/// m/s² (MOBIL's safe deceleration; a B of courtesy c accepts `this − 6c`, down to 1 m/s²).
+pub const LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2: f64 = 7.0;
+
+/// A's reaction time in B's cut-in safety check, s: B counts on A braking this late.
+pub const CUT_IN_REACTION_S: f64 = 0.5;
+
 // ------------------------------------------------------------------------------------ cut-in
 
 /// The random draws of one cut-in / make-way scene (geometry, A and B, slow vehicle, noise).
@@ -152,7 +159,7 @@ pub fn simulate_cutin(p: &CutinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
         let mut cmds = vec![0.0; agents.len()];
         let c = b.courtesy(t);
         let politeness = 2.0 * c;
-        let safe_brake = 7.0 - 6.0 * c;
+        let safe_brake = LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2 - 6.0 * c;
         // B decides from the current step on, so its courtesy shows in the future to predict.
         if with_b && change_start.is_none() && t >= CURRENT_STEP {
             // MOBIL: B's advantage minus politeness × A's disadvantage, with A's safety.
@@ -182,7 +189,7 @@ pub fn simulate_cutin(p: &CutinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
             // Safety: the constant deceleration A would need behind B, allowing A half a second
             // to react (IDM's own prediction is far harsher than what A really needs).
             let a_needs = if p.cut_in && b.s > a.s {
-                let gap = a.gap_to(b.s, b.length_m) - (a.v - b.v).max(0.0) * 0.5;
+                let gap = a.gap_to(b.s, b.length_m) - (a.v - b.v).max(0.0) * CUT_IN_REACTION_S;
                 (a.v - b.v).max(0.0).powi(2) / (2.0 * gap.max(0.5))
             } else {
                 0.0

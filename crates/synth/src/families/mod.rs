@@ -257,5 +257,8 @@ mod cutin;
 mod merge;
 
 pub use crossing::{CrossingParams, crossing_params, crossing_paths, simulate_crossing};
-pub use cutin::{CutinParams, cutin_params, cutin_paths, simulate_cutin};
+pub use cutin::{
+    CUT_IN_REACTION_S, CutinParams, LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2, cutin_params, cutin_paths,
+    simulate_cutin,
+};
 pub use merge::{MergeParams, merge_params, merge_paths, simulate_merge};
