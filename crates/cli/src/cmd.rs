@@ -458,6 +458,7 @@ fn label_options(
     .map_err(anyhow::Error::msg)?;
     options.baseline_samples = estimator.baseline_samples;
     options.lane_move_steps = estimator.label_lane_move_steps;
+    options.keep_baseline = estimator.keep_baseline_samples;
     Ok(options)
 }
 

@@ -255,6 +255,14 @@ pub struct LabelOptions {
     /// without one. 0 (the default, and every config serialised before the option): none.
     #[serde(default)]
     pub lane_move_steps: usize,
+    /// Label and keep the `baseline_samples` futures too, after the `samples` sampled ones
+    /// (and take lane moves from all of them): the futures E[r(Y_A) | x] already scores
+    /// become candidates of sample and rank at no extra forward. The generator and range
+    /// predictor still train on the first `samples` alone. `false` (the default of a
+    /// serialised config without the field): the baseline's futures are scored for E[r(Y_A)
+    /// | x] and dropped.
+    #[serde(default)]
+    pub keep_baseline: bool,
 }
 
 impl LabelOptions {
@@ -265,6 +273,18 @@ impl LabelOptions {
             MarginalEstimate::ConditionalAverage => self.baseline_samples,
             MarginalEstimate::Direct => 0,
         }
+    }
+
+    /// The sampled futures of B labelled and kept per role (rows `1..=` this of a role's
+    /// labels; the lane moves follow): `samples`, and the baseline's futures with
+    /// [`LabelOptions::keep_baseline`].
+    pub fn labelled_samples(&self) -> usize {
+        self.samples
+            + if self.keep_baseline {
+                self.baseline_futures()
+            } else {
+                0
+            }
     }
 }
 
@@ -310,6 +330,15 @@ pub fn label_role(
         .collect();
     let t = a.0.condition_future_valid.len();
     let mut sampled = b_mixture.sample(samples, sample_noise, rng);
+    // The baseline's futures are drawn after the labelled ones either way (the same draws);
+    // kept, they are labelled futures like the first `samples`.
+    let baseline = b_mixture.sample(options.baseline_futures(), sample_noise, rng);
+    let kept_baseline = if options.keep_baseline {
+        sampled.extend_from_slice(&baseline);
+        true
+    } else {
+        false
+    };
     let moves: Vec<Vec<[f32; 2]>> = if options.lane_move_steps > 0 {
         let path = scbg_features::lane_path_points(b);
         // A at the current step in B's frame, driving on at its current velocity: a move must
@@ -331,8 +360,8 @@ pub fn label_role(
     let n_sampled = sampled.len();
     let n = 1 + n_sampled + moves.len();
     sampled.extend(moves);
-    if options.baseline_futures() > 0 {
-        sampled.extend(b_mixture.sample(options.baseline_futures(), sample_noise, rng));
+    if !kept_baseline {
+        sampled.extend(baseline);
     }
     // Every future scored.
     let n_all = 1 + sampled.len();

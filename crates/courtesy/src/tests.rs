@@ -357,6 +357,7 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
             audience,
             baseline_samples: 0,
             lane_move_steps: 0,
+            keep_baseline: false,
         };
         let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(9);
         let all = label_role(
@@ -432,6 +433,7 @@ fn baseline_samples_widen_the_marginal_estimate_and_label_only_the_first_futures
         audience: Audience::Pair,
         baseline_samples,
         lane_move_steps: 0,
+        keep_baseline: false,
     };
     let label = |o| {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
@@ -458,6 +460,25 @@ fn baseline_samples_widen_the_marginal_estimate_and_label_only_the_first_futures
     let mean3 = narrow.e_cond[1..].iter().sum::<f32>() / 3.0;
     assert!((narrow.e_marg - mean3).abs() < 1e-5 * (1.0 + mean3.abs()));
     assert_ne!(narrow.e_marg, wide.e_marg);
+    // Kept, the baseline's futures are labelled after the first 3: the labels of 8 sampled
+    // futures, to the last bit.
+    let kept = label(LabelOptions {
+        keep_baseline: true,
+        ..options(3, 5)
+    });
+    assert_eq!(options(3, 5).labelled_samples(), 3);
+    assert_eq!(
+        LabelOptions {
+            keep_baseline: true,
+            ..options(3, 5)
+        }
+        .labelled_samples(),
+        8
+    );
+    assert_eq!(kept.psi, all.psi);
+    assert_eq!(kept.e_cond, all.e_cond);
+    assert_eq!(kept.e_marg, all.e_marg);
+    assert_eq!(kept.futures_in_a, all.futures_in_a);
 }
 
 /// With lane moves, the sampled futures that drift off B's lane path are labelled once more,
@@ -477,6 +498,7 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
         audience: Audience::Pair,
         baseline_samples: 3,
         lane_move_steps,
+        keep_baseline: false,
     };
     let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(11);
     // The futures label_pair draws (the same stream), in B's frame.
@@ -535,6 +557,26 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
     for k in 0..with.psi.len() {
         assert!((with.psi[k] - (with.e_cond[k] - with.e_marg)).abs() < 1e-5);
     }
+    // The baseline's 3 futures kept: labelled after the 4, and the moves taken from all 7
+    // (the same draws), against the same E[r(Y_A) | x].
+    let drawn_all = mixture.sample(7, 1.0, &mut rng());
+    assert_eq!(drawn_all[..4], drawn[..]);
+    let moved_all = drawn_all
+        .iter()
+        .filter_map(|f| scbg_features::lane_move(f, &path, 30))
+        .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity))
+        .count();
+    let kept = LabelOptions {
+        keep_baseline: true,
+        ..options(30)
+    };
+    let kept = label_pair(&model, &a, &b, &mixture, kept, &mut rng(), &device);
+    assert_eq!(kept.psi.len(), 8 + moved_all);
+    assert_eq!(kept.futures_in_a[..5], with.futures_in_a[..5]);
+    assert!((kept.e_marg - with.e_marg).abs() < 1e-5 * (1.0 + with.e_marg.abs()));
+    for k in 0..5 {
+        assert!((kept.psi[k] - with.psi[k]).abs() < 1e-5, "future {k}");
+    }
 }
 
 #[test]
@@ -570,6 +612,7 @@ fn an_ensemble_scores_the_first_members_futures_with_every_member_and_averages()
         audience: Audience::Pair,
         baseline_samples: 0,
         lane_move_steps: 0,
+        keep_baseline: false,
     };
     let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(4);
     let label = |members: &[(&Multipath, &FeatureStats)]| {

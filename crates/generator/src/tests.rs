@@ -93,6 +93,7 @@ fn labelled(
             audience: Default::default(),
             baseline_samples: 0,
             lane_move_steps: 0,
+            keep_baseline: false,
         },
         seed,
         device,

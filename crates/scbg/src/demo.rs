@@ -60,8 +60,9 @@ pub struct DemoOptions {
     /// this-many sampled futures of B in each are replayed in the synthetic world with A
     /// reacting ([`crate::fidelity::reaction_scenes`]), and they join the training for those
     /// epochs ([`scbg_train::TrainConfig::reaction_from_epoch`]; BENCHMARKS.md, issue 11).
-    /// Those labels have no lane moves ([`LabelOptions::lane_move_steps`]): the siblings are
-    /// B's samples alone, so the moves leave the predictor as it was.
+    /// Those labels have no lane moves ([`LabelOptions::lane_move_steps`]) and keep no
+    /// baseline futures ([`LabelOptions::keep_baseline`]): the siblings are B's first samples
+    /// alone, so neither changes the predictor (or the cost of that pass).
     pub reaction_siblings: usize,
     /// The last this-many of the predictor's `epochs` train with the reaction siblings.
     pub reaction_epochs: usize,
@@ -428,9 +429,9 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         .filter(|r| split_of(&r.scenario_id, vf) == Split::Validation)
         .cloned()
         .collect();
-    let fidelity = truth
-        .as_deref()
-        .and_then(|t| crate::fidelity::fidelity(&held_out_rows, t, options.labels.samples));
+    let fidelity = truth.as_deref().and_then(|t| {
+        crate::fidelity::fidelity(&held_out_rows, t, options.labels.labelled_samples())
+    });
     let check_list = acceptance_checks(
         &variants_mean,
         &truth_mean,

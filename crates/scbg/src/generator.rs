@@ -345,9 +345,11 @@ fn psi_spread(examples: &[Example]) -> f32 {
     scbg_generator::eval::MeanStd::of(&all).map_or(1.0, |m| m.std.max(1e-6) as f32)
 }
 
-/// `examples` with B's logged and `samples` sampled futures alone: the labelled lane moves
-/// after them ([`LabelOptions::lane_move_steps`]) are not samples of B's marginal, so the
-/// generator and range predictor do not learn from them (sample and rank chooses among them).
+/// `examples` with B's logged and first `samples` sampled futures alone: the kept baseline
+/// futures after them ([`LabelOptions::keep_baseline`]) leave the generator's training as it
+/// was, and the labelled lane moves after those ([`LabelOptions::lane_move_steps`]) are not
+/// samples of B's marginal, so the generator and range predictor do not learn from either
+/// (sample and rank chooses among both).
 fn without_lane_moves(examples: &[Example], samples: usize) -> std::borrow::Cow<'_, [Example]> {
     if examples.iter().all(|e| e.psi.len() <= 1 + samples) {
         return std::borrow::Cow::Borrowed(examples);

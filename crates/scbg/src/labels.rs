@@ -251,10 +251,12 @@ pub struct LabelSummary {
     pub predictors: usize,
     /// Labelled pair roles (= logged futures).
     pub pairs_roles: usize,
-    /// Futures sampled from B's marginal prediction per pair role.
+    /// Futures sampled from B's marginal prediction per pair role and labelled
+    /// ([`LabelOptions::labelled_samples`]).
     pub samples_per_pair: usize,
-    /// More futures of B sampled per pair role for the estimate of E[r(Y_A) | x] alone
-    /// ([`LabelOptions::baseline_futures`]: 0 with the direct estimate).
+    /// More futures of B sampled per pair role for the estimate of E[r(Y_A) | x] alone, not
+    /// labelled ([`LabelOptions::baseline_futures`]; 0 with the direct estimate, or when they
+    /// are kept, [`LabelOptions::keep_baseline`]).
     pub baseline_samples: usize,
     /// Steps of the lane moves labelled after the sampled futures
     /// ([`LabelOptions::lane_move_steps`]; 0: none).
@@ -305,12 +307,16 @@ impl LabelSummary {
             rows: rows.len(),
             predictors: 1,
             pairs_roles: logged.len(),
-            samples_per_pair: options.samples,
-            baseline_samples: options.baseline_futures(),
+            samples_per_pair: options.labelled_samples(),
+            baseline_samples: if options.keep_baseline {
+                0
+            } else {
+                options.baseline_futures()
+            },
             lane_move_steps: options.lane_move_steps,
             lane_moves: rows
                 .iter()
-                .filter(|r| r.sample as usize > options.samples)
+                .filter(|r| r.sample as usize > options.labelled_samples())
                 .count(),
             reward: options.reward,
             marginal: options.marginal,
@@ -343,7 +349,7 @@ impl LabelSummary {
             // The oracle scores ψ toward A alone: no fidelity for another audience.
             fidelity: truth
                 .filter(|_| options.audience == scbg_courtesy::Audience::Pair)
-                .and_then(|t| crate::fidelity::fidelity(rows, t, options.samples)),
+                .and_then(|t| crate::fidelity::fidelity(rows, t, options.labelled_samples())),
             fidelity_held_out: None,
         }
     }
@@ -454,6 +460,7 @@ pub fn label_options(
         audience: Default::default(),
         baseline_samples: 0,
         lane_move_steps: 0,
+        keep_baseline: false,
     })
 }
 
@@ -663,7 +670,14 @@ pub fn label_cache(
         )?;
         let scenes: Vec<&SceneLabels> = labelled.iter().collect();
         if let (Some((dir, per_role)), Some(index)) = (&run.reaction_siblings, index.as_ref()) {
-            write_reaction_siblings(dir, si, &scenes, index, run.options.samples, *per_role)?;
+            write_reaction_siblings(
+                dir,
+                si,
+                &scenes,
+                index,
+                run.options.labelled_samples(),
+                *per_role,
+            )?;
         }
         let shard_rows = scored_rows(&scenes, index.as_ref());
         write_label_table(&path, &shard_rows)?;

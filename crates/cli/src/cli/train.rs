@@ -46,6 +46,20 @@ pub struct EstimatorArgs {
     /// sample and rank's control in truth rose from 0.43 to 0.49 with them (BENCHMARKS.md).
     #[arg(long, default_value_t = scbg::labels::DEFAULT_LABEL_LANE_MOVE_STEPS)]
     pub label_lane_move_steps: usize,
+    /// Also label and keep the --baseline-samples futures (after the --samples ones; lane
+    /// moves then come from all of them): sample and rank chooses among every future E[r(Y_A)
+    /// | x] scores, at no extra forward; the generator and range predictor still train on the
+    /// first --samples. Over four data seeds, sample and rank's control in truth rose from
+    /// 0.49 to 0.53 with them (default since the thirty-third session; BENCHMARKS.md).
+    #[arg(
+        long,
+        default_value_t = true,
+        action = clap::ArgAction::Set,
+        num_args = 0..=1,
+        default_missing_value = "true",
+        value_name = "BOOL"
+    )]
+    pub keep_baseline_samples: bool,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -33,7 +33,13 @@ fn label_writes_parquet_and_resumes() {
         )
         .unwrap()
     };
-    let summary = label("labels", &["--label-lane-move-steps", "0"]);
+    let old_layout = [
+        "--label-lane-move-steps",
+        "0",
+        "--keep-baseline-samples",
+        "false",
+    ];
+    let summary = label("labels", &old_layout);
     // 20 scenarios × 1 labelled pair × 2 roles × (1 logged + 3 sampled).
     assert_eq!(summary["rows"], 20 * 2 * 4);
     assert_eq!(summary["pairs_roles"], 40);
@@ -67,6 +73,8 @@ fn label_writes_parquet_and_resumes() {
         "3",
         "--label-lane-move-steps",
         "0",
+        "--keep-baseline-samples",
+        "false",
     ]);
     assert_eq!(
         std::fs::metadata(&parquet).unwrap().modified().unwrap(),
@@ -99,6 +107,8 @@ fn label_writes_parquet_and_resumes() {
             "proximity",
             "--label-lane-move-steps",
             "0",
+            "--keep-baseline-samples",
+            "false",
         ],
     );
     assert_eq!(summary["rows"], 20 * 2 * 4);
@@ -108,7 +118,7 @@ fn label_writes_parquet_and_resumes() {
     assert!(summary["fidelity"].is_null(), "{summary}");
     // With lane moves (the default): the logged and sampled futures as before, then the
     // moves of the sampled ones, scored by the oracle apart from them.
-    let summary = label("labels_moves", &[]);
+    let summary = label("labels_moves", &["--keep-baseline-samples", "false"]);
     assert_eq!(summary["lane_move_steps"], 30, "{summary}");
     let moves = summary["lane_moves"].as_u64().unwrap();
     assert_eq!(summary["rows"].as_u64().unwrap(), 20 * 2 * 4 + moves);
@@ -117,6 +127,14 @@ fn label_writes_parquet_and_resumes() {
     // Only the ground-truth roles' moves are scored (half of the roles).
     let scored = fidelity["lane_moves"]["all"]["n"].as_u64().unwrap_or(0);
     assert!(scored <= moves, "{summary}");
+    // The baseline's futures kept (the default): labelled after the 3 sampled ones (5 in
+    // all), the moves after them; none left over for E[r(Y_A) | x] alone.
+    let summary = label("labels_kept", &["--baseline-samples", "2"]);
+    assert_eq!(summary["samples_per_pair"], 5, "{summary}");
+    assert_eq!(summary["baseline_samples"], 0, "{summary}");
+    let moves = summary["lane_moves"].as_u64().unwrap();
+    assert_eq!(summary["rows"].as_u64().unwrap(), 20 * 2 * 6 + moves);
+    assert_eq!(summary["fidelity"]["sampled"]["all"]["n"], 100, "{summary}");
 }
 
 #[test]

@@ -175,12 +175,12 @@ fn ray_shards_merge_to_the_single_process_result_and_k8s_jobs_validate() {
         "label",
     );
     assert_eq!(record["tasks"].as_array().unwrap().len(), 2);
-    // 24 scenarios × 2 roles × (1 logged + 2 sampled), then the labelled lane moves (the
-    // default), as many as the one-process run below has.
+    // 24 scenarios × 2 roles × (1 logged + 2 sampled + the 24 kept baseline futures), then
+    // the labelled lane moves (the defaults), as many as the one-process run below has.
     let moves = read_json(&p("labels/summary.json"))["lane_moves"]
         .as_u64()
         .unwrap();
-    assert_eq!(record["rows"].as_u64().unwrap(), 24 * 2 * 3 + moves);
+    assert_eq!(record["rows"].as_u64().unwrap(), 24 * 2 * 27 + moves);
     scbg_ok(&[
         "label",
         "--model",

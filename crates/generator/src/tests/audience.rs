@@ -25,6 +25,7 @@ fn labelled_toward_neighbours(
             audience,
             baseline_samples: 0,
             lane_move_steps: 0,
+            keep_baseline: false,
         },
         4,
         device,

@@ -34,6 +34,7 @@ fn untrained_scbg(
             audience: Default::default(),
             baseline_samples: 0,
             lane_move_steps: 0,
+            keep_baseline: false,
         },
         policy,
     };

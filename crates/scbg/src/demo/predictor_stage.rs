@@ -158,6 +158,7 @@ fn make_reaction_siblings(
             out: root.join("labels_stage1"),
             options: crate::choices::LabelOptions {
                 lane_move_steps: 0,
+                keep_baseline: false,
                 ..options.labels
             },
             seed: options.seed,
