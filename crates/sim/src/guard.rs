@@ -247,6 +247,28 @@ fn cut_in_unsafe(gap_m: f64, closing_mps: f64) -> bool {
     closing_mps * closing_mps / (2.0 * room_m) > LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2
 }
 
+/// How far ahead a plan's slowing counts for gap acceptance, s ([`planned_gap_speed_mps`]).
+const PLAN_SLOWING_S: f64 = 3.0;
+/// The window over which a plan's speed is averaged for [`planned_gap_speed_mps`], steps (1 s:
+/// a sampled future's points carry noise that single steps would read as speed).
+const PLAN_SPEED_WINDOW_STEPS: usize = 10;
+
+/// The least speed, m/s, that a plan of positions `step_s` seconds apart comes down to within
+/// [`PLAN_SLOWING_S`] after its point `from` (where it has me now), averaged over 1 s
+/// windows; `None` when no whole window is left. A follower that gap acceptance lets me cut
+/// in front of must stay behind me at that speed, not only at my current one.
+pub(crate) fn planned_gap_speed_mps(plan: &[[f64; 2]], from: usize, step_s: f64) -> Option<f64> {
+    let w = PLAN_SPEED_WINDOW_STEPS;
+    let last = plan.len().checked_sub(w + 1)?;
+    let end = (from + (PLAN_SLOWING_S / step_s).round() as usize).min(last);
+    (from..=end)
+        .map(|k| {
+            let (p, q) = (plan[k], plan[k + w]);
+            (q[0] - p[0]).hypot(q[1] - p[1]) / (w as f64 * step_s)
+        })
+        .reduce(f64::min)
+}
+
 /// Gap acceptance toward `o` behind me in the next lane, closing on me at `closing_mps`: the
 /// clearance between our boxes across *its* heading (its lane's direction; in my frame,
 /// turned toward it, a follower far behind seems farther to the side than it is) when it is
@@ -266,13 +288,16 @@ fn refused_gap(me: &AgentState, o: &AgentState, closing_mps: f64) -> Option<f64>
 /// half the two lengths plus 1 m along it (behind it, plus what the other closes on it in
 /// 3 s) and whose box is less than 0.8 m away to one side (more while drifting toward it) —
 /// or a follower in the next lane (its box less than 2.5 m from mine across its heading),
-/// however far behind, that could not stay behind me braking at 7 m/s² ([`cut_in_unsafe`]).
+/// however far behind, that could not stay behind me braking at 7 m/s² ([`cut_in_unsafe`])
+/// as I slow to `gap_speed_mps` (my speed, or the least my plan comes down to soon:
+/// [`planned_gap_speed_mps`]).
 /// Toward such an agent the steering may at most turn the agent parallel to it with a time
 /// constant of 0.5 s, shorter while drifting toward it ([`SIDE_ALIGN_S`]; the bicycle's yaw
 /// rate `v·tan δ / wheelbase`). `None` when nobody is alongside.
 pub(crate) fn side_steer_bounds(
     me: &AgentState,
     speed_mps: f64,
+    gap_speed_mps: f64,
     wheelbase_m: f64,
     others: &[&AgentState],
 ) -> Option<(f64, f64)> {
@@ -305,9 +330,11 @@ pub(crate) fn side_steer_bounds(
         // Gap acceptance: a follower in the next lane that could not stay behind me without
         // braking harder than the least courteous driver asks keeps me out of its lane
         // altogether, however far behind (moving in slowly ahead of a fast one, then braking,
-        // was side-swiped; BENCHMARKS.md).
+        // was side-swiped; BENCHMARKS.md) — behind me as my plan slows me down, too (a B
+        // merging 30 m ahead of A, then stopping at the end of the ramp, was run into).
+        let closing_gap = closing + speed_mps - gap_speed_mps.min(speed_mps);
         let (clearance, trigger, reach) = match behind_next_lane
-            .then(|| refused_gap(me, o, closing))
+            .then(|| refused_gap(me, o, closing_gap))
             .flatten()
         {
             Some(across_its_lane) => (across_its_lane, NEXT_LANE_CLEARANCE_M, f64::INFINITY),
@@ -595,7 +622,7 @@ mod tests {
             heading_rad: heading_deg.to_radians(),
             ..me
         };
-        let bounds = |others: &[&AgentState]| side_steer_bounds(&me, 10.0, 2.7, others);
+        let bounds = |others: &[&AgentState]| side_steer_bounds(&me, 10.0, 10.0, 2.7, others);
         // Parallel, 2.5 m to the left (0.6 m between the boxes): no steering to the left.
         let left = at(1.0, 2.5, 0.0);
         assert_eq!(bounds(&[&left]), Some((f64::NEG_INFINITY, 0.0)));
@@ -649,17 +676,66 @@ mod tests {
             velocity_x_mps: 23.3,
             ..me_along_x()
         };
-        let (lo, hi) = side_steer_bounds(&me, 12.0, 2.7, &[&a_at(-17.3)]).expect("bounded");
+        let (lo, hi) = side_steer_bounds(&me, 12.0, 12.0, 2.7, &[&a_at(-17.3)]).expect("bounded");
         assert_eq!(lo, f64::NEG_INFINITY);
         assert!(hi < 0.0, "turning back parallel to A: {hi}");
         // 40 m behind it needs 2.1 m/s²: room enough, and I may move over.
-        assert_eq!(side_steer_bounds(&me, 12.0, 2.7, &[&a_at(-40.0)]), None);
+        assert_eq!(
+            side_steer_bounds(&me, 12.0, 12.0, 2.7, &[&a_at(-40.0)]),
+            None
+        );
         // Two lanes over (7.2 m) it is none of my business.
         let far = AgentState {
             y_m: 7.2,
             ..a_at(-17.3)
         };
-        assert_eq!(side_steer_bounds(&me, 12.0, 2.7, &[&far]), None);
+        assert_eq!(side_steer_bounds(&me, 12.0, 12.0, 2.7, &[&far]), None);
+    }
+
+    #[test]
+    fn a_plan_that_slows_down_soon_needs_a_longer_gap() {
+        // A plan along x at 10 m/s that stops dead after `stop` steps (points 0.1 s apart,
+        // the first a step after the start).
+        let plan = |stop: usize| -> Vec<[f64; 2]> {
+            (1..=80).map(|k| [k.min(stop) as f64, 0.0]).collect()
+        };
+        let dt = 0.1;
+        assert!((planned_gap_speed_mps(&plan(80), 0, dt).unwrap() - 10.0).abs() < 1e-9);
+        // Stopping within 3 s: 0. Stopping at 5 s: beyond the look-ahead, 10 m/s until then
+        // (the last window starts at 3 s and ends at 4 s).
+        assert_eq!(planned_gap_speed_mps(&plan(25), 0, dt), Some(0.0));
+        assert!((planned_gap_speed_mps(&plan(50), 0, dt).unwrap() - 10.0).abs() < 1e-9);
+        // Half a window into the stop: half the speed. From later in the plan, it comes closer.
+        assert!((planned_gap_speed_mps(&plan(36), 0, dt).unwrap() - 5.0).abs() < 1e-9);
+        assert_eq!(planned_gap_speed_mps(&plan(50), 20, dt), Some(0.0));
+        // No whole second left: nothing to say.
+        assert_eq!(planned_gap_speed_mps(&plan(80)[..10], 0, dt), None);
+        assert_eq!(planned_gap_speed_mps(&plan(80), 75, dt), None);
+
+        // Me at 12 m/s, turned 5° toward A in the next lane 40 m behind at 23.3 m/s: at my
+        // speed it needs 2.1 m/s² and I may move over. If my plan comes down to 6 m/s, 5.6
+        // m/s²: still. Down to 2 m/s: 9.1 m/s², more than the least courteous B asks, and I
+        // may not.
+        let me = AgentState {
+            heading_rad: 5f32.to_radians(),
+            velocity_x_mps: 12.0 * 5f32.to_radians().cos(),
+            velocity_y_mps: 12.0 * 5f32.to_radians().sin(),
+            ..me_along_x()
+        };
+        let a = AgentState {
+            x_m: -40.0,
+            y_m: 3.6,
+            velocity_x_mps: 23.3,
+            ..me_along_x()
+        };
+        let bounds = |gap_speed: f64| side_steer_bounds(&me, 12.0, gap_speed, 2.7, &[&a]);
+        assert_eq!(bounds(12.0), None);
+        assert_eq!(bounds(6.0), None);
+        let (lo, hi) = bounds(2.0).expect("refused");
+        assert_eq!(lo, f64::NEG_INFINITY);
+        assert!(hi < 0.0, "turning back parallel to A: {hi}");
+        // A plan that speeds up changes nothing (the gap is judged at my speed or below).
+        assert_eq!(bounds(30.0), None);
     }
 
     #[test]
@@ -676,7 +752,7 @@ mod tests {
             heading_rad: rel as f32,
             ..me
         };
-        let hi = |c: f64| side_steer_bounds(&me, v, wheelbase, &[&at_clearance(c)]).map(|b| b.1);
+        let hi = |c: f64| side_steer_bounds(&me, v, v, wheelbase, &[&at_clearance(c)]).map(|b| b.1);
         // The time constant is the one whose drift keeps 0.2 m of the clearance — from beyond
         // 0.8 m (where 0.5 s of drift would take more than the clearance) on, and the closer,
         // the harder the turn away.

@@ -14,7 +14,7 @@ use scbg_scene::{AgentState, Scene};
 use scbg_synth::ClosedLoop;
 use serde::{Deserialize, Serialize};
 
-use crate::guard::{crossing_conflict, side_steer_bounds};
+use crate::guard::{crossing_conflict, planned_gap_speed_mps, side_steer_bounds};
 use crate::idm::{IdmAgent, leader_on_path, polyline_path};
 
 /// The safety guard's IDM (a free road never limits: the desired speed is out of reach).
@@ -613,9 +613,16 @@ impl Simulation {
                 if leader.is_some() {
                     a = a.min(GUARD.accel(c.bicycle.speed_mps, leader));
                 }
-                if let Some((lo, hi)) =
-                    side_steer_bounds(me, c.bicycle.speed_mps, c.bicycle.wheelbase_m, &others)
-                {
+                // The plan's point for now is `k_now - 1` (its first is a step after its start).
+                let gap_speed = planned_gap_speed_mps(&c.plan, k_now.saturating_sub(1), STEP_SECS)
+                    .unwrap_or(c.bicycle.speed_mps);
+                if let Some((lo, hi)) = side_steer_bounds(
+                    me,
+                    c.bicycle.speed_mps,
+                    gap_speed,
+                    c.bicycle.wheelbase_m,
+                    &others,
+                ) {
                     d = d.clamp(lo, hi);
                 }
             }
