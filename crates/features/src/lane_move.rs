@@ -84,12 +84,14 @@ pub fn lane_move(mode: &[[f32; 2]], path: &[[f32; 2]], steps: usize) -> Option<V
             a[1] + u * t[1] + offset * t[0],
         ]
     };
-    let along: Vec<(f32, f32)> = mode.iter().map(|&p| project(p)).collect();
+    // Whether the mode leaves its lane, from its last point alone (most keep their lane: the
+    // labels ask this of every sampled future of B, and sample and rank at every plan).
     let (_, start) = project([0.0, 0.0]);
-    let drift = along.last()?.1 - start;
+    let drift = project(*mode.last()?).1 - start;
     if !(LANE_LEAVING_M..=LANE_MOVE_MAX_DRIFT_M).contains(&drift.abs()) {
         return None;
     }
+    let along: Vec<(f32, f32)> = mode.iter().map(|&p| project(p)).collect();
     let end = start + drift.signum() * drift.abs().max(LANE_MOVE_M);
     let steps = steps.max(1) as f32;
     Some(
