@@ -234,16 +234,18 @@ pub struct LabelOptions {
     /// Whose reward counts: A alone (the paper, the default) or B's neighbours.
     #[serde(default)]
     pub audience: Audience,
-    /// More futures of B sampled for [`MarginalEstimate::ConditionalAverage`] alone: E[r(Y_A) |
-    /// x] averages the conditional expectations over `samples + baseline_samples` futures, of
-    /// which only the first `samples` are labelled and kept. The estimate's noise is the same
+    /// More futures of B sampled for [`MarginalEstimate::ConditionalAverage`]: E[r(Y_A) | x]
+    /// averages the conditional expectations over `samples + baseline_samples` futures, of
+    /// which only the first `samples` are labelled and kept unless
+    /// [`LabelOptions::keep_baseline`] keeps them all. The estimate's noise is the same
     /// for every future of a role but not across roles, so it blurs how ψ ranks scenes (with 8
     /// futures against 32 the demo's labels ranked held-out logged futures like the oracle at
     /// 0.685 against 0.712 over four data seeds; BENCHMARKS.md). 0 (the default of a serialised
     /// config without the field) averages over the labelled futures only.
     #[serde(default)]
     pub baseline_samples: usize,
-    /// Above 0: each of the `samples` sampled futures of B that drifts off B's lane path (1–5 m
+    /// Above 0: each labelled sampled future of B ([`LabelOptions::labelled_samples`]) that
+    /// drifts off B's lane path (1–5 m
     /// at the horizon) also joins the labelled futures with its lane move completed within
     /// this many steps along that path ([`scbg_features::lane_move`]), after the sampled ones,
     /// if it leaves A room where it enters A's lane ([`scbg_features::leaves_room`], A driving
@@ -257,7 +259,8 @@ pub struct LabelOptions {
     pub lane_move_steps: usize,
     /// Label and keep the `baseline_samples` futures too, after the `samples` sampled ones
     /// (and take lane moves from all of them): the futures E[r(Y_A) | x] already scores
-    /// become candidates of sample and rank at no extra forward. The generator and range
+    /// become candidates of sample and rank (their own ψ costs no extra forward; their lane
+    /// moves add rows to it, about 5 per role against 1.3 on the demo). The generator and range
     /// predictor still train on the first `samples` alone. `false` (the default of a
     /// serialised config without the field): the baseline's futures are scored for E[r(Y_A)
     /// | x] and dropped.

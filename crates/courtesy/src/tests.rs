@@ -561,18 +561,29 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
     // (the same draws), against the same E[r(Y_A) | x].
     let drawn_all = mixture.sample(7, 1.0, &mut rng());
     assert_eq!(drawn_all[..4], drawn[..]);
-    let moved_all = drawn_all
+    let moves_all: Vec<_> = drawn_all
         .iter()
         .filter_map(|f| scbg_features::lane_move(f, &path, 30))
         .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity))
-        .count();
+        .collect();
     let kept = LabelOptions {
         keep_baseline: true,
         ..options(30)
     };
     let kept = label_pair(&model, &a, &b, &mixture, kept, &mut rng(), &device);
-    assert_eq!(kept.psi.len(), 8 + moved_all);
+    assert_eq!(kept.psi.len(), 8 + moves_all.len());
     assert_eq!(kept.futures_in_a[..5], with.futures_in_a[..5]);
+    // Rows 5..8 are the baseline's draws, and the moves of all 7 follow them.
+    for (f, in_a) in drawn_all[4..]
+        .iter()
+        .chain(&moves_all)
+        .zip(&kept.futures_in_a[5..])
+    {
+        let want = change_frame(f, &b.world_from_agent, &a.world_from_agent);
+        for (p, q) in want.iter().zip(in_a) {
+            assert!((p[0] - q[0]).abs() < 1e-4 && (p[1] - q[1]).abs() < 1e-4);
+        }
+    }
     assert!((kept.e_marg - with.e_marg).abs() < 1e-5 * (1.0 + with.e_marg.abs()));
     for k in 0..5 {
         assert!((kept.psi[k] - with.psi[k]).abs() < 1e-5, "future {k}");

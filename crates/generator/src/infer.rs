@@ -119,9 +119,9 @@ pub enum GenerateError {
     #[error("A and B are the same track ({0})")]
     SameTrack(i64),
     /// [`Policy::Ranked`] without candidates: no sampled future of B with a finite ψ label
-    /// (the labels draw `.0` futures).
+    /// (the labels keep `.0` sampled futures).
     #[error(
-        "the ranked policy found no sampled future of B with a finite ψ label (the labels draw {0})"
+        "the ranked policy found no sampled future of B with a finite ψ label (the labels keep {0})"
     )]
     NoCandidates(usize),
     /// A given future of B is malformed (what is wrong).
@@ -291,7 +291,7 @@ impl Scbg {
                     .iter()
                     .map(|&c| ranked_choice(&ctx.candidate_psi, c))
                     .collect::<Option<Vec<usize>>>()
-                    .ok_or(GenerateError::NoCandidates(self.labels.samples))?;
+                    .ok_or(GenerateError::NoCandidates(self.labels.labelled_samples()))?;
                 for (p, (c, &k)) in psi.iter_mut().zip(courtesy.iter().zip(&chosen)) {
                     if let Courtesy::Quantile(_) = c {
                         // The ψ the rank stands for: the chosen candidate's label.
@@ -400,7 +400,7 @@ impl Scbg {
             let role = self.labelled_role(scene, window, a_id, b_id, true, device)?;
             let sampled = role.labels.psi.get(1..).unwrap_or_default();
             let k = ranked_choice(sampled, courtesy)
-                .ok_or(GenerateError::NoCandidates(self.labels.samples))?;
+                .ok_or(GenerateError::NoCandidates(self.labels.labelled_samples()))?;
             // Through B's frame, as `generate_in`'s candidates are: the same numbers.
             let in_b = scbg_courtesy::label::change_frame(
                 &role.labels.futures_in_a[1 + k],

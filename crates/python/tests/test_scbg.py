@@ -34,8 +34,8 @@ def test_the_ranked_policy_picks_labelled_samples(trained_dirs):
     assert model.policy == "ranked"
     scene = scbg.read_scenarios(file)[0]
     a, b = _pair(scene)
-    # The tiny model's labels keep 26 futures of B (2 sampled, 24 of the baseline): quantile 0
-    # takes the lowest-ψ one, quantile 1 the highest.
+    # The tiny model's labels keep 26 futures of B (2 sampled, 24 of the baseline) and any
+    # lane moves of them: quantile 0 takes the lowest-ψ one, quantile 1 the highest.
     low = model.generate(scene, a, b, quantile=0.0)
     high = model.generate(scene, a, b, quantile=1.0)
     assert low["psi"] <= high["psi"]

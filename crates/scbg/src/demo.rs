@@ -191,7 +191,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
         5,
         &format!(
             "auto-labelling the courtesy ψ of every interacting pair (logged + {} sampled futures of B)",
-            options.labels.samples
+            options.labels.labelled_samples()
         ),
     );
     let predictors = load_predictors(&trained.dir)?;

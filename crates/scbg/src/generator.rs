@@ -587,13 +587,20 @@ pub fn train_generator(
             String::new()
         }
     ));
+    // The generator trains on the logged and first `samples` futures alone
+    // (`without_lane_moves`): kept baseline futures would only cost their lane moves' labels
+    // (and the oracle's scores), so the training split is labelled without them; `settings`
+    // still records them for sample and rank at inference.
     let mut labelled = labelled_split(
         &p.plain,
         &p.ckpt,
         &p.plain_device,
         data,
         Some(Split::Train),
-        settings.labels,
+        LabelOptions {
+            keep_baseline: false,
+            ..settings.labels
+        },
         settings.seed,
         progress,
     )?;

@@ -258,6 +258,9 @@ pub struct LabelSummary {
     /// labelled ([`LabelOptions::baseline_futures`]; 0 with the direct estimate, or when they
     /// are kept, [`LabelOptions::keep_baseline`]).
     pub baseline_samples: usize,
+    /// Whether the baseline's futures are labelled and kept after the first sampled ones
+    /// ([`LabelOptions::keep_baseline`]; then `samples_per_pair` counts them).
+    pub keep_baseline: bool,
     /// Steps of the lane moves labelled after the sampled futures
     /// ([`LabelOptions::lane_move_steps`]; 0: none).
     pub lane_move_steps: usize,
@@ -313,6 +316,7 @@ impl LabelSummary {
             } else {
                 options.baseline_futures()
             },
+            keep_baseline: options.keep_baseline,
             lane_move_steps: options.lane_move_steps,
             lane_moves: rows
                 .iter()

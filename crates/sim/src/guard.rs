@@ -247,15 +247,16 @@ fn cut_in_unsafe(gap_m: f64, closing_mps: f64) -> bool {
     closing_mps * closing_mps / (2.0 * room_m) > LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2
 }
 
-/// How far ahead a plan's slowing counts for gap acceptance, s ([`planned_gap_speed_mps`]).
+/// How far ahead a plan's slowing counts for gap acceptance, s: the 1 s windows of
+/// [`planned_gap_speed_mps`] start at most this long after now (so they reach 4 s ahead).
 const PLAN_SLOWING_S: f64 = 3.0;
 /// The window over which a plan's speed is averaged for [`planned_gap_speed_mps`], steps (1 s:
 /// a sampled future's points carry noise that single steps would read as speed).
 const PLAN_SPEED_WINDOW_STEPS: usize = 10;
 
-/// The least speed, m/s, that a plan of positions `step_s` seconds apart comes down to within
-/// [`PLAN_SLOWING_S`] after its point `from` (where it has me now), averaged over 1 s
-/// windows; `None` when no whole window is left. A follower that gap acceptance lets me cut
+/// The least speed, m/s, that a plan of positions `step_s` seconds apart comes down to soon:
+/// the least average over 1 s windows starting from its point `from` (where it has me now)
+/// to [`PLAN_SLOWING_S`] after it; `None` when no whole window is left. A follower that gap acceptance lets me cut
 /// in front of must stay behind me at that speed, not only at my current one.
 pub(crate) fn planned_gap_speed_mps(plan: &[[f64; 2]], from: usize, step_s: f64) -> Option<f64> {
     let w = PLAN_SPEED_WINDOW_STEPS;
@@ -289,8 +290,8 @@ fn refused_gap(me: &AgentState, o: &AgentState, closing_mps: f64) -> Option<f64>
 /// 3 s) and whose box is less than 0.8 m away to one side (more while drifting toward it) —
 /// or a follower in the next lane (its box less than 2.5 m from mine across its heading),
 /// however far behind, that could not stay behind me braking at 7 m/s² ([`cut_in_unsafe`])
-/// as I slow to `gap_speed_mps` (my speed, or the least my plan comes down to soon:
-/// [`planned_gap_speed_mps`]).
+/// as I slow to `gap_speed_mps` (my speed, or the least my plan comes down to in 1 s
+/// averages starting within 3 s: [`planned_gap_speed_mps`]).
 /// Toward such an agent the steering may at most turn the agent parallel to it with a time
 /// constant of 0.5 s, shorter while drifting toward it ([`SIDE_ALIGN_S`]; the bicycle's yaw
 /// rate `v·tan δ / wheelbase`). `None` when nobody is alongside.

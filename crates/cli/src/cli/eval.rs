@@ -86,7 +86,8 @@ pub struct EvalScbgArgs {
     #[arg(long)]
     pub figures: Option<PathBuf>,
     /// Futures of B sampled per held-out pair role (default: as many as the training labels
-    /// drew): the candidates of the `ranked` row and of the selection yardsticks. With the
+    /// drew), with the training labels' kept baseline futures and lane moves of them: the
+    /// candidates of the `ranked` row and of the selection yardsticks. With the
     /// conditional-average estimator E[r(Y_A) | x] is their mean, so every row's ψ moves a
     /// little with it.
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..))]

@@ -30,8 +30,9 @@ pub struct EstimatorArgs {
     /// (1 / (1 + distance / radius)).
     #[arg(long, value_enum, default_value_t = Weighting::Sum)]
     pub audience_weighting: Weighting,
-    /// More futures of B sampled only for `conditional-average`'s estimate of E[r(Y_A) | x]
-    /// (not labelled, not kept): it averages over the labelled sampled futures plus this many
+    /// More futures of B sampled for `conditional-average`'s estimate of E[r(Y_A) | x] (kept
+    /// and labelled too with --keep-baseline-samples, the default): it averages over the
+    /// first --samples sampled futures plus this many
     /// (24: 32 in all with 8 labelled; 0, the default before the twenty-fourth session,
     /// averages over the labelled ones alone). Over four data seeds of the demo's predictor 32
     /// futures ranked held-out logged futures like the oracle at 0.712 against 0.685 with 8
@@ -48,8 +49,8 @@ pub struct EstimatorArgs {
     pub label_lane_move_steps: usize,
     /// Also label and keep the --baseline-samples futures (after the --samples ones; lane
     /// moves then come from all of them): sample and rank chooses among every future E[r(Y_A)
-    /// | x] scores, at no extra forward; the generator and range predictor still train on the
-    /// first --samples. Over four data seeds, sample and rank's control in truth rose from
+    /// | x] scores (their ψ costs no extra forward, their lane moves add some); the generator
+    /// and range predictor still train on the first --samples. `false`: the earlier layout. Over four data seeds, sample and rank's control in truth rose from
     /// 0.49 to 0.53 with them (default since the thirty-third session; BENCHMARKS.md).
     #[arg(
         long,

@@ -42,6 +42,7 @@ fn label_writes_parquet_and_resumes() {
     let summary = label("labels", &old_layout);
     // 20 scenarios × 1 labelled pair × 2 roles × (1 logged + 3 sampled).
     assert_eq!(summary["rows"], 20 * 2 * 4);
+    assert_eq!(summary["keep_baseline"], false, "{summary}");
     assert_eq!(summary["pairs_roles"], 40);
     assert!(dir.path().join("labels/psi_histogram.png").is_file());
     // The fidelity report: every future of the 20 ground-truth roles is scored by the oracle.
@@ -132,6 +133,7 @@ fn label_writes_parquet_and_resumes() {
     let summary = label("labels_kept", &["--baseline-samples", "2"]);
     assert_eq!(summary["samples_per_pair"], 5, "{summary}");
     assert_eq!(summary["baseline_samples"], 0, "{summary}");
+    assert_eq!(summary["keep_baseline"], true, "{summary}");
     let moves = summary["lane_moves"].as_u64().unwrap();
     assert_eq!(summary["rows"].as_u64().unwrap(), 20 * 2 * 6 + moves);
     assert_eq!(summary["fidelity"]["sampled"]["all"]["n"], 100, "{summary}");
