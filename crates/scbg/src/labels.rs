@@ -613,8 +613,85 @@ fn shard_ranges(dataset: &PreparedDataset) -> Vec<std::ops::Range<usize>> {
         .collect()
 }
 
+/// The file in a label folder naming what its tables were labelled with (the options, the
+/// seed and the ensemble's size): a run resuming into the folder must ask for the same, or
+/// the tables would mix layouts ([`LabelOptions::keep_baseline`] changed the default layout
+/// in the thirty-third session).
+pub const LABEL_OPTIONS_FILE: &str = "label_options.json";
+
+/// Checks `run` against its folder's [`LABEL_OPTIONS_FILE`] (or writes it there before any
+/// table): a folder labelled with other options, or holding tables without the file, is
+/// refused with what differs, and nothing in it is touched.
+fn claim_label_folder(run: &LabelRun, predictors: usize) -> anyhow::Result<()> {
+    let path = run.out.join(LABEL_OPTIONS_FILE);
+    let mine = serde_json::json!({
+        "options": run.options,
+        "seed": run.seed,
+        "predictors": predictors,
+    });
+    if path.is_file() {
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("reading {}", path.display()))?;
+        let theirs: serde_json::Value = serde_json::from_str(&text)
+            .with_context(|| format!("{}: not the JSON a label run writes", path.display()))?;
+        let flat = |v: &serde_json::Value| -> BTreeMap<String, String> {
+            let mut out = BTreeMap::new();
+            if let Some(o) = v.as_object() {
+                for (k, x) in o {
+                    match x.as_object() {
+                        Some(inner) if k == "options" => {
+                            for (ik, ix) in inner {
+                                out.insert(ik.clone(), ix.to_string());
+                            }
+                        }
+                        _ => {
+                            out.insert(k.clone(), x.to_string());
+                        }
+                    }
+                }
+            }
+            out
+        };
+        let (a, b) = (flat(&mine), flat(&theirs));
+        let differ: Vec<String> = a
+            .keys()
+            .chain(b.keys())
+            .collect::<std::collections::BTreeSet<_>>()
+            .into_iter()
+            .filter(|k| a.get(*k) != b.get(*k))
+            .map(|k| {
+                let show = |m: &BTreeMap<String, String>| m.get(k).cloned().unwrap_or("-".into());
+                format!("{k}: {} there, {} asked", show(&b), show(&a))
+            })
+            .collect();
+        ensure_request!(
+            differ.is_empty(),
+            "{} was labelled with other options ({}): label into another folder, or delete it to relabel",
+            run.out.display(),
+            differ.join("; ")
+        );
+        return Ok(());
+    }
+    let has_tables = std::fs::read_dir(&run.out)
+        .with_context(|| format!("reading {}", run.out.display()))?
+        .filter_map(Result::ok)
+        .any(|e| {
+            let name = e.file_name().to_string_lossy().into_owned();
+            name.starts_with("labels-") && name.ends_with(".parquet")
+        });
+    ensure_request!(
+        !has_tables,
+        "{} holds label tables but no {LABEL_OPTIONS_FILE} (labelled before the thirty-third session, whose default layout differs, see --keep-baseline-samples): label into another folder, or delete its tables to relabel",
+        run.out.display()
+    );
+    scbg_base::atomic::write_json(&path, &mine)
+        .with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
 /// `scbg label`: labels every pair role of the cache, one Parquet table per shard (a shard
-/// whose table exists is read back, not labelled again), then the histogram and summary.
+/// whose table exists is read back, not labelled again, if [`LABEL_OPTIONS_FILE`] shows the
+/// same options), then the histogram and summary.
 pub fn label_cache(
     run: &LabelRun,
     progress: &dyn Progress,
@@ -643,6 +720,7 @@ pub fn label_cache(
         .map(crate::synth::read_ground_truth)
         .transpose()?;
     std::fs::create_dir_all(&run.out).with_context(|| format!("creating {}", run.out.display()))?;
+    claim_label_folder(run, members.len())?;
     // The oracle scores ψ toward A alone: ψ_true only for the paper's pair audience.
     let index = truth
         .as_deref()

@@ -81,6 +81,46 @@ fn label_writes_parquet_and_resumes() {
         std::fs::metadata(&parquet).unwrap().modified().unwrap(),
         before
     );
+    // A run asking for other options (the default layout) is refused, naming what differs,
+    // and the folder's tables are left alone; so is a folder of tables without the record of
+    // their options (labelled before it existed).
+    let relabel = |out: &str| {
+        scbg(&[
+            "label",
+            "--model",
+            &p("model"),
+            "--data",
+            &p("cache"),
+            "--out",
+            &p(out),
+            "--samples",
+            "3",
+        ])
+    };
+    let other = relabel("labels");
+    let err = String::from_utf8_lossy(&other.stderr);
+    assert!(!other.status.success(), "{err}");
+    assert!(
+        err.contains("other options") && err.contains("keep_baseline: false there, true asked"),
+        "{err}"
+    );
+    assert!(err.contains("lane_move_steps: 0 there, 30 asked"), "{err}");
+    assert_eq!(
+        std::fs::metadata(&parquet).unwrap().modified().unwrap(),
+        before
+    );
+    std::fs::create_dir_all(p("labels_unrecorded")).unwrap();
+    std::fs::copy(
+        &parquet,
+        dir.path().join("labels_unrecorded/labels-00000.parquet"),
+    )
+    .unwrap();
+    let unrecorded = relabel("labels_unrecorded");
+    let err = String::from_utf8_lossy(&unrecorded.stderr);
+    assert!(
+        !unrecorded.status.success() && err.contains("no label_options.json"),
+        "{err}"
+    );
     // ψ toward B's neighbours (issue 12): same rows, each counting its audience; a bad radius
     // is refused before anything is written.
     let bad = scbg(&[
