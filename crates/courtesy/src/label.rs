@@ -334,14 +334,11 @@ pub fn label_role(
     let t = a.0.condition_future_valid.len();
     let mut sampled = b_mixture.sample(samples, sample_noise, rng);
     // The baseline's futures are drawn after the labelled ones either way (the same draws);
-    // kept, they are labelled futures like the first `samples`.
-    let baseline = b_mixture.sample(options.baseline_futures(), sample_noise, rng);
-    let kept_baseline = if options.keep_baseline {
-        sampled.extend_from_slice(&baseline);
-        true
-    } else {
-        false
-    };
+    // kept, they are labelled futures like the first `samples` (and `baseline` is left empty).
+    let mut baseline = b_mixture.sample(options.baseline_futures(), sample_noise, rng);
+    if options.keep_baseline {
+        sampled.append(&mut baseline);
+    }
     let moves: Vec<Vec<[f32; 2]>> = if options.lane_move_steps > 0 {
         let path = scbg_features::lane_path_points(b);
         // A at the current step in B's frame, driving on at its current velocity: a move must
@@ -363,9 +360,7 @@ pub fn label_role(
     let n_sampled = sampled.len();
     let n = 1 + n_sampled + moves.len();
     sampled.extend(moves);
-    if !kept_baseline {
-        sampled.extend(baseline);
-    }
+    sampled.extend(baseline);
     // Every future scored.
     let n_all = 1 + sampled.len();
     let mut cond = Vec::with_capacity(members.len() * n_all * t * 3);

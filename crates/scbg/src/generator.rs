@@ -350,7 +350,7 @@ fn psi_spread(examples: &[Example]) -> f32 {
 /// was, and the labelled lane moves after those ([`LabelOptions::lane_move_steps`]) are not
 /// samples of B's marginal, so the generator and range predictor do not learn from either
 /// (sample and rank chooses among both).
-fn without_lane_moves(examples: &[Example], samples: usize) -> std::borrow::Cow<'_, [Example]> {
+fn training_futures(examples: &[Example], samples: usize) -> std::borrow::Cow<'_, [Example]> {
     if examples.iter().all(|e| e.psi.len() <= 1 + samples) {
         return std::borrow::Cow::Borrowed(examples);
     }
@@ -372,7 +372,7 @@ pub fn train_variant(
 ) -> anyhow::Result<GeneratorCheckpoint> {
     let started = std::time::Instant::now();
     ensure_request!(!examples.is_empty(), "no labelled pairs to train on");
-    let examples = &*without_lane_moves(examples, s.labels.samples);
+    let examples = &*training_futures(examples, s.labels.samples);
     let device = &p.device;
     // Examples with A's context train a generator and range predictor that read
     // B's embedding ‖ A's context.
@@ -588,7 +588,7 @@ pub fn train_generator(
         }
     ));
     // The generator trains on the logged and first `samples` futures alone
-    // (`without_lane_moves`): kept baseline futures would only cost their lane moves' labels
+    // (`training_futures`): kept baseline futures would only cost their lane moves' labels
     // (and the oracle's scores), so the training split is labelled without them; `settings`
     // still records them for sample and rank at inference.
     let mut labelled = labelled_split(

@@ -620,72 +620,49 @@ fn shard_ranges(dataset: &PreparedDataset) -> Vec<std::ops::Range<usize>> {
 pub const LABEL_OPTIONS_FILE: &str = "label_options.json";
 
 /// Checks `run` against its folder's [`LABEL_OPTIONS_FILE`] (or writes it there before any
-/// table): a folder labelled with other options, or holding tables without the file, is
-/// refused with what differs, and nothing in it is touched.
-fn claim_label_folder(run: &LabelRun, predictors: usize) -> anyhow::Result<()> {
+/// of its `shards` tables): a folder labelled with other options, or holding tables without
+/// the file, is refused with what differs, and nothing in it is touched. The file is one flat
+/// object: the options' fields, `seed` and `predictors`.
+fn claim_label_folder(run: &LabelRun, predictors: usize, shards: usize) -> anyhow::Result<()> {
     let path = run.out.join(LABEL_OPTIONS_FILE);
-    let mine = serde_json::json!({
-        "options": run.options,
-        "seed": run.seed,
-        "predictors": predictors,
-    });
-    if path.is_file() {
-        let text = std::fs::read_to_string(&path)
-            .with_context(|| format!("reading {}", path.display()))?;
-        let theirs: serde_json::Value = serde_json::from_str(&text)
-            .with_context(|| format!("{}: not the JSON a label run writes", path.display()))?;
-        let flat = |v: &serde_json::Value| -> BTreeMap<String, String> {
-            let mut out = BTreeMap::new();
-            if let Some(o) = v.as_object() {
-                for (k, x) in o {
-                    match x.as_object() {
-                        Some(inner) if k == "options" => {
-                            for (ik, ix) in inner {
-                                out.insert(ik.clone(), ix.to_string());
-                            }
-                        }
-                        _ => {
-                            out.insert(k.clone(), x.to_string());
-                        }
-                    }
-                }
-            }
-            out
-        };
-        let (a, b) = (flat(&mine), flat(&theirs));
-        let differ: Vec<String> = a
-            .keys()
-            .chain(b.keys())
-            .collect::<std::collections::BTreeSet<_>>()
-            .into_iter()
-            .filter(|k| a.get(*k) != b.get(*k))
-            .map(|k| {
-                let show = |m: &BTreeMap<String, String>| m.get(k).cloned().unwrap_or("-".into());
-                format!("{k}: {} there, {} asked", show(&b), show(&a))
-            })
-            .collect();
+    let mut mine = serde_json::to_value(run.options)?;
+    if let Some(o) = mine.as_object_mut() {
+        o.insert("seed".into(), run.seed.into());
+        o.insert("predictors".into(), predictors.into());
+    }
+    if !path.is_file() {
         ensure_request!(
-            differ.is_empty(),
-            "{} was labelled with other options ({}): label into another folder, or delete it to relabel",
-            run.out.display(),
-            differ.join("; ")
+            !(0..shards).any(|si| run.out.join(shard_table_name(si)).is_file()),
+            "{} holds label tables but no {LABEL_OPTIONS_FILE} (labelled before the thirty-third session, whose default layout differs, see --keep-baseline-samples): label into another folder, or delete its tables to relabel",
+            run.out.display()
         );
+        scbg_base::atomic::write_json(&path, &mine)
+            .with_context(|| format!("writing {}", path.display()))?;
         return Ok(());
     }
-    let has_tables = std::fs::read_dir(&run.out)
-        .with_context(|| format!("reading {}", run.out.display()))?
-        .filter_map(Result::ok)
-        .any(|e| {
-            let name = e.file_name().to_string_lossy().into_owned();
-            name.starts_with("labels-") && name.ends_with(".parquet")
-        });
-    ensure_request!(
-        !has_tables,
-        "{} holds label tables but no {LABEL_OPTIONS_FILE} (labelled before the thirty-third session, whose default layout differs, see --keep-baseline-samples): label into another folder, or delete its tables to relabel",
-        run.out.display()
+    let text =
+        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let theirs: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not the JSON a label run writes", path.display()))?;
+    let (empty, field) = (serde_json::Map::new(), |v: Option<&serde_json::Value>| {
+        v.map_or("-".to_string(), ToString::to_string)
+    });
+    let (a, b) = (
+        mine.as_object().unwrap_or(&empty),
+        theirs.as_object().unwrap_or(&empty),
     );
-    scbg_base::atomic::write_json(&path, &mine)
-        .with_context(|| format!("writing {}", path.display()))?;
+    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
+    let differ: Vec<String> = keys
+        .into_iter()
+        .filter(|k| a.get(*k) != b.get(*k))
+        .map(|k| format!("{k}: {} there, {} asked", field(b.get(k)), field(a.get(k))))
+        .collect();
+    ensure_request!(
+        differ.is_empty(),
+        "{} was labelled with other options ({}): label into another folder, or delete it to relabel",
+        run.out.display(),
+        differ.join("; ")
+    );
     Ok(())
 }
 
@@ -720,14 +697,15 @@ pub fn label_cache(
         .map(crate::synth::read_ground_truth)
         .transpose()?;
     std::fs::create_dir_all(&run.out).with_context(|| format!("creating {}", run.out.display()))?;
-    claim_label_folder(run, members.len())?;
+    let shards = shard_ranges(&dataset);
+    claim_label_folder(run, members.len(), shards.len())?;
     // The oracle scores ψ toward A alone: ψ_true only for the paper's pair audience.
     let index = truth
         .as_deref()
         .filter(|_| run.options.audience == scbg_courtesy::Audience::Pair)
         .map(crate::fidelity::TruthIndex::new);
     let mut rows = Vec::new();
-    for (si, range) in shard_ranges(&dataset).into_iter().enumerate() {
+    for (si, range) in shards.into_iter().enumerate() {
         if si % run.num_shards != run.shard_index {
             continue;
         }

@@ -256,8 +256,9 @@ const PLAN_SPEED_WINDOW_STEPS: usize = 10;
 
 /// The least speed, m/s, that a plan of positions `step_s` seconds apart comes down to soon:
 /// the least average over 1 s windows starting from its point `from` (where it has me now)
-/// to [`PLAN_SLOWING_S`] after it; `None` when no whole window is left. A follower that gap acceptance lets me cut
-/// in front of must stay behind me at that speed, not only at my current one.
+/// to [`PLAN_SLOWING_S`] after it; `None` when no whole window is left. A follower that gap
+/// acceptance lets me cut in front of must stay behind me at that speed, not only at my
+/// current one.
 pub(crate) fn planned_gap_speed_mps(plan: &[[f64; 2]], from: usize, step_s: f64) -> Option<f64> {
     let w = PLAN_SPEED_WINDOW_STEPS;
     let last = plan.len().checked_sub(w + 1)?;

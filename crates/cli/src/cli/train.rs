@@ -50,8 +50,9 @@ pub struct EstimatorArgs {
     /// Also label and keep the --baseline-samples futures (after the --samples ones; lane
     /// moves then come from all of them): sample and rank chooses among every future E[r(Y_A)
     /// | x] scores (their ψ costs no extra forward, their lane moves add some); the generator
-    /// and range predictor still train on the first --samples. `false`: the earlier layout. Over four data seeds, sample and rank's control in truth rose from
-    /// 0.49 to 0.53 with them (default since the thirty-third session; BENCHMARKS.md).
+    /// and range predictor still train on the first --samples. `false`: the earlier layout.
+    /// Over four data seeds, sample and rank's control in truth rose from 0.49 to 0.53 with
+    /// them (default since the thirty-third session; BENCHMARKS.md).
     #[arg(
         long,
         default_value_t = true,

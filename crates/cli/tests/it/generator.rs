@@ -10,9 +10,9 @@ fn label_writes_parquet_and_resumes() {
     let p = |s: &str| dir.path().join(s).display().to_string();
     tiny_trained_model(dir.path(), 20, 8);
     let gt = format!("{}/ground_truth.jsonl", p("synth"));
-    // `scbg label` of the tiny model's cache with 3 sampled futures and the ground truth, and
-    // more flags; its summary.json.
-    let label = |out: &str, more: &[&str]| -> Value {
+    // `scbg label` of the tiny model's cache with 3 sampled futures and more flags, into
+    // `out`; `label` adds the ground truth, expects success and returns its summary.json.
+    let run_label = |out: &str, more: &[&str]| {
         let (out_dir, model, cache) = (p(out), p("model"), p("cache"));
         let mut args = vec![
             "label",
@@ -26,8 +26,20 @@ fn label_writes_parquet_and_resumes() {
             "3",
         ];
         args.extend_from_slice(more);
-        args.extend(["--ground-truth", gt.as_str()]);
-        scbg_ok(&args);
+        scbg(&args)
+    };
+    let label = |out: &str, more: &[&str]| -> Value {
+        let more: Vec<&str> = more
+            .iter()
+            .copied()
+            .chain(["--ground-truth", &gt])
+            .collect();
+        let done = run_label(out, &more);
+        assert!(
+            done.status.success(),
+            "{}",
+            String::from_utf8_lossy(&done.stderr)
+        );
         serde_json::from_str(
             &std::fs::read_to_string(dir.path().join(out).join("summary.json")).unwrap(),
         )
@@ -62,21 +74,7 @@ fn label_writes_parquet_and_resumes() {
     assert_eq!(&bytes[..4], b"PAR1");
     // A second run reads the finished shard instead of relabelling it.
     let before = std::fs::metadata(&parquet).unwrap().modified().unwrap();
-    scbg_ok(&[
-        "label",
-        "--model",
-        &p("model"),
-        "--data",
-        &p("cache"),
-        "--out",
-        &p("labels"),
-        "--samples",
-        "3",
-        "--label-lane-move-steps",
-        "0",
-        "--keep-baseline-samples",
-        "false",
-    ]);
+    assert!(run_label("labels", &old_layout).status.success());
     assert_eq!(
         std::fs::metadata(&parquet).unwrap().modified().unwrap(),
         before
@@ -84,20 +82,7 @@ fn label_writes_parquet_and_resumes() {
     // A run asking for other options (the default layout) is refused, naming what differs,
     // and the folder's tables are left alone; so is a folder of tables without the record of
     // their options (labelled before it existed).
-    let relabel = |out: &str| {
-        scbg(&[
-            "label",
-            "--model",
-            &p("model"),
-            "--data",
-            &p("cache"),
-            "--out",
-            &p(out),
-            "--samples",
-            "3",
-        ])
-    };
-    let other = relabel("labels");
+    let other = run_label("labels", &[]);
     let err = String::from_utf8_lossy(&other.stderr);
     assert!(!other.status.success(), "{err}");
     assert!(
@@ -115,7 +100,7 @@ fn label_writes_parquet_and_resumes() {
         dir.path().join("labels_unrecorded/labels-00000.parquet"),
     )
     .unwrap();
-    let unrecorded = relabel("labels_unrecorded");
+    let unrecorded = run_label("labels_unrecorded", &[]);
     let err = String::from_utf8_lossy(&unrecorded.stderr);
     assert!(
         !unrecorded.status.success() && err.contains("no label_options.json"),
