@@ -459,6 +459,10 @@ fn label_options(
     options.baseline_samples = estimator.baseline_samples;
     options.lane_move_steps = estimator.label_lane_move_steps;
     options.keep_baseline = estimator.keep_baseline_samples;
+    options.lane_move_room = labels::lane_move_room(
+        estimator.lane_move_room_braking,
+        estimator.lane_move_room_reaction,
+    )?;
     Ok(options)
 }
 

@@ -5,7 +5,7 @@ use burn::tensor::{Device, Tensor, TensorData};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use scbg_features::{
-    AgentSample, FeatureConfig, FeatureStats, PreparedScene, SampleBuilder, Window,
+    AgentSample, FeatureConfig, FeatureStats, FollowerRoom, PreparedScene, SampleBuilder, Window,
 };
 use scbg_model::{Batch, Mixture, Mode, Multipath};
 use scbg_scene::Pose2;
@@ -266,6 +266,17 @@ pub struct LabelOptions {
     /// | x] and dropped.
     #[serde(default)]
     pub keep_baseline: bool,
+    /// What a lane move ([`LabelOptions::lane_move_steps`]) may ask of A when it enters A's
+    /// lane ([`scbg_features::leaves_room`]). `scbg label` and the demo take
+    /// [`FollowerRoom::HARD_BRAKING`] since the thirty-fourth session: MOBIL's polite limit
+    /// ([`FollowerRoom::MOBIL_SAFE`], the default of a serialised config without the field)
+    /// dropped the boldest cut-ins, which are the discourteous end of what B does.
+    #[serde(default = "mobil_safe")]
+    pub lane_move_room: FollowerRoom,
+}
+
+fn mobil_safe() -> FollowerRoom {
+    FollowerRoom::MOBIL_SAFE
 }
 
 impl LabelOptions {
@@ -350,7 +361,7 @@ pub fn label_role(
         sampled
             .iter()
             .filter_map(|f| scbg_features::lane_move(f, &path, options.lane_move_steps))
-            .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity))
+            .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity, options.lane_move_room))
             .collect()
     } else {
         Vec::new()

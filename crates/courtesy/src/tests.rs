@@ -358,6 +358,7 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
             baseline_samples: 0,
             lane_move_steps: 0,
             keep_baseline: false,
+            lane_move_room: scbg_features::FollowerRoom::HARD_BRAKING,
         };
         let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(9);
         let all = label_role(
@@ -434,6 +435,7 @@ fn baseline_samples_widen_the_marginal_estimate_and_label_only_the_first_futures
         baseline_samples,
         lane_move_steps: 0,
         keep_baseline: false,
+        lane_move_room: scbg_features::FollowerRoom::HARD_BRAKING,
     };
     let label = |o| {
         let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(11);
@@ -499,6 +501,7 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
         baseline_samples: 3,
         lane_move_steps,
         keep_baseline: false,
+        lane_move_room: scbg_features::FollowerRoom::HARD_BRAKING,
     };
     let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(11);
     // The futures label_pair draws (the same stream), in B's frame.
@@ -534,7 +537,14 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
     let moved: Vec<_> = drawn
         .iter()
         .filter_map(|f| scbg_features::lane_move(f, &path, 30))
-        .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity))
+        .filter(|m| {
+            scbg_features::leaves_room(
+                m,
+                a_now[0],
+                a_velocity,
+                scbg_features::FollowerRoom::HARD_BRAKING,
+            )
+        })
         .collect();
     assert!(!moved.is_empty() && moved.len() <= 4);
     let plain = label_pair(&model, &a, &b, &mixture, options(0), &mut rng(), &device);
@@ -564,7 +574,14 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
     let moves_all: Vec<_> = drawn_all
         .iter()
         .filter_map(|f| scbg_features::lane_move(f, &path, 30))
-        .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity))
+        .filter(|m| {
+            scbg_features::leaves_room(
+                m,
+                a_now[0],
+                a_velocity,
+                scbg_features::FollowerRoom::HARD_BRAKING,
+            )
+        })
         .collect();
     let kept = LabelOptions {
         keep_baseline: true,
@@ -624,6 +641,7 @@ fn an_ensemble_scores_the_first_members_futures_with_every_member_and_averages()
         baseline_samples: 0,
         lane_move_steps: 0,
         keep_baseline: false,
+        lane_move_room: scbg_features::FollowerRoom::HARD_BRAKING,
     };
     let rng = || rand_pcg::Pcg64Mcg::seed_from_u64(4);
     let label = |members: &[(&Multipath, &FeatureStats)]| {

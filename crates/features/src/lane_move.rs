@@ -107,12 +107,36 @@ pub fn lane_move(mode: &[[f32; 2]], path: &[[f32; 2]], steps: usize) -> Option<V
     )
 }
 
-/// The hardest braking a lane move may ask of a follower in its new lane, m/s² (MOBIL's
-/// safe deceleration, Kesting, Treiber and Helbing 2007).
-pub const SAFE_BRAKING_MPS2: f32 = 4.0;
+/// What a lane move may ask of a follower in its new lane ([`leaves_room`]): to brake at most
+/// `braking_mps2` after `reaction_s`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FollowerRoom {
+    /// The hardest braking asked of the follower, m/s².
+    pub braking_mps2: f32,
+    /// The follower's reaction time before it brakes, seconds.
+    pub reaction_s: f32,
+}
 
-/// A follower's reaction time in [`leaves_room`], seconds.
-const FOLLOWER_REACTION_S: f32 = 1.0;
+impl FollowerRoom {
+    /// MOBIL's safe deceleration (Kesting, Treiber and Helbing 2007), 4 m/s² after 1 s: a
+    /// polite driver's limit. The labels' check before the thirty-fourth session (and of every
+    /// serialised label config without the field): it drops the boldest cut-ins, which are
+    /// the discourteous end of what B does.
+    pub const MOBIL_SAFE: Self = Self {
+        braking_mps2: 4.0,
+        reaction_s: 1.0,
+    };
+
+    /// Hard braking, 7 m/s² after 0.5 s: the most a cut-in of the least courteous driver asks
+    /// of the follower. It is the synthetic world's own least courteous B
+    /// (`scbg_synth::LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2`, `CUT_IN_REACTION_S`; a test of the
+    /// application library keeps the two equal) and the closed loop's gap acceptance, so a
+    /// move it keeps is one a real (if rude) driver makes; what it drops is a crash.
+    pub const HARD_BRAKING: Self = Self {
+        braking_mps2: 7.0,
+        reaction_s: 0.5,
+    };
+}
 
 /// A move has entered another vehicle's lane when their centres are less than this apart
 /// sideways: two boxes about 2 m wide are then less than half a metre apart, and one passing
@@ -127,13 +151,18 @@ const CAR_LENGTH_M: f32 = 5.0;
 /// velocity `other_velocity_mps` (same frame) when it enters that vehicle's lane: at the first
 /// step it moves from outside the other's lane into it, it must not be beside it (within a
 /// car's length), and if it is ahead, the other must be able to stay behind by braking at
-/// most [`SAFE_BRAKING_MPS2`] after [`FOLLOWER_REACTION_S`] (from the closing speed Δv it
-/// needs `Δv · t_r + Δv² / 2b` of gap). MOBIL's safety criterion at the moment of the lane
+/// most `room.braking_mps2` after `room.reaction_s` (from the closing speed Δv it needs
+/// `Δv · t_r + Δv² / 2b` of gap). MOBIL's safety criterion at the moment of the lane
 /// change, asked of a completed lane move toward the one vehicle the labels know (A): a move
 /// that cuts in slowly just ahead of a fast A is not a driver's choice but a crash. What
 /// happens after the move is the follower's to handle; a future that never enters the other's
 /// lane (or is in it already at the current step) always leaves room.
-pub fn leaves_room(mine: &[[f32; 2]], other_xy: [f32; 2], other_velocity_mps: [f32; 2]) -> bool {
+pub fn leaves_room(
+    mine: &[[f32; 2]],
+    other_xy: [f32; 2],
+    other_velocity_mps: [f32; 2],
+    room: FollowerRoom,
+) -> bool {
     const STEP_S: f32 = 0.1;
     let speed = other_velocity_mps[0].hypot(other_velocity_mps[1]);
     // A standing vehicle's heading is unknown here: take the frame's x axis.
@@ -166,8 +195,7 @@ pub fn leaves_room(mine: &[[f32; 2]], other_xy: [f32; 2], other_velocity_mps: [f
         }
         if along > 0.0 && speed > my_speed {
             let closing = speed - my_speed;
-            let needed =
-                closing * FOLLOWER_REACTION_S + closing * closing / (2.0 * SAFE_BRAKING_MPS2);
+            let needed = closing * room.reaction_s + closing * closing / (2.0 * room.braking_mps2);
             if along - CAR_LENGTH_M < needed {
                 return false;
             }
@@ -195,7 +223,8 @@ mod tests {
     }
 
     /// A lane move just ahead of a faster follower in its new lane leaves it no room; the same
-    /// move far enough ahead, or with the follower slower, does.
+    /// move far enough ahead, or with the follower slower, does. Hard braking leaves room to
+    /// a bolder cut-in than MOBIL's safe deceleration.
     #[test]
     fn a_lane_move_must_leave_the_follower_room() {
         // Mine: 10 m/s along x, moving 3.5 m left over 3 s (into the follower's lane).
@@ -206,20 +235,39 @@ mod tests {
                 [i as f32, LANE_MOVE_M * w]
             })
             .collect();
-        // A follower in the left lane 40 m behind at 25 m/s: when the move enters its lane
-        // (1.1 s, 2.5 m beside it) the gap is 18.5 m, and closing at 15 m/s it needs 43 m.
-        assert!(!leaves_room(&mine, [-40.0, LANE_MOVE_M], [25.0, 0.0]));
-        // 150 m behind at 25 m/s: it has time.
-        assert!(leaves_room(&mine, [-150.0, LANE_MOVE_M], [25.0, 0.0]));
-        // 15 m behind at 10 m/s: no closing speed, and 15 m apart.
-        assert!(leaves_room(&mine, [-15.0, LANE_MOVE_M], [10.0, 0.0]));
-        // Alongside at my speed: the move runs into it.
-        assert!(!leaves_room(&mine, [0.0, LANE_MOVE_M], [10.0, 0.0]));
-        // In the lane to the right, whatever it does, it is not in my way.
-        assert!(leaves_room(&mine, [-15.0, -LANE_MOVE_M], [25.0, 0.0]));
-        // Leaving the follower's lane (starting in it, 10 m ahead) is no entry.
-        let leaving: Vec<[f32; 2]> = mine.iter().map(|p| [p[0], -p[1]]).collect();
-        assert!(leaves_room(&leaving, [-10.0, 0.0], [25.0, 0.0]));
+        for room in [FollowerRoom::MOBIL_SAFE, FollowerRoom::HARD_BRAKING] {
+            let leaves = |xy, v| leaves_room(&mine, xy, v, room);
+            // A follower in the left lane 40 m behind at 25 m/s: when the move enters its
+            // lane (1.1 s, 2.5 m beside it) the gap is 18.5 m, and closing at 15 m/s it needs
+            // 43 m (MOBIL) or 23.6 m (hard braking).
+            assert!(!leaves([-40.0, LANE_MOVE_M], [25.0, 0.0]));
+            // 150 m behind at 25 m/s: it has time.
+            assert!(leaves([-150.0, LANE_MOVE_M], [25.0, 0.0]));
+            // 15 m behind at 10 m/s: no closing speed, and 15 m apart.
+            assert!(leaves([-15.0, LANE_MOVE_M], [10.0, 0.0]));
+            // Alongside at my speed: the move runs into it.
+            assert!(!leaves([0.0, LANE_MOVE_M], [10.0, 0.0]));
+            // In the lane to the right, whatever it does, it is not in my way.
+            assert!(leaves([-15.0, -LANE_MOVE_M], [25.0, 0.0]));
+            // Leaving the follower's lane (starting in it, 10 m ahead) is no entry.
+            let leaving: Vec<[f32; 2]> = mine.iter().map(|p| [p[0], -p[1]]).collect();
+            assert!(leaves_room(&leaving, [-10.0, 0.0], [25.0, 0.0], room));
+        }
+        // 50 m behind at 25 m/s: a 28.5 m gap, room for a follower that brakes hard, not for
+        // MOBIL's polite one.
+        let follower = ([-50.0, LANE_MOVE_M], [25.0, 0.0]);
+        assert!(!leaves_room(
+            &mine,
+            follower.0,
+            follower.1,
+            FollowerRoom::MOBIL_SAFE
+        ));
+        assert!(leaves_room(
+            &mine,
+            follower.0,
+            follower.1,
+            FollowerRoom::HARD_BRAKING
+        ));
     }
 
     /// A mode that drifts 1.5 m right along a curved lane comes out of `lane_move` a full

@@ -31,7 +31,7 @@ mod window;
 pub use build::PrepareError;
 pub use builder::SampleBuilder;
 pub use codec::DecodeError;
-pub use lane_move::{LANE_MOVE_M, SAFE_BRAKING_MPS2, lane_move, lane_path_points, leaves_room};
+pub use lane_move::{FollowerRoom, LANE_MOVE_M, lane_move, lane_path_points, leaves_room};
 pub use lane_path::{
     LANE_PATH_BEHIND_M, LANE_PATH_POINTS, LANE_PATH_SPACING_M, lane_path, lane_path_arc_m,
 };

@@ -94,6 +94,7 @@ fn labelled(
             baseline_samples: 0,
             lane_move_steps: 0,
             keep_baseline: false,
+            lane_move_room: scbg_features::FollowerRoom::HARD_BRAKING,
         },
         seed,
         device,

@@ -146,7 +146,30 @@ fn label_writes_parquet_and_resumes() {
     // moves of the sampled ones, scored by the oracle apart from them.
     let summary = label("labels_moves", &["--keep-baseline-samples", "false"]);
     assert_eq!(summary["lane_move_steps"], 30, "{summary}");
+    assert_eq!(summary["lane_move_room"]["braking_mps2"], 7.0, "{summary}");
+    assert_eq!(summary["lane_move_room"]["reaction_s"], 0.5, "{summary}");
     let moves = summary["lane_moves"].as_u64().unwrap();
+    // MOBIL's polite limit leaves A more room, so it keeps no more moves; a braking of 0 is
+    // refused before anything is written.
+    let polite = label(
+        "labels_polite",
+        &[
+            "--keep-baseline-samples",
+            "false",
+            "--lane-move-room-braking",
+            "4",
+            "--lane-move-room-reaction",
+            "1",
+        ],
+    );
+    assert!(polite["lane_moves"].as_u64().unwrap() <= moves, "{polite}");
+    let bad = run_label("labels_no_room", &["--lane-move-room-braking", "0"]);
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && err.contains("--lane-move-room-braking 0"),
+        "{err}"
+    );
+    assert!(!dir.path().join("labels_no_room").exists());
     assert_eq!(summary["rows"].as_u64().unwrap(), 20 * 2 * 4 + moves);
     let fidelity = &summary["fidelity"];
     assert_eq!(fidelity["sampled"]["all"]["n"], 60, "{summary}");

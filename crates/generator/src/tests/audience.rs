@@ -26,6 +26,7 @@ fn labelled_toward_neighbours(
             baseline_samples: 0,
             lane_move_steps: 0,
             keep_baseline: false,
+            lane_move_room: scbg_features::FollowerRoom::HARD_BRAKING,
         },
         4,
         device,

@@ -35,6 +35,7 @@ fn untrained_scbg(
             baseline_samples: 0,
             lane_move_steps: 0,
             keep_baseline: false,
+            lane_move_room: scbg_features::FollowerRoom::HARD_BRAKING,
         },
         policy,
     };
