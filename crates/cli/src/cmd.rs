@@ -309,6 +309,7 @@ fn loop_config(
         others: a.others.unwrap_or(others),
         safety_guard: !a.no_safety_guard,
         lane_keeping_m: (!a.no_lane_keeping).then_some(a.lane_keeping_m),
+        take_right_of_way: !a.no_right_of_way,
         ..Default::default()
     }
 }

@@ -20,6 +20,32 @@ const CONFLICT_STEP_S: f64 = 0.5;
 /// BENCHMARKS.md.)
 const CONFLICT_WINDOW_S: f64 = 2.0;
 
+/// Margin beyond its stopping distance a yielding agent must have before my corridor, m.
+const YIELD_MARGIN_M: f64 = 2.0;
+
+/// Whether `o`, crossing my `path` ahead of `s_m` (at 45° or more) and not in my corridor yet (`half`: its
+/// half-width plus mine and a margin), can still stop before it at constant velocity: braking
+/// at most [`LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2`] after [`CUT_IN_REACTION_S`], with
+/// [`YIELD_MARGIN_M`] to spare, or it does not reach my corridor within 5 s at all. What the
+/// synthetic world's least courteous B asks of A when it takes the way.
+fn yields_in_time(path: &RefPath, s_m: f64, o: &AgentState, half: f64) -> bool {
+    let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
+    let v = vx.hypot(vy);
+    let probe = |tau: f64| path.project(o.x_m + vx * tau, o.y_m + vy * tau, Some(s_m + 25.0));
+    let (s_now, d_now) = probe(0.0);
+    let (sn, cs) = path.heading_at(s_now).sin_cos();
+    let crossing = ((vx * cs + vy * sn) / v).abs() <= std::f64::consts::FRAC_1_SQRT_2;
+    if !crossing || d_now.abs() <= half {
+        return false;
+    }
+    let needed =
+        v * CUT_IN_REACTION_S + v * v / (2.0 * LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2) + YIELD_MARGIN_M;
+    (1..=50)
+        .map(|k| 0.1 * f64::from(k))
+        .find(|&tau| probe(tau).1.abs() <= half)
+        .is_none_or(|tau| v * tau >= needed)
+}
+
 /// A crossing conflict ahead of an agent at `s_m` on `path` that follows `arrival` (the time,
 /// s from now, at which it reaches each arclength, increasing; `None` beyond where its plan
 /// stops): another agent whose position extrapolated at constant velocity 0.5, 1, …, 5 s ahead
@@ -36,12 +62,16 @@ const CONFLICT_WINDOW_S: f64 = 2.0;
 /// stops for a conflict inside another agent's way: when its box, moved along the path,
 /// reaches the way of a crossing agent (one heading at 45° or more to the path; the band
 /// around its position continued along its velocity) before the conflict, it stops before
-/// that way instead if it can at 3 m/s² (don't block the box).
+/// that way instead if it can at 3 m/s² (don't block the box). A `yielding` agent (one of
+/// `others`, known to yield to me, as the synthetic world's A yields to B) is no conflict while
+/// it crosses toward my corridor and can still stop before it braking as the world's least
+/// courteous B asks ([`yields_in_time`]): my plan then decides who goes first.
 pub(crate) fn crossing_conflict(
     path: &RefPath,
     s_m: f64,
     me: &AgentState,
     others: &[&AgentState],
+    yielding: Option<&AgentState>,
     arrival: impl Fn(f64) -> Option<f64>,
 ) -> Option<(f64, f64)> {
     let mut best: Option<(f64, f64)> = None;
@@ -66,6 +96,9 @@ pub(crate) fn crossing_conflict(
         let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
         // Where the other is at `tau` s from now, as (arclength, signed offset) on my path.
         let probe = |tau: f64| path.project(o.x_m + vx * tau, o.y_m + vy * tau, Some(s_m + 25.0));
+        if yielding.is_some_and(|y| std::ptr::eq(*o, y)) && yields_in_time(path, s_m, o, half) {
+            continue;
+        }
         // Whether the other, at `tau` s from now, is in my corridor while my box is on its way;
         // the bumper gap to that point if so.
         let conflict_at = |tau: f64, (s, d): (f64, f64)| -> Option<f64> {
@@ -433,7 +466,7 @@ mod tests {
         };
         let conflict = |t_cross: f64| {
             let other = crossing_at(t_cross);
-            crossing_conflict(&path, 0.0, &me, &[&other], arrival)
+            crossing_conflict(&path, 0.0, &me, &[&other], None, arrival)
         };
         // 1.5 s apart (a near miss the old 1 s window let through) and 4.5 s ahead (beyond
         // the old 3 s look-ahead) are conflicts; 3 s apart is not.
@@ -444,6 +477,29 @@ mod tests {
         }
         assert_eq!(conflict(6.0), None);
         assert_eq!(conflict(0.0), None, "it is through before I get there");
+    }
+
+    /// A crossing agent known to yield is no conflict while it can still stop before my
+    /// corridor braking at 7 m/s² after 0.5 s (with 2 m to spare: 14.1 m at 10 m/s); closer,
+    /// or not known to yield, it is one.
+    #[test]
+    fn a_yielding_crossing_agent_is_no_conflict_while_it_can_stop() {
+        let (me, path) = (me_along_x(), path_along_x());
+        // Driving +y at 10 m/s toward my path at x = 30 m, which I reach after 3 s; it gets
+        // there 1 or 1.5 s before me (a conflict), its centre 17.6 or 12.6 m from my corridor
+        // (2.4 m either side).
+        let far = crossing_y(30.0, -20.0, 10.0);
+        let near = crossing_y(30.0, -15.0, 10.0);
+        let conflict = |o: &AgentState, yielding: Option<&AgentState>| {
+            crossing_conflict(&path, 0.0, &me, &[o], yielding, arrival_at_10_mps)
+        };
+        assert!(conflict(&far, None).is_some());
+        assert_eq!(conflict(&far, Some(&far)), None);
+        assert!(conflict(&near, Some(&near)).is_some(), "too close to stop");
+        assert!(
+            conflict(&far, Some(&near)).is_some(),
+            "another agent yields"
+        );
     }
 
     #[test]
@@ -462,15 +518,15 @@ mod tests {
             ..me
         };
         let other = crossing_in(5.0);
-        assert!(crossing_conflict(&path, 0.0, &me, &[&other], stops_at(28.0)).is_some());
+        assert!(crossing_conflict(&path, 0.0, &me, &[&other], None, stops_at(28.0)).is_some());
         assert_eq!(
-            crossing_conflict(&path, 0.0, &me, &[&other], stops_at(20.0)),
+            crossing_conflict(&path, 0.0, &me, &[&other], None, stops_at(20.0)),
             None
         );
         // Passing through at 20 m/s (never stopping), I have left its way 3.3 s before it
         // comes.
         assert_eq!(
-            crossing_conflict(&path, 0.0, &me, &[&other], |s: f64| Some(s / 20.0)),
+            crossing_conflict(&path, 0.0, &me, &[&other], None, |s: f64| Some(s / 20.0)),
             None
         );
     }
@@ -483,7 +539,7 @@ mod tests {
         let me = me_along_x();
         let path = path_along_x();
         let fast = crossing_y(30.0, -26.25, 15.0);
-        assert!(crossing_conflict(&path, 0.0, &me, &[&fast], arrival_at_10_mps).is_some());
+        assert!(crossing_conflict(&path, 0.0, &me, &[&fast], None, arrival_at_10_mps).is_some());
     }
 
     #[test]
@@ -494,9 +550,9 @@ mod tests {
         let me = me_along_x();
         let path = path_along_x();
         let other = crossing_y(30.0, -50.0, 10.0);
-        assert!(crossing_conflict(&path, 0.0, &me, &[&other], stops_at(26.5)).is_some());
+        assert!(crossing_conflict(&path, 0.0, &me, &[&other], None, stops_at(26.5)).is_some());
         assert_eq!(
-            crossing_conflict(&path, 0.0, &me, &[&other], stops_at(24.0)),
+            crossing_conflict(&path, 0.0, &me, &[&other], None, stops_at(24.0)),
             None
         );
     }
@@ -510,17 +566,24 @@ mod tests {
         let conflict = crossing_y(40.0, -40.0, 10.0);
         let far_way = crossing_y(25.0, 55.0, -5.0);
         let (alone, _) =
-            crossing_conflict(&path, 0.0, &me, &[&conflict], arrival_at_10_mps).unwrap();
+            crossing_conflict(&path, 0.0, &me, &[&conflict], None, arrival_at_10_mps).unwrap();
         assert!((alone - (40.0 - 4.5)).abs() < 1.0, "gap {alone}");
-        let (both, v) =
-            crossing_conflict(&path, 0.0, &me, &[&conflict, &far_way], arrival_at_10_mps).unwrap();
+        let (both, v) = crossing_conflict(
+            &path,
+            0.0,
+            &me,
+            &[&conflict, &far_way],
+            None,
+            arrival_at_10_mps,
+        )
+        .unwrap();
         // (Where my front reaches the band around that way: 25 m less half my length and half
         // the band, 0.95 + 0.5 m.)
         assert!((both - (25.0 - 2.25 - 1.45)).abs() < 0.5, "gap {both}");
         assert_eq!(v, 0.0);
         // Without a conflict the far way alone does not stop me.
         assert_eq!(
-            crossing_conflict(&path, 0.0, &me, &[&far_way], arrival_at_10_mps),
+            crossing_conflict(&path, 0.0, &me, &[&far_way], None, arrival_at_10_mps),
             None
         );
         // An agent driving along my path (in the next lane, inside my corridor) has no
@@ -581,8 +644,15 @@ mod tests {
         let path = path_along_x();
         let conflict = crossing_y(40.0, -40.0, 10.0);
         let near_way = crossing_y(14.5, 55.0, -5.0);
-        let (gap, _) =
-            crossing_conflict(&path, 0.0, &me, &[&conflict, &near_way], arrival_at_10_mps).unwrap();
+        let (gap, _) = crossing_conflict(
+            &path,
+            0.0,
+            &me,
+            &[&conflict, &near_way],
+            None,
+            arrival_at_10_mps,
+        )
+        .unwrap();
         assert!((gap - (40.0 - 4.5)).abs() < 1.0, "gap {gap}");
     }
 
@@ -599,7 +669,7 @@ mod tests {
             velocity_x_mps: speed_mps,
             ..me
         };
-        let conflict = |v: f32| crossing_conflict(&path, 0.0, &me, &[&follower(v)], arrival);
+        let conflict = |v: f32| crossing_conflict(&path, 0.0, &me, &[&follower(v)], None, arrival);
         // Slower or as fast: braking would only bring it closer, so no conflict.
         assert_eq!(conflict(8.0), None);
         assert_eq!(conflict(10.0), None);
@@ -612,7 +682,7 @@ mod tests {
             x_m: 8.0,
             ..follower(8.0)
         };
-        assert!(crossing_conflict(&path, 0.0, &me, &[&ahead], arrival).is_some());
+        assert!(crossing_conflict(&path, 0.0, &me, &[&ahead], None, arrival).is_some());
     }
 
     #[test]

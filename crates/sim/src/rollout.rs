@@ -118,6 +118,20 @@ pub struct SimConfig {
     /// followed; `None` follows the plans as generated. Default 0.25 m.
     #[serde(default = "default_lane_keeping_m")]
     pub lane_keeping_m: Option<f64>,
+    /// The guard lets the synthetic world's B take the right of way at a crossing from a
+    /// reacting A (the world's rule, which yields to a B committed to cross, as the
+    /// counterfactual oracle's A does): A is no crossing conflict while it can still stop
+    /// before B's corridor braking at most 7 m/s² after 0.5 s, what the world's least
+    /// courteous B asks of it. B's plan then decides who goes first, so its courtesy shows in
+    /// the loop; without it the guard made every B yield like a courteous one. Only for the
+    /// world's B with A reactive in a synthetic scene (nobody else is known to yield). Default
+    /// true (also for a serialised config without the field).
+    #[serde(default = "yes")]
+    pub take_right_of_way: bool,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// The default lane keeping (0.25 m; what a serialised config without the field gets).
@@ -139,6 +153,7 @@ impl Default for SimConfig {
             limits: VehicleLimits::default(),
             safety_guard: true,
             lane_keeping_m: default_lane_keeping_m(),
+            take_right_of_way: true,
         }
     }
 }
@@ -606,9 +621,17 @@ impl Simulation {
                         .position(|&ps| ps >= s_at)
                         .map(|k| (k as f64 + 1.0 - k_now as f64) * STEP_SECS)
                 };
+                // The synthetic world's reacting A yields to its B (the oracle's rule).
+                let yielding = (self.config.take_right_of_way
+                    && self.config.ego == EgoMode::Reactive
+                    && self
+                        .synthetic
+                        .as_ref()
+                        .is_some_and(|syn| syn.b_track == c.track))
+                .then(|| current[self.ego]);
                 let leader = scbg_synth::closer(
                     leader_on_path(path, s, 0.0, me, &others),
-                    crossing_conflict(path, s, me, &others, arrival),
+                    crossing_conflict(path, s, me, &others, yielding, arrival),
                 );
                 if leader.is_some() {
                     a = a.min(GUARD.accel(c.bicycle.speed_mps, leader));

@@ -87,6 +87,79 @@ fn following_the_logged_plan_reproduces_the_synthetic_log() {
     assert!(worst_a < 2.0, "A strays {worst_a} m from its logged future");
 }
 
+/// Whether B passes the point where the logged paths of A and B come closest before A does.
+fn b_goes_first(log: &Scene) -> bool {
+    let (a, b) = (&log.tracks[0].states, &log.tracks[1].states);
+    let mut best = (f64::INFINITY, 0, 0);
+    for (i, p) in a.iter().enumerate().skip(10) {
+        for (j, q) in b.iter().enumerate().skip(10) {
+            let d = (p.x_m - q.x_m).hypot(p.y_m - q.y_m);
+            if d < best.0 {
+                best = (d, i, j);
+            }
+        }
+    }
+    best.2 < best.1
+}
+
+/// In 24 synthetic crossings with the guard on and B following its logged future: the scenes
+/// where the log's B goes first (A yielding), and those of them where B and A both stay within
+/// 2 m of their logged futures.
+fn logged_crossings_with_the_guard(take_right_of_way: bool) -> (usize, usize) {
+    let config = SimConfig {
+        others: OthersMode::Reactive,
+        take_right_of_way,
+        ..SimConfig::default()
+    };
+    let (mut first, mut followed) = (0, 0);
+    for index in 0..24 {
+        let scenario = Scenario::draw(7, index, &[Family::Crossing]);
+        let log = scenario.generate().scene;
+        if !b_goes_first(&log) {
+            continue;
+        }
+        first += 1;
+        let mut sim = Simulation::reset(
+            &log,
+            None,
+            &[B_ID],
+            config,
+            Some(scenario.clone().closed_loop()),
+        )
+        .unwrap();
+        let mut planner = LogPlanner {
+            log: &log,
+            every: 10,
+            calls: 0,
+        };
+        sim.run(&mut planner).unwrap();
+        let out = sim.to_scene();
+        let b = max_distance(&out.tracks[1].states, &log.tracks[1].states);
+        let a = max_distance(&out.tracks[0].states, &log.tracks[0].states);
+        if b < 2.0 && a < 2.0 {
+            followed += 1;
+        }
+    }
+    (first, followed)
+}
+
+/// The guard lets the world's B take the way from a reacting A that can still stop: a B that
+/// goes first in the log does so in the loop too, A yielding as in the log. Without the right
+/// of way the guard holds B back for A, as if B were courteous. (9 of the 24 crossings have B
+/// first: 8 followed with the right of way, 5 without; the ninth asks A to brake harder than
+/// 7 m/s².)
+#[test]
+fn with_the_right_of_way_a_logged_b_that_goes_first_still_does() {
+    let (first, followed) = logged_crossings_with_the_guard(true);
+    assert!(first >= 6, "only {first} crossings where B goes first");
+    assert!(followed + 1 >= first, "{followed} of {first} followed");
+    let (_, held_back) = logged_crossings_with_the_guard(false);
+    assert!(
+        held_back + 2 <= followed,
+        "{held_back} followed without the right of way"
+    );
+}
+
 #[test]
 fn idm_world_and_external_ego() {
     let log = scbg_synth::generate(4, 1, &Family::ALL).scene;

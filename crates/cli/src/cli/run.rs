@@ -22,6 +22,11 @@ pub struct LoopArgs {
     /// crossing conflicts, no steering bound beside another agent).
     #[arg(long)]
     pub no_safety_guard: bool,
+    /// Let the guard hold the synthetic world's B back for a reacting A at crossings, as if B
+    /// were courteous, instead of letting B's plan take the right of way while A can still
+    /// stop braking at most 7 m/s² (the default since the thirty-fourth session; BENCHMARKS.md).
+    #[arg(long)]
+    pub no_right_of_way: bool,
     /// Pull every plan point to within this many metres of the nearest car-lane centre line
     /// before it is followed (lane keeping).
     #[arg(long, default_value_t = scbg::sim::DEFAULT_LANE_KEEPING_M)]
