@@ -136,6 +136,24 @@ impl FollowerRoom {
         braking_mps2: 7.0,
         reaction_s: 0.5,
     };
+
+    /// The room itself if it is one: a finite braking above 0 and a finite reaction time of at
+    /// least 0; otherwise what is wrong.
+    pub fn checked(self) -> Result<Self, String> {
+        if !(self.braking_mps2.is_finite() && self.braking_mps2 > 0.0) {
+            return Err(format!(
+                "braking_mps2 {}: expected a finite number of m/s² above 0",
+                self.braking_mps2
+            ));
+        }
+        if !(self.reaction_s.is_finite() && self.reaction_s >= 0.0) {
+            return Err(format!(
+                "reaction_s {}: expected a finite number of seconds >= 0",
+                self.reaction_s
+            ));
+        }
+        Ok(self)
+    }
 }
 
 /// A move has entered another vehicle's lane when their centres are less than this apart
@@ -268,6 +286,18 @@ mod tests {
             follower.1,
             FollowerRoom::HARD_BRAKING
         ));
+        // A room that is none is named.
+        assert!(FollowerRoom::HARD_BRAKING.checked().is_ok());
+        let no_braking = FollowerRoom {
+            braking_mps2: 0.0,
+            ..FollowerRoom::HARD_BRAKING
+        };
+        assert!(no_braking.checked().unwrap_err().contains("braking_mps2 0"));
+        let no_time = FollowerRoom {
+            reaction_s: f32::NAN,
+            ..FollowerRoom::HARD_BRAKING
+        };
+        assert!(no_time.checked().unwrap_err().contains("reaction_s NaN"));
     }
 
     /// A mode that drifts 1.5 m right along a curved lane comes out of `lane_move` a full

@@ -124,7 +124,14 @@ impl GeneratorCheckpoint {
                 json.display()
             ),
         }
-        serde_json::from_value(value).with_context(|| format!("parsing {}", json.display()))
+        let checkpoint: Self =
+            serde_json::from_value(value).with_context(|| format!("parsing {}", json.display()))?;
+        checkpoint
+            .labels
+            .lane_move_room
+            .checked()
+            .map_err(|e| anyhow::anyhow!("{}: labels.lane_move_room: {e}", json.display()))?;
+        Ok(checkpoint)
     }
 
     /// Writes `dir/generator.json` atomically.

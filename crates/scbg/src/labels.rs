@@ -486,17 +486,15 @@ pub fn lane_move_room(
     braking_mps2: f32,
     reaction_s: f32,
 ) -> anyhow::Result<scbg_features::FollowerRoom> {
-    ensure_request!(
-        braking_mps2.is_finite() && braking_mps2 > 0.0,
-        "--lane-move-room-braking {braking_mps2}: expected a finite number of m/s² above 0"
-    );
-    ensure_request!(
-        reaction_s.is_finite() && reaction_s >= 0.0,
-        "--lane-move-room-reaction {reaction_s}: expected a finite number of seconds >= 0"
-    );
-    Ok(scbg_features::FollowerRoom {
+    scbg_features::FollowerRoom {
         braking_mps2,
         reaction_s,
+    }
+    .checked()
+    .map_err(|e| {
+        anyhow::Error::new(crate::InvalidRequest(format!(
+            "--lane-move-room-braking {braking_mps2} / --lane-move-room-reaction {reaction_s}: {e}"
+        )))
     })
 }
 
@@ -651,17 +649,27 @@ fn shard_ranges(dataset: &PreparedDataset) -> Vec<std::ops::Range<usize>> {
 /// in the thirty-third session).
 pub const LABEL_OPTIONS_FILE: &str = "label_options.json";
 
+/// What [`LABEL_OPTIONS_FILE`] holds: one flat object of the options' fields, `seed` and
+/// `predictors`.
+#[derive(Debug, serde::Serialize, serde::Deserialize)]
+struct LabelRecord {
+    #[serde(flatten)]
+    options: LabelOptions,
+    seed: u64,
+    predictors: usize,
+}
+
 /// Checks `run` against its folder's [`LABEL_OPTIONS_FILE`] (or writes it there before any
 /// of its `shards` tables): a folder labelled with other options, or holding tables without
 /// the file, is refused with what differs, and nothing in it is touched. The file is one flat
 /// object: the options' fields, `seed` and `predictors`.
 fn claim_label_folder(run: &LabelRun, predictors: usize, shards: usize) -> anyhow::Result<()> {
     let path = run.out.join(LABEL_OPTIONS_FILE);
-    let mut mine = serde_json::to_value(run.options)?;
-    if let Some(o) = mine.as_object_mut() {
-        o.insert("seed".into(), run.seed.into());
-        o.insert("predictors".into(), predictors.into());
-    }
+    let mine = serde_json::to_value(LabelRecord {
+        options: run.options,
+        seed: run.seed,
+        predictors,
+    })?;
     if !path.is_file() {
         ensure_request!(
             !(0..shards).any(|si| run.out.join(shard_table_name(si)).is_file()),
@@ -674,8 +682,11 @@ fn claim_label_folder(run: &LabelRun, predictors: usize, shards: usize) -> anyho
     }
     let text =
         std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    let theirs: serde_json::Value = serde_json::from_str(&text)
+    // Read through the options, so a field added since takes the value the earlier run had
+    // (its serde default), and re-written like mine.
+    let theirs: LabelRecord = serde_json::from_str(&text)
         .with_context(|| format!("{}: not the JSON a label run writes", path.display()))?;
+    let theirs = serde_json::to_value(theirs)?;
     let (empty, field) = (serde_json::Map::new(), |v: Option<&serde_json::Value>| {
         v.map_or("-".to_string(), ToString::to_string)
     });

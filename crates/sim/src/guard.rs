@@ -23,27 +23,55 @@ const CONFLICT_WINDOW_S: f64 = 2.0;
 /// Margin beyond its stopping distance a yielding agent must have before my corridor, m.
 const YIELD_MARGIN_M: f64 = 2.0;
 
-/// Whether `o`, crossing my `path` ahead of `s_m` (at 45° or more) and not in my corridor yet (`half`: its
-/// half-width plus mine and a margin), can still stop before it at constant velocity: braking
-/// at most [`LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2`] after [`CUT_IN_REACTION_S`], with
-/// [`YIELD_MARGIN_M`] to spare, or it does not reach my corridor within 5 s at all. What the
-/// synthetic world's least courteous B asks of A when it takes the way.
-fn yields_in_time(path: &RefPath, s_m: f64, o: &AgentState, half: f64) -> bool {
+/// A yielding agent's reaction in [`yields_in_time`], s: the crossing world's A reacts 0.3–0.7 s
+/// late (`reaction_steps`). Its braking then ramps up under the world's 25 m/s³ jerk limit to at
+/// most 7.5 m/s²; at the 7 m/s² asked of it that costs no more than the difference (within
+/// 1.1 m at 12 m/s, less than [`YIELD_MARGIN_M`]).
+const YIELD_REACTION_S: f64 = 0.7;
+
+/// Whether `o`, crossing my `path` ahead of `s_m` (at 45° or more) with its front not in my
+/// corridor yet (my half-width and 0.5 m), can still stop before it at its current velocity:
+/// braking at most [`LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2`] after [`YIELD_REACTION_S`], with
+/// [`YIELD_MARGIN_M`] to spare — or it does not reach my corridor within 5 s at all. What the
+/// synthetic world's least courteous B asks of A when it takes the way. A standing or slow
+/// agent (under 0.5 m/s) is not judged here (false).
+fn yields_in_time(path: &RefPath, s_m: f64, me: &AgentState, o: &AgentState) -> bool {
     let (vx, vy) = (f64::from(o.velocity_x_mps), f64::from(o.velocity_y_mps));
     let v = vx.hypot(vy);
+    if v < 0.5 {
+        return false;
+    }
     let probe = |tau: f64| path.project(o.x_m + vx * tau, o.y_m + vy * tau, Some(s_m + 25.0));
     let (s_now, d_now) = probe(0.0);
     let (sn, cs) = path.heading_at(s_now).sin_cos();
-    let crossing = ((vx * cs + vy * sn) / v).abs() <= std::f64::consts::FRAC_1_SQRT_2;
-    if !crossing || d_now.abs() <= half {
+    let cos_rel = ((vx * cs + vy * sn) / v).abs();
+    if cos_rel > CROSSING_MIN_ANGLE_RAD.cos() {
         return false;
     }
-    let needed =
-        v * CUT_IN_REACTION_S + v * v / (2.0 * LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2) + YIELD_MARGIN_M;
-    (1..=50)
-        .map(|k| 0.1 * f64::from(k))
-        .find(|&tau| probe(tau).1.abs() <= half)
-        .is_none_or(|tau| v * tau >= needed)
+    let sin_rel = (1.0 - cos_rel * cos_rel).max(0.0).sqrt();
+    // How far its centre is from my path when its front reaches my corridor.
+    let reach_m = 0.5 * f64::from(me.width_m)
+        + 0.5
+        + 0.5 * (f64::from(o.length_m) * sin_rel + f64::from(o.width_m) * cos_rel);
+    if d_now.abs() <= reach_m {
+        return false;
+    }
+    let needed_m =
+        v * YIELD_REACTION_S + v * v / (2.0 * LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2) + YIELD_MARGIN_M;
+    // When its front enters my corridor (or it crosses my path between two samples),
+    // interpolated between samples 0.1 s apart, up to 5 s ahead.
+    let mut previous = (0.0, d_now);
+    for k in 1..=50 {
+        let tau = 0.1 * f64::from(k);
+        let d = probe(tau).1;
+        if d.abs() <= reach_m || d.signum() != previous.1.signum() {
+            let (tau_0, d_0) = (previous.0, previous.1.abs());
+            let tau_in = tau_0 + (tau - tau_0) * (d_0 - reach_m) / (d_0 - d.abs()).abs().max(1e-9);
+            return v * tau_in.min(tau) >= needed_m;
+        }
+        previous = (tau, d);
+    }
+    true
 }
 
 /// A crossing conflict ahead of an agent at `s_m` on `path` that follows `arrival` (the time,
@@ -96,7 +124,7 @@ pub(crate) fn crossing_conflict(
         let half = 0.5 * f64::from(me.width_m + o.width_m) + 0.5;
         // Where the other is at `tau` s from now, as (arclength, signed offset) on my path.
         let probe = |tau: f64| path.project(o.x_m + vx * tau, o.y_m + vy * tau, Some(s_m + 25.0));
-        if yielding.is_some_and(|y| std::ptr::eq(*o, y)) && yields_in_time(path, s_m, o, half) {
+        if yielding.is_some_and(|y| std::ptr::eq(*o, y)) && yields_in_time(path, s_m, me, o) {
             continue;
         }
         // Whether the other, at `tau` s from now, is in my corridor while my box is on its way;
@@ -480,25 +508,32 @@ mod tests {
     }
 
     /// A crossing agent known to yield is no conflict while it can still stop before my
-    /// corridor braking at 7 m/s² after 0.5 s (with 2 m to spare: 14.1 m at 10 m/s); closer,
+    /// corridor braking at 7 m/s² after 0.7 s, with 2 m to spare (16.1 m at 10 m/s); closer,
     /// or not known to yield, it is one.
     #[test]
     fn a_yielding_crossing_agent_is_no_conflict_while_it_can_stop() {
         let (me, path) = (me_along_x(), path_along_x());
         // Driving +y at 10 m/s toward my path at x = 30 m, which I reach after 3 s; it gets
-        // there 1 or 1.5 s before me (a conflict), its centre 17.6 or 12.6 m from my corridor
-        // (2.4 m either side).
-        let far = crossing_y(30.0, -20.0, 10.0);
-        let near = crossing_y(30.0, -15.0, 10.0);
+        // there 0.5 or 1.1 s before me (a conflict). Its front reaches my corridor (my
+        // half-width and 0.5 m) when its centre is 3.7 m from my path: after 21.3 or 15.3 m.
+        let far = crossing_y(30.0, -25.0, 10.0);
+        let near = crossing_y(30.0, -19.0, 10.0);
         let conflict = |o: &AgentState, yielding: Option<&AgentState>| {
             crossing_conflict(&path, 0.0, &me, &[o], yielding, arrival_at_10_mps)
         };
         assert!(conflict(&far, None).is_some());
         assert_eq!(conflict(&far, Some(&far)), None);
+        assert!(conflict(&near, None).is_some());
         assert!(conflict(&near, Some(&near)).is_some(), "too close to stop");
         assert!(
             conflict(&far, Some(&near)).is_some(),
             "another agent yields"
+        );
+        // Standing still, it is not judged: the conflict test decides as without it.
+        let standing = crossing_y(30.0, -25.0, 0.0);
+        assert_eq!(
+            conflict(&standing, Some(&standing)),
+            conflict(&standing, None)
         );
     }
 

@@ -120,12 +120,13 @@ pub struct SimConfig {
     pub lane_keeping_m: Option<f64>,
     /// The guard lets the synthetic world's B take the right of way at a crossing from a
     /// reacting A (the world's rule, which yields to a B committed to cross, as the
-    /// counterfactual oracle's A does): A is no crossing conflict while it can still stop
-    /// before B's corridor braking at most 7 m/s² after 0.5 s, what the world's least
-    /// courteous B asks of it. B's plan then decides who goes first, so its courtesy shows in
-    /// the loop; without it the guard made every B yield like a courteous one. Only for the
-    /// world's B with A reactive in a synthetic scene (nobody else is known to yield). Default
-    /// true (also for a serialised config without the field).
+    /// counterfactual oracle's A does): A is no crossing conflict while its front can still
+    /// stop before B's corridor braking at most 7 m/s² (what the world's least courteous B
+    /// asks of it) after 0.7 s, with 2 m to spare (`guard::yields_in_time`). B's plan then
+    /// decides who goes first, so its courtesy shows in the loop; without it the guard made
+    /// every B yield like a courteous one. Only for the world's B, with A reacting by the
+    /// world's rule (not controlled; the ego or another agent in reactive mode): nobody else
+    /// is known to yield. Default true (also for a serialised config without the field).
     #[serde(default = "yes")]
     pub take_right_of_way: bool,
 }
@@ -257,6 +258,9 @@ struct Controlled {
 struct Synthetic {
     world: ClosedLoop,
     b_track: usize,
+    /// The world's A, when it reacts by the world's rule (not controlled, and the ego or an
+    /// other agent in reactive mode): it yields to B ([`SimConfig::take_right_of_way`]).
+    a_yields: Option<usize>,
     /// B's simulated states so far, projected on its path once each.
     b_prefix: scbg_synth::BPrefix,
 }
@@ -379,10 +383,19 @@ impl Simulation {
                 let matches = world.scenario().scenario_id() == scene.scenario_id
                     && start == scbg_synth::CURRENT_STEP
                     && scene.tracks.len() == world.next_states(&Default::default()).len();
+                let a_yields = scene.track_index(scbg_synth::A_ID).filter(|&a| {
+                    let reactive = if a == ego {
+                        config.ego == EgoMode::Reactive
+                    } else {
+                        config.others == OthersMode::Reactive
+                    };
+                    reactive && !taken[a]
+                });
                 match b {
                     Some(b_track) if matches => Some(Synthetic {
                         world,
                         b_track,
+                        a_yields,
                         b_prefix: Default::default(),
                     }),
                     _ => return Err(SimError::WorldMismatch(id)),
@@ -621,14 +634,15 @@ impl Simulation {
                         .position(|&ps| ps >= s_at)
                         .map(|k| (k as f64 + 1.0 - k_now as f64) * STEP_SECS)
                 };
-                // The synthetic world's reacting A yields to its B (the oracle's rule).
-                let yielding = (self.config.take_right_of_way
-                    && self.config.ego == EgoMode::Reactive
-                    && self
-                        .synthetic
-                        .as_ref()
-                        .is_some_and(|syn| syn.b_track == c.track))
-                .then(|| current[self.ego]);
+                // The synthetic world's reacting A yields to its B (the oracle's rule); the
+                // reference is the one `others` holds.
+                let yielding = self
+                    .synthetic
+                    .as_ref()
+                    .filter(|syn| self.config.take_right_of_way && syn.b_track == c.track)
+                    .and_then(|syn| syn.a_yields)
+                    .map(|a| current[a])
+                    .filter(|a| a.valid);
                 let leader = scbg_synth::closer(
                     leader_on_path(path, s, 0.0, me, &others),
                     crossing_conflict(path, s, me, &others, yielding, arrival),

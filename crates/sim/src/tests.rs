@@ -89,7 +89,8 @@ fn following_the_logged_plan_reproduces_the_synthetic_log() {
 
 /// Whether B passes the point where the logged paths of A and B come closest before A does.
 fn b_goes_first(log: &Scene) -> bool {
-    let (a, b) = (&log.tracks[0].states, &log.tracks[1].states);
+    let track = |id: i64| &log.tracks[log.track_index(id).unwrap()].states;
+    let (a, b) = (track(A_ID), track(B_ID));
     let mut best = (f64::INFINITY, 0, 0);
     for (i, p) in a.iter().enumerate().skip(10) {
         for (j, q) in b.iter().enumerate().skip(10) {

@@ -23,8 +23,8 @@ pub struct LoopArgs {
     #[arg(long)]
     pub no_safety_guard: bool,
     /// Let the guard hold the synthetic world's B back for a reacting A at crossings, as if B
-    /// were courteous, instead of letting B's plan take the right of way while A can still
-    /// stop braking at most 7 m/s² (the default since the thirty-fourth session; BENCHMARKS.md).
+    /// were courteous. By default (since the thirty-fourth session; BENCHMARKS.md) B's plan
+    /// takes the right of way while A can still stop braking at most 7 m/s².
     #[arg(long)]
     pub no_right_of_way: bool,
     /// Pull every plan point to within this many metres of the nearest car-lane centre line

@@ -51,7 +51,7 @@ pub struct EstimatorArgs {
     /// after --lane-move-room-reaction seconds: 7 (the default since the thirty-fourth
     /// session) is the synthetic world's least courteous cut-in and the closed loop's gap
     /// acceptance; 4 with 1 s is MOBIL's polite limit, the default before. Over four data
-    /// seeds, sample and rank's control in truth on cut-ins rose from 0.39 to 0.48 with 7
+    /// seeds, sample and rank's control in truth on cut-ins rose from 0.39 to 0.49 with 7
     /// (BENCHMARKS.md).
     #[arg(long, default_value_t = scbg::labels::DEFAULT_LANE_MOVE_ROOM.braking_mps2, value_name = "MPS2")]
     pub lane_move_room_braking: f32,

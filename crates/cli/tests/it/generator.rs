@@ -106,6 +106,41 @@ fn label_writes_parquet_and_resumes() {
         !unrecorded.status.success() && err.contains("no label_options.json"),
         "{err}"
     );
+    // A record written before `lane_move_room` existed reads as MOBIL's polite room, the one
+    // its moves were kept with: a resume asking for that room goes on, the new default is
+    // refused, naming it.
+    let record = dir.path().join("labels/label_options.json");
+    let mut old: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&record).unwrap()).unwrap();
+    assert_eq!(old["lane_move_room"]["braking_mps2"], 7.0, "{old}");
+    old.as_object_mut().unwrap().remove("lane_move_room");
+    std::fs::write(&record, old.to_string()).unwrap();
+    let polite_room = [
+        old_layout.as_slice(),
+        &[
+            "--lane-move-room-braking",
+            "4",
+            "--lane-move-room-reaction",
+            "1",
+        ],
+    ]
+    .concat();
+    let resumed = run_label("labels", &polite_room);
+    assert!(
+        resumed.status.success(),
+        "{}",
+        String::from_utf8_lossy(&resumed.stderr)
+    );
+    let refused = run_label("labels", &old_layout);
+    let err = String::from_utf8_lossy(&refused.stderr);
+    assert!(
+        !refused.status.success() && err.contains("lane_move_room"),
+        "{err}"
+    );
+    assert_eq!(
+        std::fs::metadata(&parquet).unwrap().modified().unwrap(),
+        before
+    );
     // ψ toward B's neighbours (issue 12): same rows, each counting its audience; a bad radius
     // is refused before anything is written.
     let bad = scbg(&[
@@ -162,6 +197,8 @@ fn label_writes_parquet_and_resumes() {
             "1",
         ],
     );
+    assert_eq!(polite["lane_move_room"]["braking_mps2"], 4.0, "{polite}");
+    assert_eq!(polite["lane_move_room"]["reaction_s"], 1.0, "{polite}");
     assert!(polite["lane_moves"].as_u64().unwrap() <= moves, "{polite}");
     let bad = run_label("labels_no_room", &["--lane-move-room-braking", "0"]);
     let err = String::from_utf8_lossy(&bad.stderr);
