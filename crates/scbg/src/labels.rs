@@ -684,9 +684,17 @@ fn claim_label_folder(run: &LabelRun, predictors: usize, shards: usize) -> anyho
         std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
     // Read through the options, so a field added since takes the value the earlier run had
     // (its serde default), and re-written like mine.
-    let theirs: LabelRecord = serde_json::from_str(&text)
+    let raw: serde_json::Value = serde_json::from_str(&text)
         .with_context(|| format!("{}: not the JSON a label run writes", path.display()))?;
-    let theirs = serde_json::to_value(theirs)?;
+    let record: LabelRecord = serde_json::from_value(raw.clone())
+        .with_context(|| format!("{}: not the JSON a label run writes", path.display()))?;
+    let mut theirs = serde_json::to_value(record)?;
+    // A field this build does not know (a newer run's) is a difference too.
+    if let (Some(t), Some(r)) = (theirs.as_object_mut(), raw.as_object()) {
+        for (k, v) in r {
+            t.entry(k.clone()).or_insert_with(|| v.clone());
+        }
+    }
     let (empty, field) = (serde_json::Map::new(), |v: Option<&serde_json::Value>| {
         v.map_or("-".to_string(), ToString::to_string)
     });

@@ -137,6 +137,17 @@ fn label_writes_parquet_and_resumes() {
         !refused.status.success() && err.contains("lane_move_room"),
         "{err}"
     );
+    // A field this build does not know (a newer run's) is a difference too.
+    old.as_object_mut()
+        .unwrap()
+        .insert("newer_field".into(), true.into());
+    std::fs::write(&record, old.to_string()).unwrap();
+    let newer = run_label("labels", &polite_room);
+    let err = String::from_utf8_lossy(&newer.stderr);
+    assert!(
+        !newer.status.success() && err.contains("newer_field: true there, - asked"),
+        "{err}"
+    );
     assert_eq!(
         std::fs::metadata(&parquet).unwrap().modified().unwrap(),
         before
