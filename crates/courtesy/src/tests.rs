@@ -534,18 +534,15 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
         &b.world_from_agent,
     );
     let a_velocity = [a_now[1][0] - a_now[0][0], a_now[1][1] - a_now[0][1]];
-    let moved: Vec<_> = drawn
-        .iter()
-        .filter_map(|f| scbg_features::lane_move(f, &path, 30))
-        .filter(|m| {
-            scbg_features::leaves_room(
-                m,
-                a_now[0],
-                a_velocity,
-                scbg_features::FollowerRoom::HARD_BRAKING,
-            )
-        })
-        .collect();
+    let room = options(30).lane_move_room;
+    let moves_of = |futures: &[Vec<[f32; 2]>]| -> Vec<Vec<[f32; 2]>> {
+        futures
+            .iter()
+            .filter_map(|f| scbg_features::lane_move(f, &path, 30))
+            .filter(|m| scbg_features::leaves_room(m, a_now[0], a_velocity, room))
+            .collect()
+    };
+    let moved = moves_of(&drawn);
     assert!(!moved.is_empty() && moved.len() <= 4);
     let plain = label_pair(&model, &a, &b, &mixture, options(0), &mut rng(), &device);
     let with = label_pair(&model, &a, &b, &mixture, options(30), &mut rng(), &device);
@@ -571,18 +568,7 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
     // (the same draws), against the same E[r(Y_A) | x].
     let drawn_all = mixture.sample(7, 1.0, &mut rng());
     assert_eq!(drawn_all[..4], drawn[..]);
-    let moves_all: Vec<_> = drawn_all
-        .iter()
-        .filter_map(|f| scbg_features::lane_move(f, &path, 30))
-        .filter(|m| {
-            scbg_features::leaves_room(
-                m,
-                a_now[0],
-                a_velocity,
-                scbg_features::FollowerRoom::HARD_BRAKING,
-            )
-        })
-        .collect();
+    let moves_all = moves_of(&drawn_all);
     let kept = LabelOptions {
         keep_baseline: true,
         ..options(30)

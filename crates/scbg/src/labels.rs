@@ -2,7 +2,6 @@
 //! of a prepared cache — used by `scbg label`, the generator's training and evaluation sets and
 //! the demo — and the label table (Parquet) it is stored in.
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
@@ -15,13 +14,17 @@ use scbg_features::{FeatureConfig, PreparedScene};
 use scbg_model::Multipath;
 use scbg_synth::GroundTruth;
 use scbg_train::Checkpoint;
-use serde::Serialize;
 
 pub use crate::label_table::{LabelRow, read_label_table, write_label_table};
 use crate::{Progress, ensure_request};
 
+mod folder;
 mod oracle;
+mod summary;
+pub use folder::LABEL_OPTIONS_FILE;
+use folder::claim_label_folder;
 pub use oracle::{OracleLabelCount, oracle_labelled, world_futures_in_a};
+pub use summary::{FamilyRho, LabelSummary, PsiAll, Spread, spearman_latent, within_pair_std};
 
 /// The labelled pair roles of one scene of a cache.
 #[derive(Debug, Clone)]
@@ -159,260 +162,6 @@ pub fn label_scenes_ensemble(
         })
         .collect::<anyhow::Result<_>>()?;
     Ok(labelled.into_iter().flatten().collect())
-}
-
-/// Spearman(ψ of the logged y_B with roles (A, B) as in the ground truth, latent courtesy c)
-/// per family: `{family: (rho, n)}`.
-pub fn spearman_latent(
-    rows: &[LabelRow],
-    truth: &[GroundTruth],
-) -> BTreeMap<String, (Option<f64>, usize)> {
-    let truth: BTreeMap<&str, &GroundTruth> =
-        truth.iter().map(|t| (t.scenario_id.as_str(), t)).collect();
-    let mut by_family: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
-    for r in rows.iter().filter(|r| r.sample == 0) {
-        if let Some(t) = truth.get(r.scenario_id.as_str())
-            && r.a_id == t.a_id
-            && r.b_id == t.b_id
-        {
-            let e = by_family.entry(t.family.name().to_string()).or_default();
-            e.0.push(f64::from(r.psi));
-            e.1.push(t.courtesy);
-        }
-    }
-    by_family
-        .into_iter()
-        .map(|(f, (x, y))| (f, (scbg_metrics::spearman(&x, &y), x.len())))
-        .collect()
-}
-
-/// The spread of ψ that B's future causes: the square root of the mean, over pair roles, of
-/// the variance of ψ across that role's futures (logged and sampled). When it is small next to
-/// the overall std, ψ says more about the scene than about what B does.
-pub fn within_pair_std(rows: &[LabelRow]) -> f64 {
-    let mut groups: BTreeMap<(&str, u32, i64, i64), Vec<f64>> = BTreeMap::new();
-    for r in rows {
-        groups
-            .entry((r.scenario_id.as_str(), r.window_step, r.a_id, r.b_id))
-            .or_default()
-            .push(f64::from(r.psi));
-    }
-    let vars: Vec<f64> = groups
-        .values()
-        .filter(|v| v.len() > 1)
-        .map(|v| {
-            let m = v.iter().sum::<f64>() / v.len() as f64;
-            v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64
-        })
-        .collect();
-    (vars.iter().sum::<f64>() / vars.len().max(1) as f64).sqrt()
-}
-
-/// Mean and population standard deviation.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct Spread {
-    /// Mean.
-    pub mean: f64,
-    /// Population standard deviation.
-    pub std: f64,
-}
-
-/// ψ over every future, logged and sampled.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct PsiAll {
-    /// Mean.
-    pub mean: f64,
-    /// Population standard deviation.
-    pub std: f64,
-    /// Smallest ψ.
-    pub min: f64,
-    /// Largest ψ.
-    pub max: f64,
-    /// Share of futures with |ψ| > 2 m/s (the paper's high-courtesy threshold).
-    pub fraction_abs_gt_2: f64,
-}
-
-/// Spearman's ρ of one family and the number of pairs it is over.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct FamilyRho {
-    /// Spearman's ρ (`None` when undefined: fewer than two pairs or no spread).
-    pub rho: Option<f64>,
-    /// Number of pairs.
-    pub n: usize,
-}
-
-/// `summary.json` of a label run.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct LabelSummary {
-    /// Labelled futures.
-    pub rows: usize,
-    /// Predictors whose ψ is averaged (1, or the size of the ensemble of `scbg label --model
-    /// P1 --model P2 …`).
-    pub predictors: usize,
-    /// Labelled pair roles (= logged futures).
-    pub pairs_roles: usize,
-    /// Futures sampled from B's marginal prediction per pair role and labelled
-    /// ([`LabelOptions::labelled_samples`]).
-    pub samples_per_pair: usize,
-    /// More futures of B sampled per pair role for the estimate of E[r(Y_A) | x] alone, not
-    /// labelled ([`LabelOptions::baseline_futures`]; 0 with the direct estimate, or when they
-    /// are kept, [`LabelOptions::keep_baseline`]).
-    pub baseline_samples: usize,
-    /// Whether the baseline's futures are labelled and kept after the first sampled ones
-    /// ([`LabelOptions::keep_baseline`]; then `samples_per_pair` counts them).
-    pub keep_baseline: bool,
-    /// Steps of the lane moves labelled after the sampled futures
-    /// ([`LabelOptions::lane_move_steps`]; 0: none).
-    pub lane_move_steps: usize,
-    /// What a lane move may ask of A ([`LabelOptions::lane_move_room`]).
-    pub lane_move_room: scbg_features::FollowerRoom,
-    /// Lane moves labelled (rows after the sampled futures of their role).
-    pub lane_moves: usize,
-    /// The reward r(y_A).
-    pub reward: Reward,
-    /// How E[r(Y_A) | x] was estimated.
-    pub marginal: scbg_courtesy::label::MarginalEstimate,
-    /// Scale of the Gaussian part of B's sampled futures.
-    pub sample_noise: f32,
-    /// Whose reward counts (A alone, or B's neighbours).
-    pub audience: scbg_courtesy::Audience,
-    /// Mean number of agents whose reward a logged future's ψ counts (1 for the pair).
-    pub audience_size_mean: f64,
-    /// ψ of the logged futures.
-    pub psi_logged: Spread,
-    /// See [`within_pair_std`].
-    pub psi_within_pair_std: f64,
-    /// ψ of every future.
-    pub psi_all: PsiAll,
-    /// Spearman(ψ of the logged future, latent courtesy) per family (synthetic data only).
-    pub spearman_latent: BTreeMap<String, FamilyRho>,
-    /// Agreement with the simulator's ψ_true (synthetic data with its ground truth only).
-    pub fidelity: Option<crate::fidelity::Fidelity>,
-    /// The same on the predictor's held-out (validation) scenes only, which it never trained
-    /// on (`scbg label`; absent where the split is not known).
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub fidelity_held_out: Option<crate::fidelity::Fidelity>,
-}
-
-impl LabelSummary {
-    /// The summary of `rows` labelled with `options`; `truth` adds the latent-courtesy check.
-    pub fn of(rows: &[LabelRow], options: LabelOptions, truth: Option<&[GroundTruth]>) -> Self {
-        let logged: Vec<f64> = rows
-            .iter()
-            .filter(|r| r.sample == 0)
-            .map(|r| f64::from(r.psi))
-            .collect();
-        let all: Vec<f64> = rows.iter().map(|r| f64::from(r.psi)).collect();
-        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
-        let std = |v: &[f64]| {
-            (v.iter().map(|x| (x - mean(v)).powi(2)).sum::<f64>() / v.len().max(1) as f64).sqrt()
-        };
-        let high = all.iter().filter(|p| p.abs() > 2.0).count();
-        Self {
-            rows: rows.len(),
-            predictors: 1,
-            pairs_roles: logged.len(),
-            samples_per_pair: options.labelled_samples(),
-            baseline_samples: if options.keep_baseline {
-                0
-            } else {
-                options.baseline_futures()
-            },
-            keep_baseline: options.keep_baseline,
-            lane_move_steps: options.lane_move_steps,
-            lane_move_room: options.lane_move_room,
-            lane_moves: rows
-                .iter()
-                .filter(|r| r.sample as usize > options.labelled_samples())
-                .count(),
-            reward: options.reward,
-            marginal: options.marginal,
-            sample_noise: options.sample_noise,
-            audience: options.audience,
-            audience_size_mean: rows
-                .iter()
-                .filter(|r| r.sample == 0)
-                .map(|r| f64::from(r.audience_size))
-                .sum::<f64>()
-                / logged.len().max(1) as f64,
-            psi_logged: Spread {
-                mean: mean(&logged),
-                std: std(&logged),
-            },
-            psi_within_pair_std: within_pair_std(rows),
-            psi_all: PsiAll {
-                mean: mean(&all),
-                std: std(&all),
-                min: all.iter().copied().fold(f64::INFINITY, f64::min),
-                max: all.iter().copied().fold(f64::NEG_INFINITY, f64::max),
-                fraction_abs_gt_2: high as f64 / all.len().max(1) as f64,
-            },
-            spearman_latent: truth
-                .map(|t| spearman_latent(rows, t))
-                .unwrap_or_default()
-                .into_iter()
-                .map(|(f, (rho, n))| (f, FamilyRho { rho, n }))
-                .collect(),
-            // The oracle scores ψ toward A alone: no fidelity for another audience.
-            fidelity: truth
-                .filter(|_| options.audience == scbg_courtesy::Audience::Pair)
-                .and_then(|t| crate::fidelity::fidelity(rows, t, options.labelled_samples())),
-            fidelity_held_out: None,
-        }
-    }
-
-    /// The lines `scbg label` prints.
-    pub fn to_text(&self) -> String {
-        let moves = if self.lane_moves > 0 {
-            format!(", then {} lane moves of them", self.lane_moves)
-        } else {
-            String::new()
-        };
-        let mut s = format!(
-            "labelled {} futures ({} pair roles × {} each{moves}); ψ of logged futures: mean {:.3}, std {:.3}; std within a pair role {:.3}; |ψ| > 2 for {:.1} % of all",
-            self.rows,
-            self.pairs_roles,
-            1 + self.samples_per_pair,
-            self.psi_logged.mean,
-            self.psi_logged.std,
-            self.psi_within_pair_std,
-            100.0 * self.psi_all.fraction_abs_gt_2
-        );
-        if self.baseline_samples > 0 {
-            s += &format!(
-                "; E[r | x] averaged over {} sampled futures of B",
-                self.samples_per_pair + self.baseline_samples
-            );
-        }
-        if self.predictors > 1 {
-            s += &format!(
-                "\nψ averaged over an ensemble of {} predictors",
-                self.predictors
-            );
-        }
-        for (family, r) in &self.spearman_latent {
-            s += &format!(
-                "\nSpearman(ψ, latent courtesy) {family}: {} (n = {})",
-                r.rho.map_or("-".into(), |r| format!("{r:.3}")),
-                r.n
-            );
-        }
-        if self.audience != scbg_courtesy::Audience::Pair {
-            s += &format!(
-                "\naudience {:?}: {:.2} agents per ψ on average (A and B's neighbours); no ψ_true (the oracle scores A alone)",
-                self.audience, self.audience_size_mean
-            );
-        }
-        if let Some(f) = &self.fidelity {
-            s += "\nfidelity of ψ_label against the simulator's ψ_true:\n";
-            s += &f.to_markdown();
-        }
-        if let Some(f) = &self.fidelity_held_out {
-            s += "\nthe same on the predictor's held-out scenes:\n";
-            s += &f.to_markdown();
-        }
-        s
-    }
 }
 
 /// A `scbg label` run.
@@ -641,80 +390,6 @@ fn shard_ranges(dataset: &PreparedDataset) -> Vec<std::ops::Range<usize>> {
             r
         })
         .collect()
-}
-
-/// The file in a label folder naming what its tables were labelled with (the options, the
-/// seed and the ensemble's size): a run resuming into the folder must ask for the same, or
-/// the tables would mix layouts ([`LabelOptions::keep_baseline`] changed the default layout
-/// in the thirty-third session).
-pub const LABEL_OPTIONS_FILE: &str = "label_options.json";
-
-/// What [`LABEL_OPTIONS_FILE`] holds: one flat object of the options' fields, `seed` and
-/// `predictors`.
-#[derive(Debug, serde::Serialize, serde::Deserialize)]
-struct LabelRecord {
-    #[serde(flatten)]
-    options: LabelOptions,
-    seed: u64,
-    predictors: usize,
-}
-
-/// Checks `run` against its folder's [`LABEL_OPTIONS_FILE`] (or writes it there before any
-/// of its `shards` tables): a folder labelled with other options, or holding tables without
-/// the file, is refused with what differs, and nothing in it is touched. The file is one flat
-/// object: the options' fields, `seed` and `predictors`.
-fn claim_label_folder(run: &LabelRun, predictors: usize, shards: usize) -> anyhow::Result<()> {
-    let path = run.out.join(LABEL_OPTIONS_FILE);
-    let mine = serde_json::to_value(LabelRecord {
-        options: run.options,
-        seed: run.seed,
-        predictors,
-    })?;
-    if !path.is_file() {
-        ensure_request!(
-            !(0..shards).any(|si| run.out.join(shard_table_name(si)).is_file()),
-            "{} holds label tables but no {LABEL_OPTIONS_FILE} (labelled before the thirty-third session, whose default layout differs, see --keep-baseline-samples): label into another folder, or delete its tables to relabel",
-            run.out.display()
-        );
-        scbg_base::atomic::write_json(&path, &mine)
-            .with_context(|| format!("writing {}", path.display()))?;
-        return Ok(());
-    }
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    // Read through the options, so a field added since takes the value the earlier run had
-    // (its serde default), and re-written like mine.
-    let raw: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not the JSON a label run writes", path.display()))?;
-    let record: LabelRecord = serde_json::from_value(raw.clone())
-        .with_context(|| format!("{}: not the JSON a label run writes", path.display()))?;
-    let mut theirs = serde_json::to_value(record)?;
-    // A field this build does not know (a newer run's) is a difference too.
-    if let (Some(t), Some(r)) = (theirs.as_object_mut(), raw.as_object()) {
-        for (k, v) in r {
-            t.entry(k.clone()).or_insert_with(|| v.clone());
-        }
-    }
-    let (empty, field) = (serde_json::Map::new(), |v: Option<&serde_json::Value>| {
-        v.map_or("-".to_string(), ToString::to_string)
-    });
-    let (a, b) = (
-        mine.as_object().unwrap_or(&empty),
-        theirs.as_object().unwrap_or(&empty),
-    );
-    let keys: std::collections::BTreeSet<&String> = a.keys().chain(b.keys()).collect();
-    let differ: Vec<String> = keys
-        .into_iter()
-        .filter(|k| a.get(*k) != b.get(*k))
-        .map(|k| format!("{k}: {} there, {} asked", field(b.get(k)), field(a.get(k))))
-        .collect();
-    ensure_request!(
-        differ.is_empty(),
-        "{} was labelled with other options ({}): label into another folder, or delete it to relabel",
-        run.out.display(),
-        differ.join("; ")
-    );
-    Ok(())
 }
 
 /// `scbg label`: labels every pair role of the cache, one Parquet table per shard (a shard
