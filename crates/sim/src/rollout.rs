@@ -135,6 +135,18 @@ fn yes() -> bool {
     true
 }
 
+impl SimConfig {
+    /// Whether track `i` reacts (the ego's mode for the ego, the others' for the rest); a
+    /// controlled agent is driven whatever this says.
+    fn reacts(&self, i: usize, ego: usize) -> bool {
+        if i == ego {
+            self.ego == EgoMode::Reactive
+        } else {
+            self.others == OthersMode::Reactive
+        }
+    }
+}
+
 /// The default lane keeping (0.25 m; what a serialised config without the field gets).
 pub const DEFAULT_LANE_KEEPING_M: f64 = 0.25;
 
@@ -383,14 +395,9 @@ impl Simulation {
                 let matches = world.scenario().scenario_id() == scene.scenario_id
                     && start == scbg_synth::CURRENT_STEP
                     && scene.tracks.len() == world.next_states(&Default::default()).len();
-                let a_yields = scene.track_index(scbg_synth::A_ID).filter(|&a| {
-                    let reactive = if a == ego {
-                        config.ego == EgoMode::Reactive
-                    } else {
-                        config.others == OthersMode::Reactive
-                    };
-                    reactive && !taken[a]
-                });
+                let a_yields = scene
+                    .track_index(scbg_synth::A_ID)
+                    .filter(|&a| config.reacts(a, ego) && !taken[a]);
                 match b {
                     Some(b_track) if matches => Some(Synthetic {
                         world,
@@ -402,14 +409,7 @@ impl Simulation {
                 }
             }
         };
-        let reactive_idm = |i: usize| {
-            let reactive = if i == ego {
-                config.ego == EgoMode::Reactive
-            } else {
-                config.others == OthersMode::Reactive
-            };
-            reactive && !taken[i] && synthetic.is_none()
-        };
+        let reactive_idm = |i: usize| config.reacts(i, ego) && !taken[i] && synthetic.is_none();
         let idm = scene
             .tracks
             .iter()
@@ -690,11 +690,9 @@ impl Simulation {
             let world_next = syn.world.next_states(&syn.b_prefix);
             let controlled: Vec<usize> = self.controlled.iter().map(|c| c.track).collect();
             for (i, p) in world_next.iter().enumerate() {
-                let reactive = if i == self.ego {
-                    self.config.ego == EgoMode::Reactive
-                } else {
-                    self.config.others == OthersMode::Reactive && i != syn.b_track
-                };
+                // B follows the world only as the ego (it is replayed otherwise).
+                let reactive =
+                    self.config.reacts(i, self.ego) && (i == self.ego || i != syn.b_track);
                 if !reactive || controlled.contains(&i) {
                     continue;
                 }
