@@ -156,6 +156,13 @@ pub struct DemoArgs {
     /// embedding alone (BENCHMARKS.md, issues 11/12).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub mode_courtesy: bool,
+    /// With `--mode-courtesy true`: the scorer also sees the requested ψ relative to this
+    /// scene's choices, (ψ − ψ_k) / (their spread + 0.1 label spreads), so that a scene
+    /// whose choices J_φ scores close together (a cut-in) is ranked as finely as one whose
+    /// choices lie far apart (a crossing); `false` gives the earlier scorer of ψ and ψ_k
+    /// alone (BENCHMARKS.md, *Courtesy relative to the scene's choices*, issue 11).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub relative_mode_courtesy: bool,
     /// With `--head modes`: slowed copies of each of B's modes join the generator's choices
     /// (`scbg train generator --mode-slowdowns`; `none`: the modes alone).
     #[arg(long, default_value_t = Slowdowns::default())]

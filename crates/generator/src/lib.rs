@@ -29,7 +29,9 @@ pub use data::{
     scored_candidates,
 };
 pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Policy, Scbg};
-pub use model::{CandidateFutures, Generator, GeneratorConfig};
+pub use model::{
+    CandidateFutures, Generator, GeneratorConfig, RELATIVE_COURTESY_FLOOR, relative_courtesy,
+};
 pub use modes::{BModes, slowdown_warp};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,

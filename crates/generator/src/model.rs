@@ -47,6 +47,17 @@ pub struct GeneratorConfig {
     /// trained before the option.
     #[serde(default)]
     pub mode_courtesy: bool,
+    /// With `mode_courtesy`: the scorer also sees the requested ψ *relative to this scene's
+    /// choices*, `(ψ − ψ_k) / (std_j ψ_j + floor)` (all ÷ `psi_scale`, the std over the
+    /// scene's choices), with this floor ([`RELATIVE_COURTESY_FLOOR`] for new generators).
+    /// J_φ's courtesy spans a scene's choices by 0.1 label spreads in one family and by
+    /// several in another (cut-ins against crossings): in units of the pooled `psi_scale`,
+    /// one small MLP cannot resolve the narrow scenes, while the relative input ranks the
+    /// choices alike in both. The floor keeps a scene whose choices J_φ scores alike from
+    /// turning noise into rank. `None` (the pair alone) for every generator trained before
+    /// the option.
+    #[serde(default)]
+    pub relative_courtesy_floor: Option<f32>,
     /// With `modes > 0`: outside training, B's future is the selector's likeliest mode plus
     /// the displacement ([`Generator::forward`]), not the softmax blend of the modes, which
     /// training needs to be differentiable ([`Generator::forward_blend`]). A blend of a
@@ -77,6 +88,10 @@ pub struct GeneratorConfig {
 
 /// Hidden width of the per-mode courtesy scorer ([`GeneratorConfig::mode_courtesy`]).
 const MODE_SCORER_HIDDEN: usize = 32;
+
+/// The floor of [`GeneratorConfig::relative_courtesy_floor`] in new generators, in label
+/// spreads (BENCHMARKS.md, *Courtesy relative to the scene's choices*).
+pub const RELATIVE_COURTESY_FLOOR: f32 = 0.1;
 
 /// The generator's ψ inputs, in units of the labels' spread (`psi_scale`), are clamped to
 /// ± this many spreads (the demo's labels span about ±5.4; a label beyond is rare).
@@ -111,6 +126,7 @@ impl GeneratorConfig {
             a_context_width: 0,
             modes: 0,
             mode_courtesy: false,
+            relative_courtesy_floor: None,
             likeliest_mode: false,
             mode_slowdowns: Vec::new(),
             lane_move_steps: 0,
@@ -152,8 +168,13 @@ impl GeneratorConfig {
                 weights[s * knots + hi - 2] = 1.0 - frac;
             }
         }
-        let mode_scorer = (self.modes > 0 && self.mode_courtesy)
-            .then(|| Mlp::init(&[2, MODE_SCORER_HIDDEN, MODE_SCORER_HIDDEN, 1], device));
+        let relative_courtesy_floor = self
+            .relative_courtesy_floor
+            .filter(|_| self.modes > 0 && self.mode_courtesy);
+        let mode_scorer = (self.modes > 0 && self.mode_courtesy).then(|| {
+            let inputs = 2 + usize::from(relative_courtesy_floor.is_some());
+            Mlp::init(&[inputs, MODE_SCORER_HIDDEN, MODE_SCORER_HIDDEN, 1], device)
+        });
         Generator {
             mode_scorer,
             psi_mlp: Mlp::init(&[1, self.psi_width, self.psi_width], device),
@@ -169,6 +190,7 @@ impl GeneratorConfig {
             psi_scale: self.psi_scale,
             a_context_width: self.a_context_width,
             likeliest_mode: self.modes > 0 && self.likeliest_mode,
+            relative_courtesy_floor,
             mode_warp: if self.modes > 0 {
                 slowdown_warp(&self.mode_slowdowns, self.future_steps, device)
                     .map(|w| burn::module::Param::from_tensor(w).set_require_grad(false))
@@ -193,7 +215,8 @@ pub struct Generator {
     pub decoder: Mlp,
     /// MLP of `[embedding ‖ ψ embedding]` → `K` mode logits (see [`GeneratorConfig::modes`]).
     pub selector: Option<Mlp>,
-    /// MLP of `[ψ, ψ_k]` (÷ `psi_scale`) → one more logit for mode `k` (see
+    /// MLP of `[ψ, ψ_k]` (÷ `psi_scale`), and with [`Self::relative_courtesy_floor`] ψ
+    /// relative to the scene's choices, → one more logit for mode `k` (see
     /// [`GeneratorConfig::mode_courtesy`]).
     pub mode_scorer: Option<Mlp>,
     /// `[T, knots]` fixed linear interpolation from knots to steps (not trained).
@@ -208,6 +231,8 @@ pub struct Generator {
     pub a_context_width: usize,
     /// See [`GeneratorConfig::likeliest_mode`].
     pub likeliest_mode: bool,
+    /// See [`GeneratorConfig::relative_courtesy_floor`] (`None` without a mode scorer).
+    pub relative_courtesy_floor: Option<f32>,
     /// `[S, T, T]` fixed warps of [`GeneratorConfig::mode_slowdowns`] (not trained; `None`
     /// without slowed copies).
     pub mode_warp: Option<burn::module::Param<Tensor<3>>>,
@@ -395,20 +420,36 @@ impl Generator {
                     / self.psi_scale.max(1e-12);
                 // Clamped like ψ: a mode J_φ scores far outside the labels (an off-data
                 // mode of a weak predictor) must not saturate the softmax by its value alone.
-                let pair = Tensor::cat(
-                    vec![
-                        psi_scaled.expand([b, k]).reshape([b, k, 1]),
-                        mode_psi.reshape([b, k, 1]),
-                    ],
-                    2,
-                )
-                .clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
-                logits = logits + scorer.forward(pair).reshape([b, k]);
+                let psi_scaled = psi_scaled.clone();
+                let mut inputs = vec![
+                    psi_scaled.clone().expand([b, k]).reshape([b, k, 1]),
+                    mode_psi.clone().reshape([b, k, 1]),
+                ];
+                if let Some(floor) = self.relative_courtesy_floor {
+                    inputs.push(relative_courtesy(psi_scaled, mode_psi, floor).reshape([b, k, 1]));
+                }
+                let inputs = Tensor::cat(inputs, 2).clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
+                logits = logits + scorer.forward(inputs).reshape([b, k]);
             }
             (logits, at_knots)
         });
         Heads { knot_xy, choice }
     }
+}
+
+/// The requested courtesy relative to each row's choices
+/// ([`GeneratorConfig::relative_courtesy_floor`]): `(ψ − ψ_k) / (std_j ψ_j + floor)`, with
+/// both inputs first clamped to ± [`PSI_INPUT_RANGE`] like the scorer's other inputs.
+///
+/// # Shapes
+/// `psi: [batch, 1]`, `choices: [batch, K]` (both in label spreads) → `[batch, K]`
+pub fn relative_courtesy(psi: Tensor<2>, choices: Tensor<2>, floor: f32) -> Tensor<2> {
+    let [b, k] = choices.dims();
+    let choices = choices.clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
+    let psi = psi.clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE).expand([b, k]);
+    let mean = choices.clone().mean_dim(1);
+    let spread = (choices.clone() - mean).powf_scalar(2.0).mean_dim(1).sqrt() + floor.max(1e-6);
+    (psi - choices) / spread.expand([b, k])
 }
 
 /// What [`Generator::forward_candidates`] returns.

@@ -91,6 +91,9 @@ pub struct DemoOptions {
     /// With `select_modes`: generators that also score B's modes by their own courtesy
     /// ([`crate::generator::VariantSettings::mode_courtesy`]).
     pub mode_courtesy: bool,
+    /// With `mode_courtesy`: the scorer also sees ψ relative to the scene's choices
+    /// ([`crate::generator::VariantSettings::relative_mode_courtesy`]).
+    pub relative_mode_courtesy: bool,
     /// With `select_modes`: slowed copies of B's modes among the generators' choices
     /// ([`crate::generator::VariantSettings::mode_slowdowns`]).
     pub mode_slowdowns: Vec<f32>,
@@ -316,6 +319,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                                         seed,
                                         select_modes: options.select_modes,
                                         mode_courtesy: options.mode_courtesy,
+                                        relative_mode_courtesy: options.relative_mode_courtesy,
                                         mode_slowdowns: options.mode_slowdowns.clone(),
                                         lane_move_steps: options.lane_move_steps,
                                         selector_loss: options.selector_loss,

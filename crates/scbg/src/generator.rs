@@ -305,6 +305,10 @@ pub struct VariantSettings {
     /// ([`GeneratorConfig::mode_courtesy`]), and B's future is its likeliest mode rather than
     /// the blend outside training ([`GeneratorConfig::likeliest_mode`]).
     pub mode_courtesy: bool,
+    /// With `mode_courtesy`: the scorer also sees the requested ψ relative to the scene's
+    /// choices ([`GeneratorConfig::relative_courtesy_floor`], floor
+    /// [`scbg_generator::RELATIVE_COURTESY_FLOOR`]).
+    pub relative_mode_courtesy: bool,
     /// With `select_modes`: slowed copies of B's modes join the choices, one per factor
     /// ([`GeneratorConfig::mode_slowdowns`]; empty: none).
     pub mode_slowdowns: Vec<f32>,
@@ -335,6 +339,7 @@ impl VariantSettings {
             world_futures: 0,
             select_modes: true,
             mode_courtesy: true,
+            relative_mode_courtesy: true,
             mode_slowdowns: DEFAULT_MODE_SLOWDOWNS.to_vec(),
             lane_move_steps: DEFAULT_LANE_MOVE_STEPS,
             selector_loss: DEFAULT_SELECTOR_LOSS,
@@ -394,6 +399,8 @@ pub fn train_variant(
         gen_config.modes = p.ckpt.model_config.num_modes;
         gen_config.mode_courtesy = s.mode_courtesy;
         gen_config.likeliest_mode = s.mode_courtesy;
+        gen_config.relative_courtesy_floor = (s.mode_courtesy && s.relative_mode_courtesy)
+            .then_some(scbg_generator::RELATIVE_COURTESY_FLOOR);
         gen_config.mode_slowdowns.clone_from(&s.mode_slowdowns);
         gen_config.lane_move_steps = s.lane_move_steps;
     }

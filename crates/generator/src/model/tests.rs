@@ -394,3 +394,75 @@ fn candidate_futures_make_the_blend_and_the_likeliest_mode() {
         assert!(gap < 1e-4, "row {row}: likeliest differs by {gap} m");
     }
 }
+
+/// ψ relative to a row's choices is `(ψ − ψ_k) / (std_j ψ_j + floor)`: the same ranks in a
+/// scene whose choices span a tenth of a label spread as in one that spans ten times more,
+/// and finite (÷ the floor) when every choice scores alike.
+#[test]
+fn relative_courtesy_is_psi_in_units_of_the_choices_spread() {
+    let device = Device::flex();
+    let choices = Tensor::<2>::from_data(
+        [[-1.0f32, 0.0, 1.0], [-0.1, 0.0, 0.1], [0.5, 0.5, 0.5]],
+        &device,
+    );
+    let psi = Tensor::<2>::from_data([[0.5f32], [0.05], [0.7]], &device);
+    let rel: Vec<f32> = relative_courtesy(psi, choices, 0.0)
+        .into_data()
+        .try_to_vec()
+        .unwrap();
+    let std = (2.0f32 / 3.0).sqrt();
+    let want = [1.5 / std, 0.5 / std, -0.5 / std];
+    for row in 0..2 {
+        for j in 0..3 {
+            let got = rel[row * 3 + j];
+            assert!(
+                (got - want[j]).abs() < 1e-3,
+                "row {row}, choice {j}: {got} vs {}",
+                want[j]
+            );
+        }
+    }
+    // Every choice alike: ÷ the (tiny) floor, finite.
+    assert!(
+        rel[6..].iter().all(|v| v.is_finite() && *v > 0.0),
+        "{rel:?}"
+    );
+    // With a floor, a narrow scene's spread is padded: 0.05 / (0.0816 + 0.1).
+    let rel: Vec<f32> = relative_courtesy(
+        Tensor::<2>::from_data([[0.05f32]], &device),
+        Tensor::<2>::from_data([[-0.1f32, 0.0, 0.1]], &device),
+        0.1,
+    )
+    .into_data()
+    .try_to_vec()
+    .unwrap();
+    assert!((rel[1] - 0.05 / (0.1 * std + 0.1)).abs() < 1e-4, "{rel:?}");
+}
+
+/// A generator with the relative input has a three-input scorer; one without (every
+/// generator trained before the option: `relative_courtesy_floor` absent from its JSON)
+/// keeps the two-input scorer its weights were saved for.
+#[test]
+fn the_relative_input_widens_the_scorer_and_older_configs_go_without() {
+    let device = Device::flex();
+    let mut config = GeneratorConfig::new(24);
+    config.modes = 2;
+    config.mode_courtesy = true;
+    let inputs = |c: &GeneratorConfig| {
+        let g = c.init(&device);
+        g.mode_scorer.unwrap().layers[0].weight.val().dims()[0]
+    };
+    assert_eq!(inputs(&config), 2);
+    config.relative_courtesy_floor = Some(RELATIVE_COURTESY_FLOOR);
+    assert_eq!(inputs(&config), 3);
+    let mut json = serde_json::to_value(&config).unwrap();
+    json.as_object_mut()
+        .unwrap()
+        .remove("relative_courtesy_floor");
+    let older: GeneratorConfig = serde_json::from_value(json).unwrap();
+    assert_eq!(older.relative_courtesy_floor, None);
+    assert_eq!(inputs(&older), 2);
+    // Without the mode scorer the floor does nothing.
+    config.mode_courtesy = false;
+    assert!(config.init(&device).relative_courtesy_floor.is_none());
+}
