@@ -49,7 +49,8 @@ pub struct GeneratorConfig {
     pub mode_courtesy: bool,
     /// With `mode_courtesy`: the scorer also sees the requested ψ *relative to this scene's
     /// choices*, `(ψ − ψ_k) / (std_j ψ_j + floor)` (all ÷ `psi_scale`, the std over the
-    /// scene's choices), with this floor ([`RELATIVE_COURTESY_FLOOR`] for new generators).
+    /// scene's choices), with this floor (`None` in [`Self::new`]; the application trains with
+    /// [`RELATIVE_COURTESY_FLOOR`]).
     /// J_φ's courtesy spans a scene's choices by 0.1 label spreads in one family and by
     /// several in another (cut-ins against crossings): in units of the pooled `psi_scale`,
     /// one small MLP cannot resolve the narrow scenes, while the relative input ranks the

@@ -301,7 +301,18 @@ fn train_generator_saves_generator_and_range_predictor() {
         "8",
         "--range-steps",
         "20",
+        "--relative-mode-courtesy",
+        "false",
     ]);
+    // Without the relative input the scorer reads ψ and ψ_k alone, as before the option.
+    let base: Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.path().join("gen_base/generator.json")).unwrap(),
+    )
+    .unwrap();
+    assert!(
+        base["generator"]["relative_courtesy_floor"].is_null(),
+        "{base}"
+    );
 
     // `scbg generate` on a pair of the synthetic ground truth.
     let gt = std::fs::read_to_string(dir.path().join("synth/ground_truth.jsonl")).unwrap();

@@ -466,3 +466,55 @@ fn the_relative_input_widens_the_scorer_and_older_configs_go_without() {
     config.mode_courtesy = false;
     assert!(config.init(&device).relative_courtesy_floor.is_none());
 }
+
+/// The scorer's third input is ψ relative to the row's choices. With the selector's own
+/// logits and the scorer's weights of ψ and ψ_k zeroed, two scenes alike but for the scale of
+/// their courtesy (the second's ψ and ψ_k a tenth of the first's, as J_φ spreads a cut-in
+/// against a crossing) get the same logits, and the logits still tell the choices apart.
+#[test]
+fn the_scorer_reads_psi_relative_to_the_choices() {
+    let device = Device::flex();
+    let mut config = GeneratorConfig::new(24);
+    config.modes = 2;
+    config.mode_courtesy = true;
+    config.relative_courtesy_floor = Some(1e-6);
+    let mut g = config.init(&device);
+    let selector = g.selector.as_mut().unwrap().layers.last_mut().unwrap();
+    selector.weight = selector.weight.clone().map(|w| w.zeros_like());
+    if let Some(bias) = &mut selector.bias {
+        *bias = bias.clone().map(|b| b.zeros_like());
+    }
+    let first = &mut g.mode_scorer.as_mut().unwrap().layers[0];
+    let [inputs, hidden] = first.weight.val().dims();
+    assert_eq!(inputs, 3);
+    let keep_relative = Tensor::<2>::from_data(
+        burn::tensor::TensorData::new(
+            (0..inputs)
+                .flat_map(|i| std::iter::repeat_n(f32::from(u8::from(i == 2)), hidden))
+                .collect(),
+            [inputs, hidden],
+        ),
+        &device,
+    );
+    first.weight = first.weight.clone().map(|w| w * keep_relative);
+    let modes = BModes {
+        xy: two_modes(&device).reshape([1, 2, 80, 2]).repeat_dim(0, 2),
+        log_prob: Tensor::<2>::zeros([2, 2], &device),
+        psi: Some(Tensor::from_data([[1.0f32, -1.0], [0.1, -0.1]], &device)),
+        mixture_modes: 2,
+    };
+    let logits: Vec<f32> = g
+        .forward_candidates(
+            Tensor::ones([2, 24], &device),
+            Tensor::from_data([0.5f32, 0.05], &device),
+            modes,
+        )
+        .logits
+        .into_data()
+        .try_to_vec()
+        .unwrap();
+    for k in 0..2 {
+        assert!((logits[k] - logits[2 + k]).abs() < 1e-4, "{logits:?}");
+    }
+    assert!((logits[0] - logits[1]).abs() > 1e-6, "{logits:?}");
+}
