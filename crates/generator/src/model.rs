@@ -419,9 +419,6 @@ impl Generator {
                     .psi
                     .expect("a generator scoring the modes' courtesy needs their ψ")
                     / self.psi_scale.max(1e-12);
-                // Clamped like ψ: a mode J_φ scores far outside the labels (an off-data
-                // mode of a weak predictor) must not saturate the softmax by its value alone.
-                let psi_scaled = psi_scaled.clone();
                 let mut inputs = vec![
                     psi_scaled.clone().expand([b, k]).reshape([b, k, 1]),
                     mode_psi.clone().reshape([b, k, 1]),
@@ -429,6 +426,8 @@ impl Generator {
                 if let Some(floor) = self.relative_courtesy_floor {
                     inputs.push(relative_courtesy(psi_scaled, mode_psi, floor).reshape([b, k, 1]));
                 }
+                // Clamped like ψ: a mode J_φ scores far outside the labels (an off-data
+                // mode of a weak predictor) must not saturate the softmax by its value alone.
                 let inputs = Tensor::cat(inputs, 2).clamp(-PSI_INPUT_RANGE, PSI_INPUT_RANGE);
                 logits = logits + scorer.forward(inputs).reshape([b, k]);
             }
