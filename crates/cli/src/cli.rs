@@ -185,7 +185,7 @@ pub struct DemoArgs {
     pub seed: u64,
 }
 
-/// `--mode-slowdowns`: comma-separated factors, each in (0, 1], or `none`.
+/// `--mode-slowdowns`: comma-separated factors, each in (0, 2] (above 1: hurried), or `none`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Slowdowns(pub Vec<f32>);
 
@@ -216,8 +216,13 @@ impl std::str::FromStr for Slowdowns {
             w.trim()
                 .parse::<f32>()
                 .ok()
-                .filter(|w| *w > 0.0 && *w <= 1.0)
-                .ok_or_else(|| format!("slowdown {w:?}: expected a number in (0, 1], or none"))
+                .filter(|w| *w > 0.0 && *w <= scbg::generator::MAX_MODE_SPEEDUP)
+                .ok_or_else(|| {
+                    format!(
+                        "slowdown {w:?}: expected a number in (0, {}], or none",
+                        scbg::generator::MAX_MODE_SPEEDUP
+                    )
+                })
         };
         text.split(',')
             .map(factor)
@@ -265,7 +270,7 @@ mod tests {
     }
 
     #[test]
-    fn mode_slowdowns_are_factors_in_0_1() {
+    fn mode_slowdowns_are_factors_in_0_2() {
         let slowdowns = |args: &[&str]| {
             Cli::try_parse_from(["scbg", "demo"].iter().chain(args).copied()).map(|c| {
                 match c.command {
@@ -283,7 +288,11 @@ mod tests {
             slowdowns(&["--mode-slowdowns", "none"]).unwrap().0,
             Vec::<f32>::new()
         );
-        for bad in ["0", "1.5", "-0.5", "slow", "0.5,", ""] {
+        assert_eq!(
+            slowdowns(&["--mode-slowdowns", "0.5,1.25"]).unwrap().0,
+            vec![0.5, 1.25]
+        );
+        for bad in ["0", "2.5", "-0.5", "slow", "0.5,", ""] {
             assert!(slowdowns(&["--mode-slowdowns", bad]).is_err(), "{bad}");
         }
     }

@@ -32,7 +32,7 @@ pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Pol
 pub use model::{
     CandidateFutures, Generator, GeneratorConfig, RELATIVE_COURTESY_FLOOR, relative_courtesy,
 };
-pub use modes::{BModes, slowdown_warp};
+pub use modes::{BModes, MAX_SPEEDUP, slowdown_warp};
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,
     stored_embeddings,

@@ -121,6 +121,9 @@ impl BModes {
 /// the slowed copy is at the mode's fractional step `τ(t) = t − (1 − w) t² / (2T)` at step
 /// `t`, linearly interpolated: its speed is the mode's times `1 − (1 − w) t / T`, smooth at
 /// the current step (no jump in speed) and `w` times the mode's at the horizon.
+///
+/// A factor above 1 (up to [`MAX_SPEEDUP`]) hurries the mode instead: past the horizon
+/// (`τ > T`) the copy extends the mode's last step straight on.
 pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option<Tensor<3>> {
     if slowdowns.is_empty() || steps == 0 {
         return None;
@@ -128,13 +131,22 @@ pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option
     let t_max = steps as f32;
     let mut weights = vec![0.0f32; slowdowns.len() * steps * steps];
     for (i, &w) in slowdowns.iter().enumerate() {
-        let w = w.clamp(0.0, 1.0);
+        let w = w.clamp(0.0, MAX_SPEEDUP);
         for s in 0..steps {
             let t = (s + 1) as f32;
-            let tau = (t - (1.0 - w) * t * t / (2.0 * t_max)).clamp(0.0, t_max);
+            let tau = (t - (1.0 - w) * t * t / (2.0 * t_max)).max(0.0);
+            let row = i * steps * steps + s * steps;
+            if tau > t_max {
+                // p(τ) = p_T + (τ − T)(p_T − p_{T−1}); p_0 is the origin (zero).
+                let e = tau - t_max;
+                weights[row + steps - 1] += 1.0 + e;
+                if steps >= 2 {
+                    weights[row + steps - 2] -= e;
+                }
+                continue;
+            }
             let lo = tau.floor() as usize; // 0 = the origin
             let frac = tau - lo as f32;
-            let row = i * steps * steps + s * steps;
             if lo >= 1 {
                 weights[row + lo - 1] += 1.0 - frac;
             }
@@ -148,6 +160,9 @@ pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option
         device,
     ))
 }
+
+/// The largest factor of [`slowdown_warp`]: a copy that ends at twice its mode's speed.
+pub const MAX_SPEEDUP: f32 = 2.0;
 
 /// Two modes of B in a row: a straight one along x and one turning to +y (`[2, 80, 2]`).
 #[cfg(test)]
@@ -201,6 +216,34 @@ mod tests {
         let speeds: Vec<f32> = (1..80).map(|s| x(s) - x(s - 1)).collect();
         assert!(speeds.windows(2).all(|w| w[1] <= w[0] + 1e-4), "eases off");
         assert!((speeds[78] - 0.5).abs() < 0.02, "{}", speeds[78]);
+    }
+
+    /// A factor above 1 hurries the mode along its path: factor 1.5 on the turning mode
+    /// (1 m a step along x) starts at the mode's speed, ends at 1.5 times it and reaches
+    /// `T (1 + w) / 2` = 100 m along x, the last 20 m extending the mode's last step, still
+    /// on its line.
+    #[test]
+    fn hurried_copies_speed_up_and_extend_the_mode() {
+        let device = Device::flex();
+        let warp = slowdown_warp(&[1.5], 80, &device).unwrap();
+        let out = BModes {
+            xy: two_modes(&device).reshape([1, 2, 80, 2]),
+            log_prob: Tensor::from_data([[-0.1f32, -2.0]], &device),
+            psi: None,
+            mixture_modes: 2,
+        }
+        .with_slowdowns(Some(&warp));
+        let xy: Vec<f32> = out.xy.into_data().try_to_vec().unwrap();
+        let at = |s: usize| [xy[(3 * 80 + s) * 2], xy[(3 * 80 + s) * 2 + 1]];
+        for s in 0..80 {
+            let p = at(s);
+            assert!((p[1] - 0.1 * p[0]).abs() < 1e-3, "{s}: {p:?}");
+        }
+        assert!((at(79)[0] - 100.0).abs() < 1e-3, "{:?}", at(79));
+        assert!((at(0)[0] - (1.0 + 0.5 / 160.0)).abs() < 1e-4, "{:?}", at(0));
+        let speeds: Vec<f32> = (1..80).map(|s| at(s)[0] - at(s - 1)[0]).collect();
+        assert!(speeds.windows(2).all(|w| w[1] >= w[0] - 1e-3), "speeds up");
+        assert!((speeds[78] - 1.5).abs() < 0.02, "{}", speeds[78]);
     }
 
     /// `with_lane_moves` appends one copy per mixture mode with its log-probability: the

@@ -263,6 +263,9 @@ pub const DEFAULT_SELECTOR_LOSS: SelectorLoss = SelectorLoss::Classify;
 /// BENCHMARKS.md, *J_φ cheaper per future of B, and the slowed copies by default*).
 pub const DEFAULT_MODE_SLOWDOWNS: [f32; 2] = [0.75, 0.5];
 
+/// The largest factor of a mode's copy ([`scbg_generator::slowdown_warp`]).
+pub const MAX_MODE_SPEEDUP: f32 = scbg_generator::MAX_SPEEDUP;
+
 /// The lane moves of B's modes that `scbg train generator` and the demo add to a
 /// mode-selecting generator's choices by default: none (0). With 30 (3 s) they lift what the
 /// choices allow in truth, but the trained generators follow the truth less
