@@ -106,19 +106,25 @@ pub struct DemoOptions {
     /// How courtesy is labelled (8 sampled futures per pair role by default).
     pub labels: LabelOptions,
     /// Held-out scenes of the closed-loop stage (0 skips it); WOSAC realism is scored on up
-    /// to [`DEMO_WOSAC_SCENES`] of them.
+    /// to [`DEMO_WOSAC_SCENES`] of them for the generator, [`DEMO_RANKED_WOSAC_SCENES`] for
+    /// sample and rank.
     pub closed_loop_scenes: usize,
     /// Seed of everything.
     pub seed: u64,
 }
 
-/// Closed-loop scenes the demo scores with WOSAC realism (at most): scbg at three quantiles
-/// and with the knob drawn from its prior, and three baselines, 32 rollouts each (~1 s a
-/// scene on 2 cores). The per-scene difference between scbg and IDM-only has a standard
-/// error of ~0.03 at 10–20 scenes (BENCHMARKS.md), so the demo cannot decide it either way
-/// within its 10-minute budget; `scbg eval sim --wosac-scenes 400` on every held-out scene
-/// does (+0.04 ± 0.008).
-pub const DEMO_WOSAC_SCENES: usize = 10;
+/// Closed-loop scenes on which the demo scores the generator's WOSAC realism (at most): scbg
+/// at three quantiles and with the knob drawn from its prior, and three baselines, 32
+/// rollouts each (~0.4 s a scene on 2 cores). The per-scene difference between scbg and
+/// IDM-only has a standard deviation of ~0.14, so 10 scenes could not tell them apart
+/// (± 0.04); 60 do in each of four data seeds (± 0.015–0.02, BENCHMARKS.md *WOSAC on 60 of
+/// the demo's scenes*) for about 20 s more. `scbg eval sim --wosac-scenes 400` scores every
+/// held-out scene.
+pub const DEMO_WOSAC_SCENES: usize = 60;
+
+/// The same for sample and rank, whose rollouts cost about twice the generator's: at three
+/// quantiles, no prior; 60 scenes would add another ~30 s to the demo.
+pub const DEMO_RANKED_WOSAC_SCENES: usize = 10;
 
 /// Runs the demo and writes `report.md`, `report.json` and the figures in `options.out`.
 pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Result<DemoReport> {

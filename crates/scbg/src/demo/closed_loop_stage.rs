@@ -5,7 +5,7 @@ use std::path::Path;
 
 use scbg_generator::Variant;
 
-use super::{DEMO_WOSAC_SCENES, DemoOptions, generator_dir_name};
+use super::{DEMO_RANKED_WOSAC_SCENES, DEMO_WOSAC_SCENES, DemoOptions, generator_dir_name};
 use crate::Progress;
 use crate::generator::load_scbg;
 use crate::sim_eval::SimEval;
@@ -42,7 +42,10 @@ pub(super) fn closed_loop_stage(
                 model.scbg.policy = policy;
                 let eval_options = crate::sim_eval::SimEvalOptions {
                     scenes: options.closed_loop_scenes,
-                    wosac_scenes: options.closed_loop_scenes.min(DEMO_WOSAC_SCENES),
+                    wosac_scenes: options.closed_loop_scenes.min(match policy {
+                        crate::choices::Policy::Generator => DEMO_WOSAC_SCENES,
+                        crate::choices::Policy::Ranked => DEMO_RANKED_WOSAC_SCENES,
+                    }),
                     wosac_prior: policy == crate::choices::Policy::Generator,
                     ..crate::sim_eval::SimEvalOptions::of_policy(policy)
                 };
