@@ -68,9 +68,10 @@ pub struct GeneratorConfig {
     #[serde(default)]
     pub likeliest_mode: bool,
     /// With `modes > 0`: each of B's `K` modes also joins the choices slowed down, once per
-    /// factor `w` here (in (0, 1]): the same path, travelled at a speed that eases linearly
-    /// from the mode's own at the current step to `w` times it at the horizon
-    /// ([`slowdown_warp`]; a factor in (1, 2] hurries the mode instead, not a default). Yielding — dropping back, letting A merge or cross first — is
+    /// factor `w` here (in (0, 2], clamped): the same path, travelled at a speed that eases
+    /// linearly from the mode's own at the current step to `w` times it at the horizon
+    /// ([`slowdown_warp`]; a factor above 1 hurries the mode, an option, never a default).
+    /// Yielding — dropping back, letting A merge or cross first — is
     /// the courteous manoeuvre of every interaction family, and a predictor's marginal modes
     /// rarely hold enough of it. The selector then chooses among `K · (1 + S)` candidates
     /// ([`Self::candidates`]); a slowed copy starts with its mode's log-probability. Empty

@@ -122,8 +122,9 @@ impl BModes {
 /// `t`, linearly interpolated: its speed is the mode's times `1 − (1 − w) t / T`, smooth at
 /// the current step (no jump in speed) and `w` times the mode's at the horizon.
 ///
-/// A factor above 1 (up to [`MAX_SPEEDUP`]) hurries the mode instead: past the horizon
-/// (`τ > T`) the copy extends the mode's last step straight on.
+/// A factor above 1 hurries the mode instead: past the horizon (`τ > T`) the copy extends the
+/// mode's last step straight on. Factors are clamped to `[0, MAX_SPEEDUP]`
+/// ([`MAX_SPEEDUP`]).
 pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option<Tensor<3>> {
     if slowdowns.is_empty() || steps == 0 {
         return None;
@@ -161,7 +162,8 @@ pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option
     ))
 }
 
-/// The largest factor of [`slowdown_warp`]: a copy that ends at twice its mode's speed.
+/// The largest factor of [`slowdown_warp`] (larger ones are clamped to it): a copy that ends
+/// at twice its mode's speed.
 pub const MAX_SPEEDUP: f32 = 2.0;
 
 /// Two modes of B in a row: a straight one along x and one turning to +y (`[2, 80, 2]`).
@@ -244,6 +246,63 @@ mod tests {
         let speeds: Vec<f32> = (1..80).map(|s| at(s)[0] - at(s - 1)[0]).collect();
         assert!(speeds.windows(2).all(|w| w[1] >= w[0] - 1e-3), "speeds up");
         assert!((speeds[78] - 1.5).abs() < 0.02, "{}", speeds[78]);
+    }
+
+    /// On a curving mode that slows down, a hurried copy is the mode's own point at the warped
+    /// step `τ(t)` (interpolated between its steps) up to the horizon, and the last step's
+    /// straight extension `p_T + (τ − T)(p_T − p_{T−1})` past it, computed here on the host.
+    /// Factors above [`MAX_SPEEDUP`] are clamped to it; a one-step mode extends from the
+    /// origin.
+    #[test]
+    fn hurried_copies_follow_a_curving_slowing_mode_and_clamp() {
+        let device = Device::flex();
+        let t_max = 80usize;
+        // Speed 1 − s/160 m a step along x, on the parabola y = 0.01 x².
+        let p = |s: usize| {
+            let x = s as f32 - (s * s) as f32 / 320.0;
+            [x, 0.01 * x * x]
+        };
+        let xy: Vec<f32> = (1..=t_max).flat_map(p).collect();
+        let mode =
+            Tensor::<4>::from_data(burn::tensor::TensorData::new(xy, [1, 1, t_max, 2]), &device);
+        for (w, expect_w) in [(1.5f32, 1.5f32), (3.0, MAX_SPEEDUP)] {
+            let warp = slowdown_warp(&[w], t_max, &device).unwrap();
+            let out = BModes {
+                xy: mode.clone(),
+                log_prob: Tensor::from_data([[0.0f32]], &device),
+                psi: None,
+                mixture_modes: 1,
+            }
+            .with_slowdowns(Some(&warp));
+            let got: Vec<f32> = out.xy.narrow(1, 1, 1).into_data().try_to_vec().unwrap();
+            for t in 1..=t_max {
+                let tf = t as f32;
+                let tau = tf - (1.0 - expect_w) * tf * tf / (2.0 * t_max as f32);
+                let want = if tau > t_max as f32 {
+                    let (a, b) = (p(t_max), p(t_max - 1));
+                    let e = tau - t_max as f32;
+                    [a[0] + e * (a[0] - b[0]), a[1] + e * (a[1] - b[1])]
+                } else {
+                    let lo = tau.floor() as usize;
+                    let f = tau - lo as f32;
+                    let at = |s: usize| if s == 0 { [0.0, 0.0] } else { p(s) };
+                    let (a, b) = (at(lo), at((lo + 1).min(t_max)));
+                    [a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1])]
+                };
+                let g = [got[(t - 1) * 2], got[(t - 1) * 2 + 1]];
+                assert!(
+                    (g[0] - want[0]).abs() < 1e-3 && (g[1] - want[1]).abs() < 1e-3,
+                    "w {w}, step {t}: {g:?} against {want:?}"
+                );
+            }
+        }
+        // One step: τ(1) = 1 + (1.5 − 1) / 2 = 1.25, the point 1.25 times the first.
+        let warp: Vec<f32> = slowdown_warp(&[1.5], 1, &device)
+            .unwrap()
+            .into_data()
+            .try_to_vec()
+            .unwrap();
+        assert_eq!(warp, vec![1.25]);
     }
 
     /// `with_lane_moves` appends one copy per mixture mode with its log-probability: the

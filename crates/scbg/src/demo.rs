@@ -117,8 +117,9 @@ pub struct DemoOptions {
 /// at three quantiles and with the knob drawn from its prior, and three baselines, 32
 /// rollouts each (~0.4 s a scene on 2 cores). The per-scene difference between scbg and
 /// IDM-only has a standard deviation of ~0.14, so 10 scenes could not tell them apart
-/// (± 0.04); 60 do in each of four data seeds (± 0.015–0.02, BENCHMARKS.md *WOSAC on 60 of
-/// the demo's scenes*) for about 20 s more. `scbg eval sim --wosac-scenes 400` scores every
+/// (± 0.04); on 60 (± 0.014–0.02) scbg is above both baselines in each of four data seeds,
+/// though in seed 0 within one standard error of IDM-only around the quantiles
+/// (BENCHMARKS.md *WOSAC on 60 of the demo's scenes*), for about 20 s more. `scbg eval sim --wosac-scenes 400` scores every
 /// held-out scene.
 pub const DEMO_WOSAC_SCENES: usize = 60;
 

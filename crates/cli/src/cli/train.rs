@@ -206,12 +206,12 @@ pub struct TrainGeneratorArgs {
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub relative_mode_courtesy: bool,
     /// With `--head modes`: slowed copies of each of B's modes join the generator's choices,
-    /// one per factor (comma-separated, each in (0, 1]): the mode's path, travelled at a speed
-    /// easing from the mode's own to the factor times it at the horizon (yielding, in every
-    /// family). `none`: the modes alone, the default before 0.75,0.5 (BENCHMARKS.md, issue 11).
-    /// A factor in (1, 2] hurries the mode instead (its speed rising to the factor times its
-    /// own, past its horizon straight on): it widens what the choices allow in truth, but the
-    /// trained generator follows the truth less (BENCHMARKS.md, *Hurried copies*).
+    /// one per factor (comma-separated, each in (0, 2]): the mode's path, travelled at a speed
+    /// easing from the mode's own to the factor times it at the horizon (below 1: yielding, in
+    /// every family). `none`: the modes alone, the default before 0.75,0.5 (BENCHMARKS.md,
+    /// issue 11). A factor above 1 hurries the mode (past its horizon straight on): it widens
+    /// what the choices allow in truth, but the trained generator follows the truth less
+    /// (BENCHMARKS.md, *Hurried copies*).
     #[arg(long, default_value_t = Slowdowns::default())]
     pub mode_slowdowns: Slowdowns,
     /// With `--head modes`: each of B's modes that drifts off B's lane path also joins the
