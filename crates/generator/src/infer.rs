@@ -368,12 +368,43 @@ fn check_request(
     Ok((index(a_id)?, index(b_id)?))
 }
 
+/// What a closed-loop plan of B toward A shares across requested courtesies
+/// ([`Scbg::plan_basis`]): everything but the choice. With [`Policy::Generator`], B's
+/// embedding, pose, choices (scored by J_φ) and predicted range of ψ; with [`Policy::Ranked`],
+/// B's labelled sampled futures. Rollouts of one scene at different quantiles start from the
+/// same view, so their first plans can share it ([`Scbg::plan_from`]).
+#[derive(Debug, Clone)]
+pub struct PlanBasis(Basis);
+
+#[derive(Debug, Clone)]
+enum Basis {
+    Generator(Box<GeneratorBasis>),
+    Ranked {
+        /// ψ labels of B's sampled futures (the logged one left out).
+        psi: Vec<f32>,
+        /// The sampled futures in A's frame (index 0: B's logged future, not a candidate).
+        futures_in_a: Vec<Vec<[f32; 2]>>,
+        a_pose: scbg_scene::Pose2,
+        b_pose: scbg_scene::Pose2,
+    },
+}
+
+#[derive(Debug, Clone)]
+struct GeneratorBasis {
+    embedding: burn::tensor::Tensor<2>,
+    pose: scbg_scene::Pose2,
+    modes: Option<crate::BModes>,
+    low: f32,
+    high: f32,
+}
+
 impl Scbg {
     /// B's future only (world frame, 80 points at 10 Hz), for closed-loop planning: the
     /// encoder, the range predictor and the generator, without J_φ's measurement of the
     /// achieved ψ (which [`Scbg::generate`] adds); with [`Policy::Ranked`], the labelling of
     /// B's sampled futures and the choice among them. A must be a track valid at the window's
     /// current step; the same future as `generate` gives for the same request.
+    /// [`Scbg::plan_basis`] then [`Scbg::plan_from`].
     pub fn plan(
         &self,
         scene: &PreparedScene,
@@ -383,7 +414,22 @@ impl Scbg {
         courtesy: Courtesy,
         device: &Device,
     ) -> Result<Vec<[f64; 2]>, GenerateError> {
-        let (ia, ib) = check_request(scene, a_id, b_id, &[courtesy])?;
+        check_courtesy(&[courtesy])?;
+        let basis = self.plan_basis(scene, window, a_id, b_id, device)?;
+        self.plan_from(&basis, courtesy, device)
+    }
+
+    /// The part of [`Scbg::plan`] that does not depend on the requested courtesy: all of its
+    /// cost but the choice (the selector's MLPs, or a sort of the labels).
+    pub fn plan_basis(
+        &self,
+        scene: &PreparedScene,
+        window: &Window,
+        a_id: i64,
+        b_id: i64,
+        device: &Device,
+    ) -> Result<PlanBasis, GenerateError> {
+        let (ia, ib) = check_request(scene, a_id, b_id, &[])?;
         let now = window.current_step;
         if !scene.tracks[ia].valid_at(now as isize) {
             return Err(GenerateError::Sample {
@@ -398,23 +444,12 @@ impl Scbg {
             // The labels alone, no embedding of B and no range: the choice `generate_in` makes
             // (its candidates are these futures, in B's frame).
             let role = self.labelled_role(scene, window, a_id, b_id, true, device)?;
-            let sampled = role.labels.psi.get(1..).unwrap_or_default();
-            let k = ranked_choice(sampled, courtesy)
-                .ok_or(GenerateError::NoCandidates(self.labels.labelled_samples()))?;
-            // Through B's frame, as `generate_in`'s candidates are: the same numbers.
-            let in_b = scbg_courtesy::label::change_frame(
-                &role.labels.futures_in_a[1 + k],
-                &role.a.world_from_agent,
-                &role.b.world_from_agent,
-            );
-            let pose = role.b.world_from_agent;
-            return Ok(in_b
-                .iter()
-                .map(|p| {
-                    let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
-                    [x, y]
-                })
-                .collect());
+            return Ok(PlanBasis(Basis::Ranked {
+                psi: role.labels.psi.get(1..).unwrap_or_default().to_vec(),
+                futures_in_a: role.labels.futures_in_a,
+                a_pose: role.a.world_from_agent,
+                b_pose: role.b.world_from_agent,
+            }));
         }
         // B's embedding (and A's context when the generator is told who A is), B's pose, and
         // the choices of a mode-selecting generator (scored by J_φ, from the pair's example,
@@ -485,28 +520,73 @@ impl Scbg {
             });
             (embedding, b.world_from_agent, modes)
         };
-        let psi = match courtesy {
-            Courtesy::Psi(p) => p,
-            Courtesy::Quantile(q) => {
-                let (low, high) = self.range.forward(embedding.clone());
-                let low = crate::eval::to_vec(low)[0];
-                let high = crate::eval::to_vec(high)[0];
-                psi_for_quantile(q, low, high)
-            }
-        };
-        let future = self.generator.forward(
+        let (low, high) = self.range.forward(embedding.clone());
+        Ok(PlanBasis(Basis::Generator(Box::new(GeneratorBasis {
             embedding,
-            burn::tensor::Tensor::from_data(burn::tensor::TensorData::new(vec![psi], [1]), device),
+            pose,
             modes,
-        );
-        let xy = crate::eval::to_vec(future);
-        Ok(xy
-            .chunks_exact(2)
-            .map(|p| {
-                let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
-                [x, y]
-            })
-            .collect())
+            low: crate::eval::to_vec(low)[0],
+            high: crate::eval::to_vec(high)[0],
+        }))))
+    }
+
+    /// B's future (world frame) for `courtesy` from a [`Scbg::plan_basis`] of this model: the
+    /// same points as [`Scbg::plan`] gives for the same scene and request.
+    pub fn plan_from(
+        &self,
+        basis: &PlanBasis,
+        courtesy: Courtesy,
+        device: &Device,
+    ) -> Result<Vec<[f64; 2]>, GenerateError> {
+        check_courtesy(&[courtesy])?;
+        let to_world = |pose: &scbg_scene::Pose2, xy: &[[f32; 2]]| -> Vec<[f64; 2]> {
+            xy.iter()
+                .map(|p| {
+                    let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
+                    [x, y]
+                })
+                .collect()
+        };
+        match &basis.0 {
+            Basis::Ranked {
+                psi,
+                futures_in_a,
+                a_pose,
+                b_pose,
+            } => {
+                let k = ranked_choice(psi, courtesy)
+                    .ok_or(GenerateError::NoCandidates(self.labels.labelled_samples()))?;
+                // Through B's frame, as `generate_in`'s candidates are: the same numbers.
+                let in_b = scbg_courtesy::label::change_frame(&futures_in_a[1 + k], a_pose, b_pose);
+                Ok(to_world(b_pose, &in_b))
+            }
+            Basis::Generator(g) => {
+                let GeneratorBasis {
+                    embedding,
+                    pose,
+                    modes,
+                    low,
+                    high,
+                } = g.as_ref();
+                let psi = match courtesy {
+                    Courtesy::Psi(p) => p,
+                    Courtesy::Quantile(q) => psi_for_quantile(q, *low, *high),
+                };
+                let future = self.generator.forward(
+                    embedding.clone(),
+                    burn::tensor::Tensor::from_data(
+                        burn::tensor::TensorData::new(vec![psi], [1]),
+                        device,
+                    ),
+                    modes.clone(),
+                );
+                let xy: Vec<[f32; 2]> = crate::eval::to_vec(future)
+                    .chunks_exact(2)
+                    .map(|p| [p[0], p[1]])
+                    .collect();
+                Ok(to_world(pose, &xy))
+            }
+        }
     }
 }
 

@@ -28,7 +28,9 @@ pub use data::{
     b_modes_for, b_modes_of, build_examples, fill_mode_courtesy, marginal_embedding, mode_courtesy,
     scored_candidates,
 };
-pub use infer::{Courtesy, CourtesyOf, GenerateError, Generated, PairContext, Policy, Scbg};
+pub use infer::{
+    Courtesy, CourtesyOf, GenerateError, Generated, PairContext, PlanBasis, Policy, Scbg,
+};
 pub use model::{
     CandidateFutures, Generator, GeneratorConfig, RELATIVE_COURTESY_FLOOR, relative_courtesy,
 };

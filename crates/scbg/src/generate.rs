@@ -145,6 +145,33 @@ pub fn plan(
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 
+/// The courtesy-free part of [`plan`] (`scbg_generator::Scbg::plan_basis`).
+pub fn plan_basis(
+    model: &LoadedScbg,
+    scene: &Scene,
+    a: i64,
+    b: i64,
+) -> anyhow::Result<scbg_generator::PlanBasis> {
+    let prepared = prepare(scene)?;
+    let window = &prepared.windows[0];
+    model
+        .scbg
+        .plan_basis(&prepared, window, a, b, &model.device)
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+}
+
+/// [`plan`] from its [`plan_basis`]: the same future.
+pub fn plan_from(
+    model: &LoadedScbg,
+    basis: &scbg_generator::PlanBasis,
+    courtesy: Courtesy,
+) -> anyhow::Result<Vec<[f64; 2]>> {
+    model
+        .scbg
+        .plan_from(basis, courtesy, &model.device)
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+}
+
 /// ψ of a given world-frame future of B (80 points after the scene's current step) toward A,
 /// with both expectations (paper eq. 2).
 pub fn courtesy(

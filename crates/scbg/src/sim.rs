@@ -67,12 +67,72 @@ pub struct ControlledAgent {
     pub courtesy: Courtesy,
 }
 
+/// The courtesy-free part of the first plans ([`scbg_generator::PlanBasis`]) that rollouts of
+/// one scene share: each rollout starts from the same logged history, whatever courtesy it
+/// asks, so its first plan differs from the others' only in the choice. Keyed by the view
+/// (a hash of its tracks' states up to its current step) and the pair: a rollout that starts
+/// elsewhere never shares. Later plans, from diverged histories, are not kept. For one thread
+/// at a time (a [`RefCell`](std::cell::RefCell)); `scbg eval sim` keeps one per scene, about a
+/// fifth of its rollouts' time (BENCHMARKS.md *Shared first plans*).
+#[derive(Debug, Default)]
+pub struct FirstPlans {
+    bases: std::cell::RefCell<
+        std::collections::HashMap<(u64, i64, i64), std::rc::Rc<scbg_generator::PlanBasis>>,
+    >,
+}
+
+impl FirstPlans {
+    /// Bases kept (one per distinct first view and pair).
+    pub fn len(&self) -> usize {
+        self.bases.borrow().len()
+    }
+
+    /// Whether none is kept.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A hash of what a planner reads from `view` besides the map: the scenario, its current step,
+/// and every track's id, type and states up to the current step.
+fn view_key(view: &Scene) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    view.scenario_id.hash(&mut h);
+    view.current_step.hash(&mut h);
+    view.sdc_track_index.hash(&mut h);
+    for tr in &view.tracks {
+        tr.id.hash(&mut h);
+        (tr.object_type as i64).hash(&mut h);
+        for s in tr.states.iter().take(view.current_step + 1) {
+            [s.x_m.to_bits(), s.y_m.to_bits(), s.z_m.to_bits()].hash(&mut h);
+            [
+                s.length_m,
+                s.width_m,
+                s.height_m,
+                s.heading_rad,
+                s.velocity_x_mps,
+                s.velocity_y_mps,
+            ]
+            .map(f32::to_bits)
+            .hash(&mut h);
+            s.valid.hash(&mut h);
+        }
+    }
+    for signals in view.signals_per_step.iter().take(view.current_step + 1) {
+        format!("{signals:?}").hash(&mut h);
+    }
+    h.finish()
+}
+
 /// The generator as the planner of the controlled agents.
 #[derive(Debug)]
 pub struct GeneratorPlanner<'m> {
     model: &'m LoadedScbg,
     ego: i64,
     controlled: Vec<ControlledAgent>,
+    /// First plans shared with other rollouts of the scene, and the agents planned so far.
+    first_plans: Option<(&'m FirstPlans, Vec<i64>)>,
 }
 
 impl<'m> GeneratorPlanner<'m> {
@@ -82,7 +142,15 @@ impl<'m> GeneratorPlanner<'m> {
             model,
             ego,
             controlled,
+            first_plans: None,
         }
+    }
+
+    /// The same, sharing each agent's first plan with other rollouts of the scene through
+    /// `first_plans`: the same futures, computed once.
+    pub fn sharing_first_plans(mut self, first_plans: &'m FirstPlans) -> Self {
+        self.first_plans = Some((first_plans, Vec::new()));
+        self
     }
 }
 
@@ -94,8 +162,27 @@ impl Planner for GeneratorPlanner<'_> {
             .find(|c| c.id == agent_id)
             .ok_or_else(|| PlanError(format!("agent {agent_id} is not controlled")))?
             .courtesy;
-        crate::generate::plan(self.model, view, self.ego, agent_id, courtesy)
-            .map_err(|e| PlanError(format!("{e:#}")))
+        let err = |e: anyhow::Error| PlanError(format!("{e:#}"));
+        if let Some((shared, planned)) = &mut self.first_plans
+            && !planned.contains(&agent_id)
+        {
+            planned.push(agent_id);
+            let key = (view_key(view), self.ego, agent_id);
+            let known = shared.bases.borrow().get(&key).cloned();
+            let basis = match known {
+                Some(b) => b,
+                None => {
+                    let b = std::rc::Rc::new(
+                        crate::generate::plan_basis(self.model, view, self.ego, agent_id)
+                            .map_err(err)?,
+                    );
+                    shared.bases.borrow_mut().insert(key, b.clone());
+                    b
+                }
+            };
+            return crate::generate::plan_from(self.model, &basis, courtesy).map_err(err);
+        }
+        crate::generate::plan(self.model, view, self.ego, agent_id, courtesy).map_err(err)
     }
 }
 
@@ -176,8 +263,35 @@ pub fn rollout(
         config.ego != EgoMode::External,
         "a whole rollout cannot have an ego driven from outside (step the simulation instead)"
     );
+    rollout_sharing(
+        model,
+        scene,
+        ego,
+        controlled,
+        config,
+        truth,
+        &FirstPlans::default(),
+    )
+}
+
+/// [`rollout`], sharing the first plans with other rollouts of `scene` through `first_plans`
+/// (the same simulated scene, faster when several rollouts share them).
+pub fn rollout_sharing(
+    model: &LoadedScbg,
+    scene: &Scene,
+    ego: Option<i64>,
+    controlled: &[ControlledAgent],
+    config: SimConfig,
+    truth: Option<&GroundTruth>,
+    first_plans: &FirstPlans,
+) -> anyhow::Result<Scene> {
+    ensure_request!(
+        config.ego != EgoMode::External,
+        "a whole rollout cannot have an ego driven from outside (step the simulation instead)"
+    );
     let mut sim = start(scene, ego, controlled, config, truth)?;
-    let mut planner = GeneratorPlanner::new(model, sim.ego_id(), controlled.to_vec());
+    let mut planner = GeneratorPlanner::new(model, sim.ego_id(), controlled.to_vec())
+        .sharing_first_plans(first_plans);
     sim.run(&mut planner).map_err(sim_error)?;
     Ok(sim.to_scene())
 }

@@ -25,7 +25,9 @@ use scbg_synth::GroundTruth;
 use serde::Serialize;
 
 use crate::generator::LoadedScbg;
-use crate::sim::{AgentRolloutMetrics, Contact, ControlledAgent, OthersMode, report, rollout};
+use crate::sim::{
+    AgentRolloutMetrics, Contact, ControlledAgent, FirstPlans, OthersMode, report, rollout_sharing,
+};
 
 /// What `eval sim` runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -252,18 +254,20 @@ fn rollout_at(
     s: &SimScene,
     q: f32,
     config: SimConfig,
+    first_plans: &FirstPlans,
 ) -> anyhow::Result<Scene> {
     let controlled = [ControlledAgent {
         id: s.controlled,
         courtesy: Courtesy::Quantile(q),
     }];
-    rollout(
+    rollout_sharing(
         model,
         &s.scene,
         Some(s.ego),
         &controlled,
         config,
         s.truth.as_ref(),
+        first_plans,
     )
 }
 
@@ -273,8 +277,9 @@ fn one_rollout(
     s: &SimScene,
     q: f32,
     config: SimConfig,
+    first_plans: &FirstPlans,
 ) -> anyhow::Result<(AgentRolloutMetrics, AgentRolloutMetrics)> {
-    let out = rollout_at(model, s, q, config)?;
+    let out = rollout_at(model, s, q, config, first_plans)?;
     let r = report(&out, s.ego, &[s.controlled])?;
     Ok((r.ego, r.controlled[0]))
 }
@@ -550,9 +555,11 @@ pub fn evaluate_sim(
     let results: Vec<anyhow::Result<SceneResult>> = scenes
         .par_iter()
         .map(|s| {
+            // The quantiles' rollouts share their first plan (`FirstPlans`).
+            let first_plans = FirstPlans::default();
             let curve = quantiles
                 .iter()
-                .map(|&q| one_rollout(model, s, q, options.config))
+                .map(|&q| one_rollout(model, s, q, options.config, &first_plans))
                 .collect::<anyhow::Result<Vec<_>>>()?;
             Ok(SceneResult::new(s, curve, base))
         })

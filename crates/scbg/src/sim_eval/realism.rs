@@ -13,8 +13,8 @@ use serde::Serialize;
 use super::{SimEval, SimEvalOptions, SimScene, mean_std, rate, rollout_at};
 use crate::generator::LoadedScbg;
 use crate::sim::{
-    AgentRolloutMetrics, EgoMode, OthersMode, report, rollout_quantiles, scene_of_rollout,
-    wosac_rollouts,
+    AgentRolloutMetrics, EgoMode, FirstPlans, OthersMode, report, rollout_quantiles,
+    scene_of_rollout, wosac_rollouts,
 };
 
 /// WOSAC numbers of one method over the WOSAC scenes.
@@ -136,10 +136,11 @@ fn scbg_rollouts(
     q: f32,
     spread: f32,
     options: &SimEvalOptions,
+    first_plans: &FirstPlans,
 ) -> anyhow::Result<Rollouts> {
     let scenes = rollout_quantiles(q, options.rollouts, spread)
         .into_iter()
-        .map(|qr| rollout_at(model, s, qr, options.config))
+        .map(|qr| rollout_at(model, s, qr, options.config, first_plans))
         .collect::<anyhow::Result<Vec<_>>>()?;
     Ok(wosac_rollouts(&s.scene, &scenes))
 }
@@ -181,12 +182,14 @@ pub(super) fn wosac_scene(
     let mut metrics = BTreeMap::new();
     let mut rollout_metrics = BTreeMap::new();
     let score = |r: &Rollouts| scbg_metrics::wosac::scenario_metrics(&s.scene, r, options.wosac);
+    // Every rollout of the scene shares its first plan.
+    let first_plans = FirstPlans::default();
     for &q in &options.wosac_quantiles {
-        let r = scbg_rollouts(model, s, q, options.spread, options)?;
+        let r = scbg_rollouts(model, s, q, options.spread, options, &first_plans)?;
         metrics.insert(quantile_method(q), score(&r)?);
     }
     if options.wosac_prior {
-        let r = scbg_rollouts(model, s, 0.5, 1.0, options)?;
+        let r = scbg_rollouts(model, s, 0.5, 1.0, options, &first_plans)?;
         metrics.insert(PRIOR.to_string(), score(&r)?);
     }
     let idm_scene = idm_only(s)?;

@@ -36,6 +36,21 @@ pub(crate) fn ranked_policy_in_the_loop(
     rolled.validate().unwrap();
     let ib = rolled.track_index(t.b_id).unwrap();
     assert!(rolled.tracks[ib].states[11..].iter().all(|s| s.valid));
+    // Shared first plans (the labelled futures of B, chosen by rank): the same rollouts.
+    let shared = sim::FirstPlans::default();
+    for q in [0.1, 0.9] {
+        let b = [ControlledAgent {
+            id: t.b_id,
+            courtesy: Courtesy::Quantile(q),
+        }];
+        assert_eq!(
+            sim::rollout_sharing(&model, scene, Some(t.a_id), &b, config, Some(t), &shared)
+                .unwrap(),
+            sim::rollout(&model, scene, Some(t.a_id), &b, config, Some(t)).unwrap(),
+            "quantile {q}"
+        );
+    }
+    assert_eq!(shared.len(), 1);
 }
 
 /// The closed-loop API on a trained (tiny) model: plans equal generations, a rollout in the
@@ -107,6 +122,20 @@ pub(crate) fn closed_loop_through_the_library(
         .collect();
     let rollouts = sim::wosac_rollouts(scene, &scenes);
     assert_eq!(rollouts.trajectories.len(), 32);
+    // Rollouts that share their first plan (as `scbg eval sim` does) are the same rollouts,
+    // with one basis computed for all of them.
+    let shared = sim::FirstPlans::default();
+    for (q, alone) in sim::rollout_quantiles(0.5, 32, 0.2)
+        .into_iter()
+        .zip(&scenes)
+        .step_by(8)
+    {
+        let with =
+            sim::rollout_sharing(model, scene, Some(t.a_id), &b(q), config, Some(t), &shared)
+                .unwrap();
+        assert_eq!(&with, alone, "quantile {q}");
+    }
+    assert_eq!(shared.len(), 1);
     let paths = sim::write_wosac(
         &dir.join("wosac"),
         "scbg-test",
