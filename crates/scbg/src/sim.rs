@@ -259,10 +259,6 @@ pub fn rollout(
     config: SimConfig,
     truth: Option<&GroundTruth>,
 ) -> anyhow::Result<Scene> {
-    ensure_request!(
-        config.ego != EgoMode::External,
-        "a whole rollout cannot have an ego driven from outside (step the simulation instead)"
-    );
     rollout_sharing(
         model,
         scene,
