@@ -70,10 +70,12 @@ pub struct ControlledAgent {
 /// The courtesy-free part of the first plans ([`scbg_generator::PlanBasis`]) that rollouts of
 /// one scene share: each rollout starts from the same logged history, whatever courtesy it
 /// asks, so its first plan differs from the others' only in the choice. Keyed by the view
-/// (a hash of its tracks' states up to its current step) and the pair: a rollout that starts
-/// elsewhere never shares. Later plans, from diverged histories, are not kept. For one thread
-/// at a time (a [`RefCell`](std::cell::RefCell)); `scbg eval sim` keeps one per scene, about a
-/// fifth of its rollouts' time (BENCHMARKS.md *Shared first plans*).
+/// (a hash of its tracks' states up to its current step, its targets and the map's size) and
+/// the pair: a rollout that starts elsewhere never shares. Later plans, from diverged
+/// histories, are not kept. Use one per scene and model: the key does not hold the model, nor
+/// the map's geometry. For one thread at a time (a [`RefCell`](std::cell::RefCell)); `scbg eval
+/// sim` keeps two per scene (its curve's rollouts and its WOSAC rollouts), saving 15–19 % of its
+/// time (BENCHMARKS.md *Shared first plans*).
 #[derive(Debug, Default)]
 pub struct FirstPlans {
     bases: std::cell::RefCell<
@@ -93,8 +95,10 @@ impl FirstPlans {
     }
 }
 
-/// A hash of what a planner reads from `view` besides the map: the scenario, its current step,
-/// and every track's id, type and states up to the current step.
+/// A hash of what a planner reads from `view`: the scenario, its current step, the SDC, every
+/// track's id, type and states up to the current step, the signals, the objects of interest
+/// and prediction targets, and the map's feature counts (not its geometry: within one
+/// scenario the map is the log's).
 fn view_key(view: &Scene) -> u64 {
     use std::hash::{Hash, Hasher};
     let mut h = std::collections::hash_map::DefaultHasher::new();
@@ -122,6 +126,19 @@ fn view_key(view: &Scene) -> u64 {
     for signals in view.signals_per_step.iter().take(view.current_step + 1) {
         format!("{signals:?}").hash(&mut h);
     }
+    view.objects_of_interest.hash(&mut h);
+    format!("{:?}", view.tracks_to_predict).hash(&mut h);
+    let m = &view.map;
+    [
+        m.lanes.len(),
+        m.road_lines.len(),
+        m.road_edges.len(),
+        m.stop_signs.len(),
+        m.crosswalks.len(),
+        m.speed_bumps.len(),
+        m.driveways.len(),
+    ]
+    .hash(&mut h);
     h.finish()
 }
 
@@ -271,7 +288,8 @@ pub fn rollout(
 }
 
 /// [`rollout`], sharing the first plans with other rollouts of `scene` through `first_plans`
-/// (the same simulated scene, faster when several rollouts share them).
+/// (the same simulated scene, faster when several rollouts share them; one [`FirstPlans`] per
+/// scene and model).
 pub fn rollout_sharing(
     model: &LoadedScbg,
     scene: &Scene,
