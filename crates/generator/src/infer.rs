@@ -321,13 +321,7 @@ impl Scbg {
                 achieved_psi: measured.psi[0][j],
                 a_expected_reward_conditional: measured.e_cond[0][j],
                 a_expected_reward_marginal: measured.e_marg[0],
-                world_xy_m: measured.futures_b[0][j]
-                    .iter()
-                    .map(|p| {
-                        let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
-                        [x, y]
-                    })
-                    .collect(),
+                world_xy_m: world_xy(&pose, &measured.futures_b[0][j]),
                 step_secs: crate::train::STEP_SECS,
             })
             .collect())
@@ -366,6 +360,16 @@ fn check_request(
             .ok_or_else(|| GenerateError::NoSuchTrack(id, scene.scenario_id.clone()))
     };
     Ok((index(a_id)?, index(b_id)?))
+}
+
+/// Points in the frame of `pose`'s agent, in the world frame.
+fn world_xy(pose: &scbg_scene::Pose2, xy: &[[f32; 2]]) -> Vec<[f64; 2]> {
+    xy.iter()
+        .map(|p| {
+            let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
+            [x, y]
+        })
+        .collect()
 }
 
 /// What a closed-loop plan of B toward A shares across requested courtesies
@@ -414,6 +418,7 @@ impl Scbg {
         courtesy: Courtesy,
         device: &Device,
     ) -> Result<Vec<[f64; 2]>, GenerateError> {
+        // Checked before the basis is paid for (`plan_from` checks again, for its own callers).
         check_courtesy(&[courtesy])?;
         let basis = self.plan_basis(scene, window, a_id, b_id, device)?;
         self.plan_from(&basis, courtesy, device)
@@ -539,14 +544,6 @@ impl Scbg {
         device: &Device,
     ) -> Result<Vec<[f64; 2]>, GenerateError> {
         check_courtesy(&[courtesy])?;
-        let to_world = |pose: &scbg_scene::Pose2, xy: &[[f32; 2]]| -> Vec<[f64; 2]> {
-            xy.iter()
-                .map(|p| {
-                    let (x, y) = pose.world_from_agent(f64::from(p[0]), f64::from(p[1]));
-                    [x, y]
-                })
-                .collect()
-        };
         match &basis.0 {
             Basis::Ranked {
                 psi,
@@ -558,7 +555,7 @@ impl Scbg {
                     .ok_or(GenerateError::NoCandidates(self.labels.labelled_samples()))?;
                 // Through B's frame, as `generate_in`'s candidates are: the same numbers.
                 let in_b = scbg_courtesy::label::change_frame(&futures_in_a[1 + k], a_pose, b_pose);
-                Ok(to_world(b_pose, &in_b))
+                Ok(world_xy(b_pose, &in_b))
             }
             Basis::Generator(g) => {
                 let GeneratorBasis {
@@ -584,7 +581,7 @@ impl Scbg {
                     .chunks_exact(2)
                     .map(|p| [p[0], p[1]])
                     .collect();
-                Ok(to_world(pose, &xy))
+                Ok(world_xy(pose, &xy))
             }
         }
     }

@@ -115,16 +115,17 @@ pub struct DemoOptions {
 
 /// Closed-loop scenes on which the demo scores the generator's WOSAC realism (at most): scbg
 /// at three quantiles and with the knob drawn from its prior, and three baselines, 32
-/// rollouts each (~0.4 s a scene on 2 cores). The per-scene difference between scbg and
-/// IDM-only has a standard deviation of ~0.14, so 10 scenes could not tell them apart
-/// (± 0.04); on 60 (± 0.014–0.02) scbg is above both baselines in each of four data seeds,
-/// though in seed 0 within one standard error of IDM-only around the quantiles
-/// (BENCHMARKS.md *WOSAC on 60 of the demo's scenes*), for about 20 s more. `scbg eval sim --wosac-scenes 400` scores every
-/// held-out scene.
+/// rollouts each (~0.3 s a scene on 2 cores with shared first plans). The per-scene
+/// difference between scbg and IDM-only has a standard deviation of ~0.14, so 10 scenes could
+/// not tell them apart (± 0.04); on 60 (± 0.014–0.02) scbg is above both baselines in each of
+/// four data seeds, though in seed 0 within one standard error of IDM-only around the
+/// quantiles (BENCHMARKS.md *WOSAC on 60 of the demo's scenes*). The demo's closed-loop stage
+/// took 30 s with 60, against 17 s with 10 before the shared plans. `scbg eval sim
+/// --wosac-scenes 400` scores every held-out scene.
 pub const DEMO_WOSAC_SCENES: usize = 60;
 
 /// The same for sample and rank, whose rollouts cost about twice the generator's: at three
-/// quantiles, no prior; 60 scenes would add another ~30 s to the demo.
+/// quantiles, no prior; 60 scenes would add another ~27 s to the demo.
 pub const DEMO_RANKED_WOSAC_SCENES: usize = 10;
 
 /// Runs the demo and writes `report.md`, `report.json` and the figures in `options.out`.

@@ -276,15 +276,7 @@ pub fn rollout(
     config: SimConfig,
     truth: Option<&GroundTruth>,
 ) -> anyhow::Result<Scene> {
-    rollout_sharing(
-        model,
-        scene,
-        ego,
-        controlled,
-        config,
-        truth,
-        &FirstPlans::default(),
-    )
+    run_rollout(model, scene, ego, controlled, config, truth, None)
 }
 
 /// [`rollout`], sharing the first plans with other rollouts of `scene` through `first_plans`
@@ -299,13 +291,35 @@ pub fn rollout_sharing(
     truth: Option<&GroundTruth>,
     first_plans: &FirstPlans,
 ) -> anyhow::Result<Scene> {
+    run_rollout(
+        model,
+        scene,
+        ego,
+        controlled,
+        config,
+        truth,
+        Some(first_plans),
+    )
+}
+
+fn run_rollout(
+    model: &LoadedScbg,
+    scene: &Scene,
+    ego: Option<i64>,
+    controlled: &[ControlledAgent],
+    config: SimConfig,
+    truth: Option<&GroundTruth>,
+    first_plans: Option<&FirstPlans>,
+) -> anyhow::Result<Scene> {
     ensure_request!(
         config.ego != EgoMode::External,
         "a whole rollout cannot have an ego driven from outside (step the simulation instead)"
     );
     let mut sim = start(scene, ego, controlled, config, truth)?;
-    let mut planner = GeneratorPlanner::new(model, sim.ego_id(), controlled.to_vec())
-        .sharing_first_plans(first_plans);
+    let mut planner = GeneratorPlanner::new(model, sim.ego_id(), controlled.to_vec());
+    if let Some(first_plans) = first_plans {
+        planner = planner.sharing_first_plans(first_plans);
+    }
     sim.run(&mut planner).map_err(sim_error)?;
     Ok(sim.to_scene())
 }
