@@ -2,6 +2,7 @@
 //!
 //! - [`atomic`]: the project's one atomic file writer (temporary file in the destination's
 //!   folder, renamed into place when complete, removed on failure).
+//! - [`fp`]: the floating-point mode of compute threads (subnormals flushed to zero).
 //! - [`seed`]: the SplitMix64 mixer that derives independent, reproducible random streams
 //!   from a `(seed, stream)` pair.
 //!
@@ -11,4 +12,5 @@
 #![warn(missing_docs)]
 
 pub mod atomic;
+pub mod fp;
 pub mod seed;

@@ -49,6 +49,9 @@ pub mod synth;
 
 pub use progress::{Bar, Progress, Quiet};
 pub use scbg_base::atomic::{write as write_atomic, write_json};
+/// The floating-point mode of compute threads (subnormals flushed to zero), which the `scbg`
+/// binary sets before it starts any thread.
+pub use scbg_base::fp;
 pub use scbg_scene::{AgentState, MapPoint, ObjectType, Scene};
 
 /// The scene value types (tracks, map features), for front ends that build scenes themselves.
