@@ -125,8 +125,9 @@ pub struct DemoOptions {
 pub const DEMO_WOSAC_SCENES: usize = 60;
 
 /// The same for sample and rank, whose rollouts cost about twice the generator's: at three
-/// quantiles, no prior; 60 scenes would add another ~27 s to the demo.
-pub const DEMO_RANKED_WOSAC_SCENES: usize = 10;
+/// quantiles, no prior. 10 scenes (± 0.04) could not tell it from IDM-only; 60 cost about
+/// 30 s more, which the flushed subnormals gave back (BENCHMARKS.md *Subnormal numbers*).
+pub const DEMO_RANKED_WOSAC_SCENES: usize = 60;
 
 /// Runs the demo and writes `report.md`, `report.json` and the figures in `options.out`.
 pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Result<DemoReport> {
