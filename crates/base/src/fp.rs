@@ -1,17 +1,22 @@
 //! The floating-point mode of compute threads: subnormal numbers flushed to zero.
 //!
-//! Training drives some values (Adam's second moments of tiny gradients, saturated gates) into
-//! the subnormal range below 1.2e-38. Intel cores take a microcode assist for every operation
-//! on such a number, so a predictor epoch of the demo slowed from 6 s to 10 s as training went
-//! on (BENCHMARKS.md, "Subnormal numbers"). Setting the CPU's flush-to-zero and
-//! denormals-are-zero flags keeps every epoch at 6 s; the demo's report was identical to the
-//! last digit. GPUs and PyTorch's `set_flush_denormal(True)` do the same.
+//! Training drives some values into the subnormal range below 1.2e-38. Intel cores take a
+//! microcode assist for every operation on such a number, so a predictor epoch of the demo grew
+//! from 6 s to 10 s as training went on (BENCHMARKS.md, "Subnormal numbers"). Setting the
+//! CPU's flush-to-zero and denormals-are-zero flags keeps every epoch at 6 s; the demo's report
+//! was identical to the last digit. PyTorch's `torch.set_flush_denormal(True)` and CUDA's
+//! `-ftz` make the same trade.
 //!
-//! The flags belong to a thread, and a thread inherits them from the thread that spawns it
-//! (POSIX `pthread_create`; a test below checks it). So [`flush_subnormals`] called first thing
-//! in `main` covers every worker pool and scoped thread the process starts afterwards. The
-//! libraries never call it: a host process (the Python module's interpreter) keeps IEEE
-//! subnormals unless it asks otherwise.
+//! The flags belong to a thread. The `scbg` binary calls [`flush_subnormals`] first thing in
+//! `main`; code that starts threads carries the starting thread's [`Mode`] over to them
+//! (`Mode::current()` before, `Mode::apply()` on the new thread), because only Linux hands a
+//! new thread its creator's flags (macOS and Windows start it with the defaults). The libraries
+//! never choose the mode themselves: a host process (the Python module's interpreter) keeps
+//! IEEE subnormals unless it asks otherwise.
+//!
+//! Rust and LLVM assume the default floating-point environment: a value folded at compile time
+//! keeps its IEEE subnormal while the same expression at run time flushes. Only subnormal
+//! values, already below f32's resolution around any normal number, can differ.
 
 /// Environment variable that keeps IEEE subnormals in the `scbg` binary (any value but empty or
 /// `0`), for measuring what the flags buy.
@@ -26,9 +31,9 @@ fn asks_to_keep(value: Option<&std::ffi::OsStr>) -> bool {
     value.is_some_and(|v| !v.is_empty() && v != "0")
 }
 
-/// Flushes subnormal results and inputs to zero on the calling thread and on the threads it
-/// spawns afterwards. Returns `false` (and changes nothing) on a CPU architecture without
-/// support here (anything but x86-64 and AArch64).
+/// Flushes subnormal results and inputs to zero on the calling thread (and, on Linux, on the
+/// threads it spawns afterwards). Returns `false` (and changes nothing) on a CPU architecture
+/// without support here (anything but x86-64 and AArch64).
 pub fn flush_subnormals() -> bool {
     set_mode(true)
 }
@@ -41,6 +46,27 @@ pub fn keep_subnormals() -> bool {
 /// Whether the calling thread flushes subnormals to zero.
 pub fn flushes_subnormals() -> bool {
     imp::get().is_some_and(|bits| bits & imp::FLUSH == imp::FLUSH)
+}
+
+/// A thread's floating-point mode, to carry over to the threads it starts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Mode {
+    /// Subnormals flushed to zero.
+    pub flush_subnormals: bool,
+}
+
+impl Mode {
+    /// The calling thread's mode.
+    pub fn current() -> Self {
+        Self {
+            flush_subnormals: flushes_subnormals(),
+        }
+    }
+
+    /// Makes it the calling thread's mode (nothing on an architecture without support).
+    pub fn apply(self) {
+        set_mode(self.flush_subnormals);
+    }
 }
 
 fn set_mode(flush: bool) -> bool {
@@ -64,7 +90,7 @@ mod imp {
     pub fn get() -> Option<u32> {
         let mut csr: u32 = 0;
         // SAFETY: `stmxcsr` stores the 32-bit MXCSR register at the given address, which
-        // points at a live, aligned `u32`; every x86-64 CPU has it.
+        // points at a live, aligned `u32`; every x86-64 CPU has it. Reading changes nothing.
         #[allow(unsafe_code)]
         unsafe {
             core::arch::asm!("stmxcsr [{}]", in(reg) &mut csr, options(nostack, preserves_flags));
@@ -74,14 +100,13 @@ mod imp {
 
     pub fn set(csr: u32) {
         // SAFETY: `ldmxcsr` loads MXCSR from a live `u32`. Only the two flush flags differ
-        // from the value just read, and neither can raise an exception.
+        // from the value just read (the exception flags raised since may be cleared: the
+        // asm does not claim to preserve them), and neither flush flag can raise an
+        // exception. Memory safety does not depend on the floating-point mode; the module's
+        // docs say which results may differ from code folded at compile time.
         #[allow(unsafe_code)]
         unsafe {
-            core::arch::asm!(
-                "ldmxcsr [{}]",
-                in(reg) &csr,
-                options(nostack, readonly, preserves_flags)
-            );
+            core::arch::asm!("ldmxcsr [{}]", in(reg) &csr, options(nostack, readonly));
         }
     }
 }
@@ -96,16 +121,25 @@ mod imp {
         // SAFETY: reading FPCR has no side effect.
         #[allow(unsafe_code)]
         unsafe {
-            core::arch::asm!("mrs {}, fpcr", out(reg) fpcr, options(nomem, nostack, preserves_flags));
+            core::arch::asm!(
+                "mrs {}, fpcr",
+                out(reg) fpcr,
+                options(nomem, nostack, preserves_flags)
+            );
         }
         Some(fpcr)
     }
 
     pub fn set(fpcr: u64) {
-        // SAFETY: writes back the value just read with only FZ changed.
+        // SAFETY: writes back the value just read with only FZ changed (see the x86-64
+        // `set` on the mode and compile-time folding).
         #[allow(unsafe_code)]
         unsafe {
-            core::arch::asm!("msr fpcr, {}", in(reg) fpcr, options(nomem, nostack, preserves_flags));
+            core::arch::asm!(
+                "msr fpcr, {}",
+                in(reg) fpcr,
+                options(nomem, nostack, preserves_flags)
+            );
         }
     }
 }
@@ -126,44 +160,89 @@ mod tests {
     use super::*;
     use std::hint::black_box;
 
-    /// The smallest positive normal f32 halved: a subnormal (5.9e-39).
+    /// The smallest positive normal f32 halved: a subnormal (5.9e-39) under IEEE rules.
     fn half_min_positive() -> f32 {
         black_box(f32::MIN_POSITIVE) * black_box(0.5)
     }
 
-    // Each test runs on its own thread, so the flags never leak into another test.
+    /// The smallest subnormal scaled up by 2^100: the normal 2^-49 under IEEE rules, zero when
+    /// subnormal inputs read as zero.
+    fn scaled_smallest_subnormal() -> f32 {
+        black_box(f32::from_bits(1)) * black_box(2f32.powi(100))
+    }
+
+    // Each test runs on its own thread, so the flags never leak into another test. Results
+    // are compared by their bits: a comparison of floats would itself read a subnormal as 0.
+    #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
     #[test]
     fn subnormals_survive_by_default_and_flush_when_asked() {
         assert!(!flushes_subnormals());
         let sub = half_min_positive();
-        assert!(
-            sub > 0.0 && !sub.is_normal(),
-            "IEEE gives a subnormal: {sub:e}"
-        );
+        assert_eq!(sub.to_bits(), 1 << 22, "IEEE gives a subnormal: {sub:e}");
+        assert_eq!(scaled_smallest_subnormal(), 2f32.powi(-49));
         assert!(flush_subnormals());
         assert!(flushes_subnormals());
-        assert_eq!(half_min_positive(), 0.0, "a subnormal result is flushed");
-        // Denormals-are-zero (x86-64) / FZ (AArch64): a subnormal input reads as zero.
-        let input = black_box(f32::from_bits(1));
-        assert_eq!(input * black_box(2.0f32), 0.0);
-        // Normal arithmetic is untouched.
-        assert_eq!(black_box(1.5f32) * black_box(2.0), 3.0);
+        assert_eq!(
+            half_min_positive().to_bits(),
+            0,
+            "a subnormal result is flushed"
+        );
+        assert_eq!(
+            scaled_smallest_subnormal().to_bits(),
+            0,
+            "a subnormal input reads as zero"
+        );
+        assert_eq!(black_box(1.5f32) * black_box(2.0), 3.0, "normal arithmetic");
         assert!(keep_subnormals());
         assert!(!flushes_subnormals());
-        assert!(half_min_positive() > 0.0);
+        assert_eq!(half_min_positive().to_bits(), 1 << 22);
     }
 
+    #[cfg(any(target_arch = "x86_64", target_arch = "aarch64"))]
     #[test]
-    fn spawned_threads_inherit_the_mode() {
+    fn a_mode_carries_over_to_a_new_thread() {
         flush_subnormals();
-        let (flag, value) = std::thread::spawn(|| (flushes_subnormals(), half_min_positive()))
+        let mode = Mode::current();
+        assert!(mode.flush_subnormals);
+        let bits = std::thread::spawn(move || {
+            keep_subnormals(); // whatever the platform handed over
+            mode.apply();
+            (flushes_subnormals(), half_min_positive().to_bits())
+        })
+        .join()
+        .unwrap();
+        assert_eq!(bits, (true, 0));
+        keep_subnormals();
+        let mode = Mode::current();
+        let bits = std::thread::spawn(move || {
+            flush_subnormals();
+            mode.apply();
+            (flushes_subnormals(), half_min_positive().to_bits())
+        })
+        .join()
+        .unwrap();
+        assert_eq!(bits, (false, 1 << 22));
+    }
+
+    /// What the binary relies on for threads it does not start itself on Linux.
+    #[cfg(all(
+        target_os = "linux",
+        any(target_arch = "x86_64", target_arch = "aarch64")
+    ))]
+    #[test]
+    fn linux_threads_inherit_the_mode() {
+        flush_subnormals();
+        let bits = std::thread::spawn(|| (flushes_subnormals(), half_min_positive().to_bits()))
             .join()
             .unwrap();
-        assert!(flag, "a thread spawned after flush_subnormals flushes too");
-        assert_eq!(value, 0.0);
-        keep_subnormals();
-        let flag = std::thread::spawn(flushes_subnormals).join().unwrap();
-        assert!(!flag);
+        assert_eq!(bits, (true, 0));
+    }
+
+    #[cfg(not(any(target_arch = "x86_64", target_arch = "aarch64")))]
+    #[test]
+    fn other_architectures_report_no_support() {
+        assert!(!flush_subnormals());
+        assert!(!flushes_subnormals());
     }
 
     #[test]

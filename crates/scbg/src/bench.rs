@@ -78,8 +78,10 @@ fn featurize_file(path: &PathBuf, samples_too: bool) -> anyhow::Result<(usize, u
 }
 
 fn run_in_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> anyhow::Result<T> {
+    let mode = crate::fp::Mode::current();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
+        .start_handler(move |_| mode.apply())
         .build()
         .context("thread pool")?;
     Ok(pool.install(f))
@@ -449,7 +451,11 @@ pub fn sim(
 ) -> anyhow::Result<SimBench> {
     use crate::sim::{ControlledAgent, OthersMode, rollout, rollout_quantiles, wosac_rollouts};
     use scbg_generator::Courtesy;
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let mode = crate::fp::Mode::current();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .start_handler(move |_| mode.apply())
+        .build()?;
     pool.install(|| {
         let config = scbg_sim::SimConfig {
             others: OthersMode::Reactive,

@@ -125,8 +125,9 @@ pub struct DemoOptions {
 pub const DEMO_WOSAC_SCENES: usize = 60;
 
 /// The same for sample and rank, whose rollouts cost about twice the generator's: at three
-/// quantiles, no prior. 10 scenes (± 0.04) could not tell it from IDM-only; 60 cost about
-/// 30 s more, which the flushed subnormals gave back (BENCHMARKS.md *Subnormal numbers*).
+/// quantiles, no prior. 10 scenes (± 0.04) could not tell it from IDM-only; 60 cost 40–45 s
+/// more on a 2-vCPU Intel Xeon, where the flushed subnormals had saved 130 s of the predictor's
+/// training (BENCHMARKS.md *Subnormal numbers*).
 pub const DEMO_RANKED_WOSAC_SCENES: usize = 60;
 
 /// Runs the demo and writes `report.md`, `report.json` and the figures in `options.out`.
@@ -307,6 +308,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     } else {
         // One thread per seed: the stage is mostly single-threaded, and each seed's models
         // are seeded apart from the others (train_variant).
+        let fp_mode = crate::fp::Mode::current();
         let trained: Vec<anyhow::Result<Vec<(PathBuf, String, f64)>>> =
             std::thread::scope(|scope| {
                 let handles: Vec<_> = seeds
@@ -315,6 +317,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                     .map(|(k, &seed)| {
                         let (predictors, examples) = (&predictors, &examples);
                         scope.spawn(move || -> anyhow::Result<Vec<(PathBuf, String, f64)>> {
+                            fp_mode.apply();
                             let mut done = Vec::new();
                             for variant in Variant::ALL {
                                 let dir = out.join(generator_dir_name(variant, k));
@@ -389,12 +392,16 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     let per_seed: Vec<ScbgEval> = match skipped {
         Some(why) => vec![ScbgEval::not_evaluated(why)],
         None => std::thread::scope(|scope| {
+            let fp_mode = crate::fp::Mode::current();
             let handles: Vec<_> = seed_dirs
                 .iter()
                 .enumerate()
                 .map(|(k, dirs)| {
                     let evaluate_seed = &evaluate_seed;
-                    scope.spawn(move || evaluate_seed(k, dirs))
+                    scope.spawn(move || {
+                        fp_mode.apply();
+                        evaluate_seed(k, dirs)
+                    })
                 })
                 .collect();
             handles

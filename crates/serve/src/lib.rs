@@ -360,8 +360,10 @@ pub async fn serve(
 /// `scbg serve`: loads the model, binds, serves until Ctrl-C (or SIGTERM).
 pub fn run(model: LoadedScbg, config: ServeConfig) -> anyhow::Result<()> {
     config.check()?;
+    let mode = scbg::fp::Mode::current();
     let runtime = tokio::runtime::Builder::new_multi_thread()
         .enable_all()
+        .on_thread_start(move || mode.apply())
         .build()?;
     runtime.block_on(async move {
         let listener = tokio::net::TcpListener::bind(config.addr)
