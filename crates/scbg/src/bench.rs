@@ -451,12 +451,7 @@ pub fn sim(
 ) -> anyhow::Result<SimBench> {
     use crate::sim::{ControlledAgent, OthersMode, rollout, rollout_quantiles, wosac_rollouts};
     use scbg_generator::Courtesy;
-    let mode = crate::fp::Mode::current();
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .start_handler(move |_| mode.apply())
-        .build()?;
-    pool.install(|| {
+    run_in_pool(1, || {
         let config = scbg_sim::SimConfig {
             others: OthersMode::Reactive,
             replan_every: replan_every
@@ -577,7 +572,7 @@ pub fn sim(
             wosac_ms_best: best(&wosac_ms),
             wosac_ms_mean: mean(&wosac_ms),
         })
-    })
+    })?
 }
 
 #[cfg(test)]
