@@ -436,11 +436,16 @@ fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
         fmt(&e.curve.spearman_within_scene_a_speed),
         fmt(&e.curve.responsive_fraction)
     );
+    println!(
+        "Spearman(quantile, A speed) with each scene's speeds ordered to rise with the quantile (a perfect knob's with these outcomes): {}",
+        fmt(&e.curve.spearman_quantile_a_speed_ordered)
+    );
     if let Some(w) = &e.world_knob {
         println!(
-            "the world's own B at c = q: Spearman(quantile, A speed) {}; within a scene {}",
+            "the world's own B at c = q: Spearman(quantile, A speed) {}; within a scene {}; ordered {}",
             fmt(&w.spearman_quantile_a_speed),
-            fmt(&w.spearman_within_scene_a_speed)
+            fmt(&w.spearman_within_scene_a_speed),
+            fmt(&w.spearman_quantile_a_speed_ordered)
         );
     }
     println!("{}", e.realism_line());

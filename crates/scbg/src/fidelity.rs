@@ -16,11 +16,11 @@ use serde::Serialize;
 use crate::label_table::LabelRow;
 
 mod control;
-pub(crate) use control::within_group_spearman;
 pub use control::{
     QuantileTruth, RESPONSIVE_PSI_MPS, SelectionControl, TruthControl, WorldKnob,
     candidate_control, selection_control, truth_control, world_future_of_b, world_truth_control,
 };
+pub(crate) use control::{ordered_pooled_spearman, within_group_spearman};
 
 /// Key of the pooled entry beside the per-family ones.
 pub const POOLED: &str = "all";

@@ -296,6 +296,11 @@ pub struct KnobCurve {
     /// Spearman(quantile, realised courtesy) over every (scene, quantile): the same, with
     /// each scene's own level removed.
     pub spearman_quantile_realised_courtesy: PerFamily,
+    /// `spearman_quantile_a_speed` with each scene's A speeds re-ordered to rise with the
+    /// quantile: the most a knob that orders these rollouts' outcomes perfectly within every
+    /// scene reaches (`crate::fidelity::ordered_pooled_spearman`). Below 1 by the spread of
+    /// A's speed from scene to scene against the knob's reach within a scene.
+    pub spearman_quantile_a_speed_ordered: PerFamily,
     /// The knob within a scene: the mean over scenes of Spearman(quantile, A's realised
     /// average speed) across the scene's own quantiles, 0 for a scene in which A's speed does
     /// not change by [`RESPONSIVE_SPEED_MPS`] over them; per family and pooled.
@@ -398,7 +403,8 @@ impl KnobCurve {
                 })
             })
             .collect();
-        let (spearman_within_scene_a_speed, responsive_fraction) = within_scene(done, quantiles);
+        let (spearman_within_scene_a_speed, responsive_fraction, spearman_quantile_a_speed_ordered) =
+            within_scene(done, quantiles);
         Self {
             scenes: done.len(),
             spearman_within_scene_a_speed,
@@ -418,6 +424,7 @@ impl KnobCurve {
             per_quantile,
             spearman_quantile_a_speed: spearman_per_family(&speed_points),
             spearman_quantile_realised_courtesy: spearman_per_family(&courtesy_points),
+            spearman_quantile_a_speed_ordered,
         }
     }
 }
@@ -488,8 +495,10 @@ fn kept_counting_skips(
 pub const RESPONSIVE_SPEED_MPS: f64 = 0.01;
 
 /// Per family and pooled: the mean over scenes of Spearman(quantile, A's realised speed)
-/// within each scene (0 where it does not respond), and the share of responsive scenes.
-fn within_scene(done: &[SceneResult], quantiles: &[f32]) -> (PerFamily, PerFamily) {
+/// within each scene (0 where it does not respond), the share of responsive scenes, and the
+/// pooled Spearman with each scene's speeds ordered to rise with the quantile
+/// ([`KnobCurve::spearman_quantile_a_speed_ordered`]).
+fn within_scene(done: &[SceneResult], quantiles: &[f32]) -> (PerFamily, PerFamily, PerFamily) {
     let q: Vec<f64> = quantiles.iter().map(|&q| f64::from(q)).collect();
     let speeds: Vec<(&str, Vec<f64>)> = done
         .iter()
@@ -503,8 +512,12 @@ fn within_scene(done: &[SceneResult], quantiles: &[f32]) -> (PerFamily, PerFamil
         &q,
         RESPONSIVE_SPEED_MPS,
     );
+    let ordered = crate::fidelity::ordered_pooled_spearman(
+        speeds.iter().map(|(family, v)| (*family, v.as_slice())),
+        &q,
+    );
     let some = |m: BTreeMap<String, f64>| m.into_iter().map(|(k, v)| (k, Some(v))).collect();
-    (some(within), some(responsive))
+    (some(within), some(responsive), ordered)
 }
 
 fn spearman_per_family(points: &[(String, f64, f64)]) -> PerFamily {

@@ -71,6 +71,19 @@ fn demo_writes_a_report() {
     let responsive = cl["responsive_fraction"]["all"].as_f64().unwrap();
     assert!(within.abs() <= responsive + 1e-9, "{cl}");
     assert!(report["truth_control"]["full"]["spearman_within_example"]["all"].is_number());
+    // Ordered to rise with the quantile within each scene (or role), no order ranks higher.
+    for (m, key) in [
+        (cl, "spearman_quantile_a_speed"),
+        (
+            &report["truth_control"]["full"],
+            "spearman_quantile_psi_true",
+        ),
+    ] {
+        let ordered = m[format!("{key}_ordered")]["all"].as_f64().unwrap();
+        if let Some(as_given) = m[key]["all"].as_f64() {
+            assert!(ordered >= as_given - 1e-9, "{key}: {m}");
+        }
+    }
     // Then sample and rank in the same loop, at its own cadence (both 2 s), without the
     // prior's score.
     let rk = &report["closed_loop_ranked"];

@@ -124,7 +124,8 @@ pub fn acceptance_checks(
             key: "truth_control_spearman",
             passed: pooled >= 0.6 && !per.is_empty() && per.iter().all(|(_, r)| *r >= 0.4),
             text: format!(
-                "full: Spearman(quantile, ψ_true of the generated future) ≥ 0.6 pooled ({pooled:.3}) and ≥ 0.4 per family ({})",
+                "full: Spearman(quantile, ψ_true of the generated future) ≥ 0.6 pooled ({pooled:.3}; each example's futures ordered to rise with the quantile {:.3}) and ≥ 0.4 per family ({})",
+                num(t, &["spearman_quantile_psi_true_ordered", POOLED]),
                 listing(&per)
             ),
         });
@@ -270,15 +271,17 @@ fn closed_loop_checks(c: &crate::sim_eval::SimEval, keys: &ClosedLoopKeys, out: 
         key: keys.spearman,
         passed: pooled >= 0.6,
         text: format!(
-            "closed loop{}: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}; within a scene {}){}",
+            "closed loop{}: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}; within a scene {}; each scene's speeds ordered to rise with the quantile {}){}",
             keys.label,
             pooled_of(&c.curve.spearman_quantile_realised_courtesy),
             pooled_of(&c.curve.spearman_within_scene_a_speed),
+            pooled_of(&c.curve.spearman_quantile_a_speed_ordered),
             c.world_knob.as_ref().map_or(String::new(), |w| format!(
-                "; the world's own B at courtesy c = q on the same scenes: {} pooled, {} with each scene's level removed, {} within a scene",
+                "; the world's own B at courtesy c = q on the same scenes: {} pooled, {} with each scene's level removed, {} within a scene, {} ordered",
                 pooled_of(&w.spearman_quantile_a_speed),
                 pooled_of(&w.spearman_quantile_realised_courtesy),
-                pooled_of(&w.spearman_within_scene_a_speed)
+                pooled_of(&w.spearman_within_scene_a_speed),
+                pooled_of(&w.spearman_quantile_a_speed_ordered)
             ))
         ),
     });

@@ -264,19 +264,20 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
             .join(", ")
     };
     out += &format!(
-        "\nSpearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene (mean of each scene's Spearman(quantile, A's realised speed), 0 where it does not respond): {}; responsive scenes: {}. scbg WOSAC over its quantiles: {}.\n\n\
+        "\nSpearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene (mean of each scene's Spearman(quantile, A's realised speed), 0 where it does not respond): {}; responsive scenes: {}. With each scene's speeds ordered to rise with the quantile (a perfect knob's with these outcomes): {}. scbg WOSAC over its quantiles: {}.\n\n\
          ![closed-loop courtesy]({figures}/sim_courtesy.png)\n![closed-loop realism]({figures}/sim_realism.png)\n",
         fmt(&c.curve.spearman_quantile_a_speed),
         fmt(&c.curve.spearman_quantile_realised_courtesy),
         fmt(&c.curve.spearman_within_scene_a_speed),
         fmt(&c.curve.responsive_fraction),
+        fmt(&c.curve.spearman_quantile_a_speed_ordered),
         meta(c.wosac_scbg.as_ref())
     );
     out += &format!("\n{}.\n", c.realism_line());
     out += &format!("\n{}.\n", c.curve.collision_line());
     if let Some(w) = &c.world_knob {
         out += &format!(
-            "\nThe ceiling: the same {} scenes with B driven by the synthetic world's own rule at courtesy c = q (a B faithful to its courtesy). A's realised speed per quantile: {}. Spearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene: {}; responsive scenes: {}. B collision rate at most {:.3}.\n",
+            "\nThe ceiling: the same {} scenes with B driven by the synthetic world's own rule at courtesy c = q (a B faithful to its courtesy). A's realised speed per quantile: {}. Spearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene: {}; responsive scenes: {}. Ordered within each scene: {}. B collision rate at most {:.3}.\n",
             w.scenes,
             w.per_quantile
                 .iter()
@@ -287,6 +288,7 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
             fmt(&w.spearman_quantile_realised_courtesy),
             fmt(&w.spearman_within_scene_a_speed),
             fmt(&w.responsive_fraction),
+            fmt(&w.spearman_quantile_a_speed_ordered),
             w.max_b_collision_rate
         );
     }

@@ -80,6 +80,11 @@ fn quantile_summary(rows: &[QuantileRow]) -> WorldKnob {
             .iter()
             .map(|(k, (q, t))| (k.clone(), scbg_metrics::spearman(q, t)))
             .collect(),
+        spearman_quantile_psi_true_ordered: ordered_pooled_spearman(
+            rows.iter()
+                .map(|(family, truths)| (*family, truths.as_slice())),
+            &q,
+        ),
         spearman_within_example,
         responsive_fraction,
         examples: q_by
@@ -113,6 +118,33 @@ pub(crate) fn within_group_spearman<'a>(
     let of =
         |f: fn(&(f64, usize, usize)) -> f64| by.iter().map(|(k, v)| (k.clone(), f(v))).collect();
     (of(|v| v.0 / v.2 as f64), of(|v| v.1 as f64 / v.2 as f64))
+}
+
+/// The most the pooled Spearman(`x`, value) over `groups` (one example's futures, one
+/// scene's rollouts, each a value per element of `x`) can be with these values: each group's
+/// values re-ordered to rise with `x`, per family and pooled ([`POOLED`]). No other order
+/// within the groups gives more (the rearrangement inequality on the pooled ranks, which keep
+/// each group's order), so it is the ceiling of a knob that ranks perfectly within every group
+/// but reaches only these outcomes; what is left below 1 is the spread between groups.
+pub(crate) fn ordered_pooled_spearman<'a>(
+    groups: impl IntoIterator<Item = (&'a str, &'a [f64])>,
+    x: &[f64],
+) -> BTreeMap<String, Option<f64>> {
+    let mut x_sorted = x.to_vec();
+    x_sorted.sort_by(f64::total_cmp);
+    let mut by: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    for (family, values) in groups {
+        let mut sorted = values.to_vec();
+        sorted.sort_by(f64::total_cmp);
+        for key in [family, POOLED] {
+            let e = by.entry(key.to_string()).or_default();
+            e.0.extend(&x_sorted[..sorted.len().min(x_sorted.len())]);
+            e.1.extend(sorted.iter().take(x_sorted.len()));
+        }
+    }
+    by.into_iter()
+        .map(|(k, (x, v))| (k, scbg_metrics::spearman(&x, &v)))
+        .collect()
 }
 
 /// Scores the quantile futures of an evaluation (`measured` as
@@ -199,6 +231,10 @@ pub fn world_future_of_b(scenario: &Scenario, b_id: i64, c: f64) -> Option<Vec<[
 pub struct WorldKnob {
     /// Spearman(q, ψ_true of the world's B at c = q), per family and pooled.
     pub spearman_quantile_psi_true: BTreeMap<String, Option<f64>>,
+    /// The same with each example's ψ_true re-ordered to rise with q
+    /// ([`ordered_pooled_spearman`]): the most a knob that orders these futures perfectly
+    /// within every example reaches; per family and pooled.
+    pub spearman_quantile_psi_true_ordered: BTreeMap<String, Option<f64>>,
     /// The knob within an example (a pair role): the mean over examples of Spearman(q, ψ_true)
     /// across the example's own futures for the input quantiles, 0 for an example whose
     /// futures all give A the same reward (ψ_true's range under [`RESPONSIVE_PSI_MPS`]); per
@@ -399,6 +435,44 @@ mod tests {
         falling.reverse();
         let k = quantile_summary(&[("cutin", falling)]);
         assert!((k.spearman_within_example["cutin"] + 1.0).abs() < 1e-12);
+        // Re-ordered, it rises perfectly.
+        assert!((k.spearman_quantile_psi_true_ordered["cutin"].unwrap() - 1.0).abs() < 1e-12);
+    }
+
+    /// The ordered ceiling by hand: two groups on levels 0–2 and 10–12 at three x's give
+    /// x ranks (1.5, 3.5, 5.5) twice against value ranks 1…6: 8 / √(16 · 17.5). It is the
+    /// same whatever order the values come in, and no within-group order of random values
+    /// gives a higher pooled Spearman.
+    #[test]
+    fn ordered_pooled_spearman_is_the_best_order_within_groups() {
+        let x = [0.9, 0.1, 0.5];
+        let (a, b) = ([2.0, 1.0, 0.0], [11.0, 12.0, 10.0]);
+        let r = ordered_pooled_spearman([("merge", &a[..]), ("cutin", &b[..])], &x);
+        let want = 8.0 / (16.0f64 * 17.5).sqrt();
+        assert!((r[POOLED].unwrap() - want).abs() < 1e-12, "{r:?}");
+        assert!((r["merge"].unwrap() - 1.0).abs() < 1e-12);
+        // Any order of random groups ranks no higher than the ordered one.
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let x: Vec<f64> = (1..=9).map(|k| f64::from(k) / 10.0).collect();
+        let groups: Vec<Vec<f64>> = (0..12)
+            .map(|g| (0..9).map(|_| 5.0 * f64::from(g % 4) + next()).collect())
+            .collect();
+        let ordered = ordered_pooled_spearman(groups.iter().map(|v| ("merge", v.as_slice())), &x)
+            [POOLED]
+            .unwrap();
+        let (xs, vs): (Vec<f64>, Vec<f64>) = groups
+            .iter()
+            .flat_map(|v| x.iter().copied().zip(v.iter().copied()))
+            .unzip();
+        let as_given = scbg_metrics::spearman(&xs, &vs).unwrap();
+        assert!(ordered > as_given + 0.05, "{ordered} vs {as_given}");
+        assert!(ordered < 1.0);
     }
 
     /// The world's B at the scene's own courtesy drives the logged future (so the world knob
