@@ -125,7 +125,9 @@ pub(crate) fn within_group_spearman<'a>(
 /// values re-ordered to rise with `x`, per family and pooled ([`POOLED`]). No other order
 /// within the groups gives more (the rearrangement inequality on the pooled ranks, which keep
 /// each group's order), so it is the ceiling of a knob that ranks perfectly within every group
-/// but reaches only these outcomes; what is left below 1 is the spread between groups.
+/// but reaches only these outcomes; what is left below 1 is the spread between groups. A group
+/// with a non-finite value or not one value per `x` is left out; `POOLED` is always there
+/// (`None` without a group).
 pub(crate) fn ordered_pooled_spearman<'a>(
     groups: impl IntoIterator<Item = (&'a str, &'a [f64])>,
     x: &[f64],
@@ -133,13 +135,17 @@ pub(crate) fn ordered_pooled_spearman<'a>(
     let mut x_sorted = x.to_vec();
     x_sorted.sort_by(f64::total_cmp);
     let mut by: BTreeMap<String, (Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    by.insert(POOLED.to_string(), Default::default());
     for (family, values) in groups {
+        if values.len() != x.len() || !values.iter().all(|v| v.is_finite()) {
+            continue;
+        }
         let mut sorted = values.to_vec();
         sorted.sort_by(f64::total_cmp);
         for key in [family, POOLED] {
             let e = by.entry(key.to_string()).or_default();
-            e.0.extend(&x_sorted[..sorted.len().min(x_sorted.len())]);
-            e.1.extend(sorted.iter().take(x_sorted.len()));
+            e.0.extend(&x_sorted);
+            e.1.extend(&sorted);
         }
     }
     by.into_iter()
@@ -473,6 +479,40 @@ mod tests {
         let as_given = scbg_metrics::spearman(&xs, &vs).unwrap();
         assert!(ordered > as_given + 0.05, "{ordered} vs {as_given}");
         assert!(ordered < 1.0);
+        // Every order of two groups of three, one with a tie: none beats the ordered one,
+        // and the ordered one is among them.
+        let (a, b) = ([1.0, 1.0, 3.0], [2.0, 5.0, 0.0]);
+        let x = [0.5, 0.1, 0.9];
+        let perms = [
+            [0, 1, 2],
+            [0, 2, 1],
+            [1, 0, 2],
+            [1, 2, 0],
+            [2, 0, 1],
+            [2, 1, 0],
+        ];
+        let mut best = f64::NEG_INFINITY;
+        for pa in &perms {
+            for pb in &perms {
+                let vs: Vec<f64> = pa
+                    .iter()
+                    .map(|&i| a[i])
+                    .chain(pb.iter().map(|&i| b[i]))
+                    .collect();
+                let xs: Vec<f64> = x.iter().chain(&x).copied().collect();
+                best = best.max(scbg_metrics::spearman(&xs, &vs).unwrap());
+            }
+        }
+        let ordered =
+            ordered_pooled_spearman([("merge", &a[..]), ("merge", &b[..])], &x)[POOLED].unwrap();
+        assert!((ordered - best).abs() < 1e-12, "{ordered} vs {best}");
+        // A group that is not one value per x, or holds a NaN, is left out.
+        let r = ordered_pooled_spearman(
+            [("merge", &[1.0, 2.0][..]), ("cutin", &[f64::NAN; 3][..])],
+            &x,
+        );
+        assert_eq!(r[POOLED], None);
+        assert!(!r.contains_key("merge") && !r.contains_key("cutin"));
     }
 
     /// The world's B at the scene's own courtesy drives the logged future (so the world knob
