@@ -1,4 +1,4 @@
-"""Python call latency of Model.generate on a loaded scene (the issue's p50 ≤ 2 ms target).
+"""Python call latency of Model.generate on a loaded scene (BENCHMARKS.md records its p50).
 
     python crates/python/bench_generate.py out/demo/generator_full out/demo/synth/synth-00000.tfrecord
 """

@@ -3,7 +3,7 @@
 //! Training drives some values into the subnormal range below 1.2e-38 (Adam's moment
 //! estimates: 15 % of the demo's final optimizer state). Intel cores take a microcode assist
 //! for every operation on such a number, so a predictor epoch of the demo grew from 6 s to
-//! 10 s as training went on (BENCHMARKS.md, "Subnormal numbers"). Setting the CPU's
+//! 10 s as training went on (docs/findings.md, *Subnormal floats*). Setting the CPU's
 //! flush-to-zero and denormals-are-zero flags keeps every epoch at 6 s; the demo's report was
 //! identical to the last digit. PyTorch's `torch.set_flush_denormal(True)` and CUDA's
 //! `-ftz` make the same trade.

@@ -3,12 +3,14 @@
 use std::io::Write;
 
 use anyhow::Context;
-use scbg::choices::{Courtesy, LabelOptions, Policy};
-use scbg::{Progress, labels, predictor};
+use scbg::Courtesy;
+use scbg::Progress;
+use scbg_lab::{labels, predictor};
+
+use scbg_lab::config::PipelineConfig;
 
 use crate::cli::{
-    BenchCommand, Command, DataCommand, EstimatorArgs, EvalCommand, GenerateArgs, InspectArgs,
-    TrainCommand,
+    BenchCommand, Command, DataCommand, EvalCommand, GenerateArgs, InspectArgs, TrainCommand,
 };
 use crate::progress::Terminal;
 
@@ -17,42 +19,14 @@ pub fn run(command: Command) -> anyhow::Result<()> {
     let progress = &Terminal;
     match command {
         Command::Demo(a) => {
-            // Checked before any work: a bad flag must not cost a predictor training.
-            let labels = label_options(&a.estimator, 8, scbg::choices::Reward::AverageSpeed)?;
-            scbg::demo::run_demo(
-                &scbg::demo::DemoOptions {
-                    out: a.out,
-                    data: a.data,
-                    scenarios: a.scenarios,
-                    counterfactuals: a.counterfactuals,
-                    condition_on_a: a.condition_on_a,
-                    lane_frame: a.lane_frame,
-                    stepwise: a.stepwise,
-                    epochs: a.epochs,
-                    reaction_siblings: a.reaction_siblings,
-                    reaction_epochs: a.reaction_epochs,
-                    data_parallel_chunks: a.data_parallel_chunks,
-                    batch_size: a.batch_size as usize,
-                    learning_rate: a.learning_rate,
-                    predictors: a.predictors as usize,
-                    generator_epochs: a.generator_epochs,
-                    generator_seeds: a.generator_seeds,
-                    closed_loop_scenes: a.closed_loop_scenes,
-                    beta: a.beta,
-                    select_modes: a.head == crate::cli::Head::Modes,
-                    mode_courtesy: a.mode_courtesy,
-                    relative_mode_courtesy: a.relative_mode_courtesy,
-                    mode_slowdowns: a.mode_slowdowns.0.clone(),
-                    lane_move_steps: a.lane_move_steps,
-                    selector_loss: a.selector_loss,
-                    labels,
-                    seed: a.seed,
-                },
-                progress,
-            )?;
+            // Checked before any work: a bad setting must not cost a predictor training.
+            let config = PipelineConfig::load(a.config.as_deref())?;
+            let options = scbg_lab::demo::DemoOptions::new(a.out, a.data, a.seed, config)?;
+            scbg_lab::demo::run_demo(&options, progress)?;
         }
         Command::Label(a) => {
-            let options = label_options(&a.estimator, a.samples, a.reward)?;
+            let options =
+                PipelineConfig::load(a.config.as_deref())?.label_options_with(a.reward)?;
             labels::label_cache(
                 &labels::LabelRun {
                     model: a.model[0].clone(),
@@ -64,7 +38,9 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     ground_truth: a.ground_truth,
                     shard_index: a.shard_index,
                     num_shards: a.num_shards,
-                    reaction_siblings: a.reaction_siblings.map(|d| (d, a.reaction_per_role)),
+                    reaction_siblings: a
+                        .reaction_siblings
+                        .map(|d| (d, labels::REACTION_SIBLINGS_PER_ROLE)),
                 },
                 progress,
             )?;
@@ -75,8 +51,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             eprintln!("wrote {} (scenario {id}, pair {pair:?})", a.out.display());
         }
         Command::Data(DataCommand::Prepare(a)) => {
-            scbg::data::prepare(
-                &scbg::data::PrepareOptions {
+            scbg_lab::prepare::prepare(
+                &scbg_lab::prepare::PrepareOptions {
                     inputs: a.input,
                     out: a.out,
                     shard_index: a.shard_index,
@@ -90,8 +66,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             )?;
         }
         Command::Synth(a) => {
-            scbg::synth::write_synthetic(
-                &scbg::synth::SynthOptions {
+            scbg_lab::synth::write_synthetic(
+                &scbg_lab::synth::SynthOptions {
                     scenarios: a.scenarios,
                     seed: a.seed,
                     out: a.out,
@@ -105,11 +81,11 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Ingest(a)) => {
             print!(
                 "{}",
-                scbg::bench::ingest(&a.input, a.repeat, &a.stage)?.to_text()
+                scbg_lab::bench::ingest(&a.input, a.repeat, &a.stage)?.to_text()
             );
         }
         Command::Bench(BenchCommand::Synth(a)) => {
-            for (threads, per_s, kb) in scbg::bench::synth(a.scenarios)? {
+            for (threads, per_s, kb) in scbg_lab::bench::synth(a.scenarios)? {
                 println!(
                     "synth generate+encode: {threads} thread(s): {per_s:.0} scenarios/s ({kb:.1} KB/scenario)"
                 );
@@ -118,20 +94,21 @@ pub fn run(command: Command) -> anyhow::Result<()> {
         Command::Bench(BenchCommand::Wosac(a)) => {
             print!(
                 "{}",
-                scbg::bench::wosac(a.file.as_deref(), a.repeats)?.to_text()
+                scbg_lab::bench::wosac(a.file.as_deref(), a.repeats)?.to_text()
             );
         }
         Command::Bench(BenchCommand::Sim(a)) => {
-            let model = load_generator(&a.model, a.predictor.as_deref(), a.policy)?;
+            let model = a.model.load()?;
             print!(
                 "{}",
-                scbg::bench::sim(&model, a.scenes, a.replan_every.map(|n| n as usize))?.to_text()
+                scbg_lab::bench::sim(model.loaded(), a.scenes, a.replan_every.map(|n| n as usize))?
+                    .to_text()
             );
             println!();
         }
         Command::Sim(a) => sim(&a, progress)?,
         Command::Serve(a) => {
-            let model = load_generator(&a.model, a.predictor.as_deref(), a.policy)?;
+            let model = a.model.load()?;
             let defaults = scbg_serve::ServeConfig::default();
             scbg_serve::run(
                 model,
@@ -148,8 +125,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             )?;
         }
         Command::Bench(BenchCommand::Serve(a)) => {
-            let model = scbg::generator::load_scbg(&a.model, None)?;
-            let (bytes, truth) = scbg::synth::scenario_bytes(0, 2)?;
+            let model = scbg::Model::load(&a.model, &scbg::LoadOptions::default())?;
+            let (bytes, truth) = scbg_lab::synth::scenario_bytes(0, 2)?;
             let report = scbg_serve::load::load_test(
                 model,
                 bytes,
@@ -166,18 +143,21 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             }
         }
         Command::Eval(EvalCommand::Sim(a)) => {
-            let options = scbg::sim_eval::SimEvalOptions {
-                policy: a.policy,
+            let closed_loop = PipelineConfig::load(a.config.as_deref())?.closed_loop;
+            let options = scbg_lab::sim_eval::SimEvalOptions {
+                policy: a.model.policy,
                 scenes: a.scenes,
                 wosac_scenes: a.wosac_scenes,
-                wosac_quantiles: a.wosac_quantiles.clone(),
-                spread: a.spread,
-                config: loop_config(&a.loop_args, scbg::sim::OthersMode::Reactive, a.policy),
+                wosac_quantiles: closed_loop.wosac_quantiles.clone(),
+                spread: closed_loop.spread,
+                config: closed_loop
+                    .loop_options(scbg::sim::OthersMode::Reactive)
+                    .config(a.model.policy),
                 ..Default::default()
             };
-            let eval = scbg::sim_eval::eval_sim_files(
-                &a.model,
-                a.predictor.as_deref(),
+            let eval = scbg_lab::sim_eval::eval_sim_files(
+                &a.model.model,
+                a.model.predictor.as_deref(),
                 &a.data,
                 a.ground_truth.as_deref(),
                 a.split,
@@ -192,8 +172,9 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             }
         }
         Command::Bench(BenchCommand::Train(a)) => {
-            let bench =
-                scbg::bench::train(&a.presets, a.batch, a.steps, a.warmup, a.chunks, &a.backend)?;
+            let bench = scbg_lab::bench::train(
+                &a.presets, a.batch, a.steps, a.warmup, a.chunks, &a.backend,
+            )?;
             print!("{}", bench.to_text());
         }
         Command::Train(TrainCommand::Predictor(a)) => {
@@ -201,39 +182,15 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             predictor::train_predictor(&a.data, &a.out, &config, a.resume, progress)?;
         }
         Command::Train(TrainCommand::Generator(a)) => {
-            let labels =
-                label_options(&a.estimator, a.samples, scbg::choices::Reward::AverageSpeed)?;
-            let truth = a
-                .oracle_labels
-                .as_deref()
-                .map(scbg::synth::read_ground_truth)
-                .transpose()?;
-            scbg::generator::train_generator(
+            let config = PipelineConfig::load(a.config.as_deref())?;
+            let settings = config.variant_settings(a.variant, config.label_options()?, a.seed);
+            scbg_lab::generator::train_generator(
                 &a.predictor,
                 &a.data,
                 &a.out,
-                &scbg::generator::VariantSettings {
-                    variant: a.variant,
-                    epochs: a.epochs,
-                    batch_size: a.batch_size,
-                    alpha: a.alpha,
-                    beta: a.beta,
-                    threshold: a.threshold,
-                    learning_rate: a.learning_rate,
-                    range_steps: a.range_steps,
-                    seed: a.seed,
-                    labels,
-                    oracle_labels: truth.is_some(),
-                    world_futures: a.world_futures,
-                    select_modes: a.head == crate::cli::Head::Modes,
-                    mode_courtesy: a.mode_courtesy,
-                    relative_mode_courtesy: a.relative_mode_courtesy,
-                    mode_slowdowns: a.mode_slowdowns.0.clone(),
-                    lane_move_steps: a.lane_move_steps,
-                    selector_loss: a.selector_loss,
-                },
-                a.condition_on_a,
-                truth.as_deref(),
+                &settings,
+                false,
+                None,
                 progress,
             )?;
         }
@@ -242,9 +199,9 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             let truth = a
                 .ground_truth
                 .as_deref()
-                .map(scbg::synth::read_ground_truth)
+                .map(scbg_lab::synth::read_ground_truth)
                 .transpose()?;
-            let result = scbg::scbg_eval::evaluate_scbg(
+            let result = scbg_lab::scbg_eval::evaluate_scbg(
                 &a.model,
                 &a.data,
                 a.predictor.as_deref(),
@@ -298,70 +255,50 @@ pub fn run(command: Command) -> anyhow::Result<()> {
 }
 
 /// The closed-loop settings of `sim` and `eval sim`.
-fn loop_config(
-    a: &crate::cli::LoopArgs,
-    others: scbg::sim::OthersMode,
-    policy: Policy,
-) -> scbg::sim::SimConfig {
-    scbg::sim::SimConfig {
-        replan_every: a
-            .replan_every
-            .unwrap_or_else(|| scbg::sim::default_replan_every(policy)),
-        ego: a.ego,
-        others: a.others.unwrap_or(others),
-        safety_guard: !a.no_safety_guard,
-        lane_keeping_m: (!a.no_lane_keeping).then_some(a.lane_keeping_m),
-        take_right_of_way: !a.no_right_of_way,
-        ..Default::default()
-    }
-}
-
 fn sim(a: &crate::cli::SimArgs, progress: &dyn Progress) -> anyhow::Result<()> {
     use scbg::sim::ControlledAgent;
-    let mut controlled = vec![ControlledAgent {
-        id: a.b,
-        courtesy: match a.psi {
-            Some(p) => Courtesy::Psi(p),
-            None => Courtesy::Quantile(a.quantile),
+    let closed_loop = PipelineConfig::load(a.config.as_deref())?.closed_loop;
+    let mut controlled = vec![ControlledAgent::new(
+        a.pair.b,
+        match a.psi {
+            Some(p) => Courtesy::psi(p)?,
+            None => Courtesy::quantile(a.quantile)?,
         },
-    }];
+    )];
     for also in &a.also {
         let (id, q) = also
             .split_once('=')
             .with_context(|| format!("--also {also:?}: expected ID=QUANTILE"))?;
-        controlled.push(ControlledAgent {
-            id: id
-                .trim()
+        let q: f32 = q
+            .trim()
+            .parse()
+            .with_context(|| format!("--also {also:?}: {q:?} is not a quantile"))?;
+        controlled.push(ControlledAgent::new(
+            id.trim()
                 .parse()
                 .with_context(|| format!("--also {also:?}: {id:?} is not a track id"))?,
-            courtesy: Courtesy::Quantile(
-                q.trim()
-                    .parse()
-                    .with_context(|| format!("--also {also:?}: {q:?} is not a quantile"))?,
-            ),
-        });
+            Courtesy::quantile(q).with_context(|| format!("--also {also:?}"))?,
+        ));
     }
-    let rollouts = a.rollouts.unwrap_or(match a.format {
+    let rollouts = closed_loop.rollouts.unwrap_or(match closed_loop.format {
         scbg::sim::ExportFormat::Wosac => 32,
         scbg::sim::ExportFormat::Scenario => 1,
     });
     let out = scbg::sim::run_sim(
         &scbg::sim::SimRun {
-            model: a.model.clone(),
-            predictor: a.predictor.clone(),
-            policy: a.policy,
-            scenario: a.scenario.clone(),
-            scenario_id: a.scenario_id.clone(),
-            ego: a.a,
+            model: a.model.model.clone(),
+            predictor: a.model.predictor.clone(),
+            policy: a.model.policy,
+            scenario: a.pair.scenario.clone(),
+            scenario_id: a.pair.scenario_id.clone(),
+            ego: a.pair.a,
             controlled,
-            config: loop_config(&a.loop_args, scbg::sim::OthersMode::Log, a.policy),
-            ground_truth: a.ground_truth.clone(),
-            no_synthetic_world: a.no_synthetic_world,
+            options: closed_loop.loop_options(scbg::sim::OthersMode::Log),
             rollouts,
-            spread: a.spread,
+            spread: closed_loop.spread,
             out: a.out.clone(),
-            format: a.format,
-            name: a.name.clone(),
+            format: closed_loop.format,
+            name: closed_loop.name.clone(),
         },
         progress,
     )?;
@@ -387,7 +324,7 @@ fn sim(a: &crate::cli::SimArgs, progress: &dyn Progress) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
+fn print_sim_eval(e: &scbg_lab::sim_eval::SimEval) {
     println!(
         "closed loop, {} scenes, re-plan every {} steps ({:.0} ms per rollout, {:.0} s)",
         e.curve.scenes, e.replan_every, e.rollout_ms, e.seconds
@@ -417,7 +354,7 @@ fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
                 .map_or("-".into(), |w| format!("{:.4}", w.metametric))
         );
     }
-    let fmt = |m: &scbg::sim_eval::PerFamily| {
+    let fmt = |m: &scbg_lab::sim_eval::PerFamily| {
         m.iter()
             .map(|(k, v)| format!("{k} {}", v.map_or("-".into(), |v| format!("{v:.3}"))))
             .collect::<Vec<_>>()
@@ -449,29 +386,6 @@ fn print_sim_eval(e: &scbg::sim_eval::SimEval) {
         );
     }
     println!("{}", e.realism_line());
-}
-
-fn label_options(
-    estimator: &EstimatorArgs,
-    samples: usize,
-    reward: scbg::choices::Reward,
-) -> anyhow::Result<LabelOptions> {
-    let mut options =
-        labels::label_options(samples, reward, estimator.marginal, estimator.sample_noise)?;
-    options.audience = scbg::choices::Audience::parse(
-        &estimator.audience,
-        estimator.audience_radius_m,
-        estimator.audience_weighting,
-    )
-    .map_err(anyhow::Error::msg)?;
-    options.baseline_samples = estimator.baseline_samples;
-    options.lane_move_steps = estimator.label_lane_move_steps;
-    options.keep_baseline = estimator.keep_baseline_samples;
-    options.lane_move_room = labels::lane_move_room(
-        estimator.lane_move_room_braking,
-        estimator.lane_move_room_reaction,
-    )?;
-    Ok(options)
 }
 
 /// `scbg data inspect`: one line (or JSON object) per scenario; a bad file is reported and
@@ -523,31 +437,27 @@ fn inspect(args: &InspectArgs) -> anyhow::Result<()> {
 }
 
 /// A generator folder with its predictor (the recorded one unless overridden), driven by `policy`.
-fn load_generator(
-    model: &std::path::Path,
-    predictor: Option<&std::path::Path>,
-    policy: Policy,
-) -> anyhow::Result<scbg::generator::LoadedScbg> {
-    let mut model = scbg::generator::load_scbg(model, predictor)?;
-    model.scbg.policy = policy;
-    Ok(model)
-}
-
 /// `scbg generate`.
 fn generate(args: &GenerateArgs, progress: &dyn Progress) -> anyhow::Result<()> {
-    let model = load_generator(&args.model, args.predictor.as_deref(), args.policy)?;
-    let (index, scene) =
-        scbg::generate::find_scene(&args.scenario, args.scenario_id.as_deref(), args.a, args.b)?;
     let courtesy: Vec<Courtesy> = if args.psi.is_empty() {
         args.quantile
             .iter()
-            .map(|&q| Courtesy::Quantile(q))
-            .collect()
+            .map(|&q| Courtesy::quantile(q))
+            .collect::<Result<_, _>>()?
     } else {
-        args.psi.iter().map(|&p| Courtesy::Psi(p)).collect()
+        args.psi
+            .iter()
+            .map(|&p| Courtesy::psi(p))
+            .collect::<Result<_, _>>()?
     };
-    let generation = scbg::generate::generate(&model, &scene, args.a, args.b, &courtesy)
-        .with_context(|| format!("{} (record {index})", args.scenario.display()))?;
+    let model = args.model.load()?;
+    let p = &args.pair;
+    let (index, scene) =
+        scbg::generate::find_scene(&p.scenario, p.scenario_id.as_deref(), p.a, p.b)?;
+    let scene = std::sync::Arc::new(scene);
+    let generation = model
+        .generate(&scene, p.a, p.b, &courtesy)
+        .with_context(|| format!("{} (record {index})", p.scenario.display()))?;
     let text = serde_json::to_string_pretty(&generation)?;
     match &args.out {
         Some(path) => scbg::write_atomic(path, &text)?,
@@ -570,46 +480,4 @@ fn generate(args: &GenerateArgs, progress: &dyn Progress) -> anyhow::Result<()> 
         progress.note(&format!("rendered {}", png.display()));
     }
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use clap::Parser;
-
-    use super::*;
-    use crate::cli::{Cli, Command, EvalCommand};
-
-    fn eval_sim_loop(args: &[&str]) -> (Policy, crate::cli::LoopArgs) {
-        let base = [
-            "scbg", "eval", "sim", "--model", "m", "--data", "d", "--out", "o",
-        ];
-        match Cli::try_parse_from(base.iter().chain(args).copied())
-            .unwrap()
-            .command
-        {
-            Command::Eval(EvalCommand::Sim(s)) => (s.policy, s.loop_args),
-            _ => unreachable!(),
-        }
-    }
-
-    #[test]
-    fn each_policy_replans_at_its_own_cadence_unless_told() {
-        let cadence = |args: &[&str]| {
-            let (policy, l) = eval_sim_loop(args);
-            loop_config(&l, scbg::sim::OthersMode::Reactive, policy).replan_every
-        };
-        assert_eq!(cadence(&[]), scbg::sim::GENERATOR_REPLAN_EVERY);
-        assert_eq!(cadence(&[]), 20);
-        assert_eq!(
-            cadence(&["--policy", "ranked"]),
-            scbg::sim::RANKED_REPLAN_EVERY
-        );
-        assert_eq!(cadence(&["--policy", "ranked"]), 20);
-        assert_eq!(cadence(&["--policy", "ranked", "--replan-every", "5"]), 5);
-        assert_eq!(cadence(&["--replan-every", "1"]), 1);
-        assert_eq!(
-            cadence(&["--replan-every", "10"]),
-            scbg::sim::DEFAULT_REPLAN_EVERY
-        );
-    }
 }

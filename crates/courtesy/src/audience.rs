@@ -1,5 +1,4 @@
-//! Whose reward B's courtesy counts (issue 12, item 2): the paper's one agent A, or every
-//! vehicle near B.
+//! Whose reward B's courtesy counts: the paper's one agent A, or every vehicle near B.
 //!
 //! With [`Audience::Neighbours`], ψ of a future `y_B` is a weighted sum over B's *audience*
 //! `N(B)`: A (the pair's other member, always counted) and every other vehicle valid at the

@@ -119,9 +119,8 @@ pub struct FollowerRoom {
 
 impl FollowerRoom {
     /// MOBIL's safe deceleration (Kesting, Treiber and Helbing 2007), 4 m/s² after 1 s: a
-    /// polite driver's limit. The labels' check before the thirty-fourth session (and of every
-    /// serialised label config without the field): it drops the boldest cut-ins, which are
-    /// the discourteous end of what B does.
+    /// polite driver's limit, and the check of every serialised label config without the
+    /// field: it drops the boldest cut-ins, which are the discourteous end of what B does.
     pub const MOBIL_SAFE: Self = Self {
         braking_mps2: 4.0,
         reaction_s: 1.0,

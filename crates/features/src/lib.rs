@@ -29,7 +29,7 @@ mod stats;
 mod window;
 
 pub use build::PrepareError;
-pub use builder::SampleBuilder;
+pub use builder::{SampleBuilder, extract_sample};
 pub use codec::DecodeError;
 pub use lane_move::{FollowerRoom, LANE_MOVE_M, lane_move, lane_path_points, leaves_room};
 pub use lane_path::{
@@ -41,7 +41,7 @@ pub use prepared::{
 };
 pub use sample::{
     AGENT_FEATURES, AgentSample, DIFF_FEATURES, FeatureConfig, ROAD_FEATURES, ROAD_TYPES,
-    SampleError, extract_sample, marginal_targets,
+    SampleError, marginal_targets,
 };
 pub use stats::FeatureStats;
 pub use window::{Window, WindowConfig, windows};

@@ -1,9 +1,10 @@
 //! The P road segments closest to a point: a uniform grid over the scene's segments, its cells
 //! visited nearest first.
 //!
-//! A scene has thousands of road segments and every sample needs its 128 closest; scanning all
-//! of them per sample was the largest cost of feature building (BENCHMARKS.md, *Ingest*). The
-//! grid visits only the cells that can still hold a closer segment than the P-th found so far.
+//! A scene has thousands of road segments and every sample needs its 128 closest; scanning all of
+//! them per sample was the largest cost of feature building (docs/findings.md, *Speed work that
+//! changed no number*). The grid visits only the cells that can still hold a closer segment than
+//! the P-th found so far.
 //!
 //! **Exactness.** The result is the same set in the same order as [`closest_brute_force`]:
 //! segments whose nearer endpoint is within the radius, ranked by the distance of their closest
@@ -393,9 +394,20 @@ fn candidate(a: [f32; 2], b: [f32; 2], i: u32, origin: [f32; 2], r2: f32) -> Opt
     let a = [a[0] - origin[0], a[1] - origin[1]];
     let b = [b[0] - origin[0], b[1] - origin[1]];
     ((a[0] * a[0] + a[1] * a[1]).min(b[0] * b[0] + b[1] * b[1]) < r2).then(|| {
-        let q = crate::sample::closest_point_to_origin(a, b);
+        let q = closest_point_to_origin(a, b);
         Key::new(q[0] * q[0] + q[1] * q[1], i)
     })
+}
+
+/// The point of segment `a`–`b` closest to the origin.
+pub(crate) fn closest_point_to_origin(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    if len2 <= 1e-12 {
+        return a;
+    }
+    let t = (-(a[0] * dx + a[1] * dy) / len2).clamp(0.0, 1.0);
+    [a[0] + t * dx, a[1] + t * dy]
 }
 
 /// The reference: every segment checked, the first `p` by (distance, index).

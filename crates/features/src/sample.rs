@@ -6,7 +6,6 @@
 
 use scbg_scene::{ObjectType, Pose2, wrap_angle_rad};
 
-use crate::builder::SampleBuilder;
 use crate::prepared::{PreparedScene, PreparedTrack, RoadKind};
 use crate::window::Window;
 
@@ -175,7 +174,8 @@ fn type_index(t: ObjectType) -> usize {
 }
 
 /// One history step of a track in the scene frame: what [`track_rows`] transforms into a
-/// target's frame. The same for every target of a window, so [`SampleBuilder`] makes them once
+/// target's frame. The same for every target of a window, so
+/// [`SampleBuilder`](crate::SampleBuilder) makes them once
 /// per window (speed's square root included).
 #[derive(Debug, Clone, Copy, Default)]
 pub(crate) struct HistoryStep {
@@ -283,19 +283,6 @@ pub enum SampleError {
     TargetInvalidNow { track_id: i64, step: usize },
 }
 
-/// Builds the features of `target` (a track index) in `window`, conditioned on the future of
-/// `condition` (another track index) when given. For many samples of one scene, a
-/// [`SampleBuilder`] is faster.
-pub fn extract_sample(
-    scene: &PreparedScene,
-    window: &Window,
-    target: usize,
-    condition: Option<usize>,
-    config: &FeatureConfig,
-) -> Result<AgentSample, SampleError> {
-    SampleBuilder::new(scene, config).sample(window, target, condition)
-}
-
 /// A track's future in `frame`: `[future, 2]` x, y, `[future]` heading and valid.
 pub(crate) fn future_of(
     t: &PreparedTrack,
@@ -319,20 +306,10 @@ pub(crate) fn future_of(
     (xy, heading, valid)
 }
 
-/// The point of segment `a`–`b` closest to the origin.
-pub(crate) fn closest_point_to_origin(a: [f32; 2], b: [f32; 2]) -> [f32; 2] {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    if len2 <= 1e-12 {
-        return a;
-    }
-    let t = (-(a[0] * dx + a[1] * dy) / len2).clamp(0.0, 1.0);
-    [a[0] + t * dx, a[1] + t * dy]
-}
-
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::builder::extract_sample;
     use crate::prepared::RoadPolyline;
 
     pub(crate) fn straight_track(id: i64, y: f32, speed: f32, n: usize) -> PreparedTrack {

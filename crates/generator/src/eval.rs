@@ -16,10 +16,12 @@ use scbg_courtesy::Reward;
 use scbg_model::Multipath;
 use serde::Serialize;
 
+use crate::audience::audience_courtesy;
+use crate::candidates::b_modes_for;
 use crate::data::Example;
 use crate::model::Generator;
 use crate::range::{RangePredictor, psi_for_quantile, stored_embeddings};
-use crate::train::{audience_courtesy, repeat_rows};
+use crate::tensors::{repeat_rows, to_vec};
 
 /// The quantiles of the *range* evaluation and of Fig. 4.
 pub const EVAL_QUANTILES: [f32; 9] = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9];
@@ -35,10 +37,6 @@ pub struct Measured {
     pub e_marg: Vec<f32>,
     /// `[example][k][T]` the generated futures in B's frame.
     pub futures_b: Vec<Vec<Vec<[f32; 2]>>>,
-}
-
-pub(crate) fn to_vec<const D: usize>(t: Tensor<D>) -> Vec<f32> {
-    t.into_data().try_to_vec::<f32>().expect("f32 tensor")
 }
 
 /// Generates B's future for every requested ψ of every example (`psi[i]` holds example `i`'s
@@ -66,7 +64,7 @@ pub fn generate_and_measure(
             .collect();
         let embedding = repeat_rows(stored_embeddings(exs, device), k);
         let modes =
-            crate::b_modes_for(generator, predictor, exs, reward, device).map(|m| m.repeat_rows(k));
+            b_modes_for(generator, predictor, exs, reward, device).map(|m| m.repeat_rows(k));
         let pred = generator.forward(
             embedding,
             Tensor::from_data(TensorData::new(psi_rows, [rows]), device),

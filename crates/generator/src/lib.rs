@@ -14,27 +14,34 @@
 
 #![warn(missing_docs)]
 
+mod audience;
+mod candidates;
+mod courtesy;
 mod data;
 pub mod eval;
 mod infer;
 mod model;
 mod modes;
+mod plan;
 mod range;
 pub mod ranked;
+mod tensors;
 mod train;
 
-pub use data::{
-    A_CONTEXT_WIDTH, Example, ScoredCandidate, a_context, a_context_of, a_from_b, b_modes,
-    b_modes_for, b_modes_of, build_examples, fill_mode_courtesy, marginal_embedding, mode_courtesy,
+pub use candidates::{
+    ScoredCandidate, b_modes, b_modes_for, b_modes_of, fill_mode_courtesy, mode_courtesy,
     scored_candidates,
 };
-pub use infer::{
-    Courtesy, CourtesyOf, GenerateError, Generated, PairContext, PlanBasis, Policy, Scbg,
+pub use courtesy::{Courtesy, Policy};
+pub use data::{
+    A_CONTEXT_WIDTH, Example, a_context, a_context_of, a_from_b, build_examples, marginal_embedding,
 };
+pub use infer::{CourtesyOf, GenerateError, Generated, PairContext, Scbg};
 pub use model::{
     CandidateFutures, Generator, GeneratorConfig, RELATIVE_COURTESY_FLOOR, relative_courtesy,
 };
 pub use modes::{BModes, MAX_SPEEDUP, slowdown_warp};
+pub use plan::PlanBasis;
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,
     stored_embeddings,

@@ -92,7 +92,7 @@ pub struct GeneratorConfig {
 const MODE_SCORER_HIDDEN: usize = 32;
 
 /// The floor of [`GeneratorConfig::relative_courtesy_floor`] in new generators, in label
-/// spreads (BENCHMARKS.md, *Courtesy relative to the scene's choices*).
+/// spreads (docs/findings.md, *Courtesy relative to the scene's choices*).
 pub const RELATIVE_COURTESY_FLOOR: f32 = 0.1;
 
 /// The generator's ψ inputs, in units of the labels' spread (`psi_scale`), are clamped to

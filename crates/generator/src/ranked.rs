@@ -22,12 +22,12 @@ use burn::tensor::{Device, Tensor, TensorData};
 use scbg_courtesy::Reward;
 use scbg_model::Multipath;
 
+use crate::courtesy::Courtesy;
 use crate::data::Example;
 use crate::eval::{
     EVAL_QUANTILES, EvalOptions, Measured, VariantEval, measure_chunk, predicted_ranges,
     requested_psi, summarize,
 };
-use crate::infer::Courtesy;
 
 /// The index of the candidate a ranked choice takes at quantile `q` among `n` candidates
 /// sorted by ψ: `⌊q·n⌋`, at most `n − 1`.

@@ -80,7 +80,7 @@ pub struct MultipathConfig {
     pub future_hidden: usize,
     /// Whether the future encoder also sees each conditioning point in the target's lane frame
     /// (arc length along and offset from its lane path; see `FutureEncoder`). Off in the
-    /// presets (BENCHMARKS.md, *B's future in A's lane frame*: it lifts the labels' fidelity
+    /// presets (docs/findings.md, *B's future in A's lane frame*: it lifts the labels' fidelity
     /// on sampled futures but made one of three predictor trainings ignore B in two families);
     /// a checkpoint written before it existed reads as off.
     #[serde(default)]

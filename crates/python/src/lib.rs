@@ -5,7 +5,7 @@
 //! formats or models of its own.
 
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{
@@ -14,13 +14,8 @@ use numpy::{
 use pyo3::exceptions::{PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use scbg::choices::Courtesy;
-use scbg::generate::PairContext;
-use scbg::generator::LoadedScbg;
-use scbg::scene::{
-    AgentState, Lane, Map, MapPoint, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType,
-    Scene as RustScene, Track,
-};
+use scbg::scene::Scene as RustScene;
+use scbg::{Courtesy, SceneArrays};
 
 /// An `anyhow` error as a Python exception: the caller's fault is a `ValueError`.
 fn py_err(err: anyhow::Error) -> PyErr {
@@ -38,22 +33,7 @@ struct Scene {
     inner: Arc<RustScene>,
 }
 
-fn object_type(name: &str) -> PyResult<ObjectType> {
-    Ok(match name {
-        "vehicle" => ObjectType::Vehicle,
-        "pedestrian" => ObjectType::Pedestrian,
-        "cyclist" => ObjectType::Cyclist,
-        "other" => ObjectType::Other,
-        "unset" => ObjectType::Unset,
-        other => {
-            return Err(PyValueError::new_err(format!(
-                "object type {other:?}: expected vehicle, pedestrian, cyclist, other or unset"
-            )));
-        }
-    })
-}
-
-fn polylines(lines: Vec<PyReadonlyArray2<'_, f64>>, what: &str) -> PyResult<Vec<Vec<MapPoint>>> {
+fn polylines(lines: Vec<PyReadonlyArray2<'_, f64>>, what: &str) -> PyResult<Vec<Vec<[f64; 2]>>> {
     lines
         .iter()
         .enumerate()
@@ -65,14 +45,7 @@ fn polylines(lines: Vec<PyReadonlyArray2<'_, f64>>, what: &str) -> PyResult<Vec<
                     a.shape()
                 )));
             }
-            Ok(a.rows()
-                .into_iter()
-                .map(|r| MapPoint {
-                    x_m: r[0],
-                    y_m: r[1],
-                    z_m: 0.0,
-                })
-                .collect())
+            Ok(a.rows().into_iter().map(|r| [r[0], r[1]]).collect())
         })
         .collect()
 }
@@ -111,94 +84,29 @@ impl Scene {
                 valid.shape()
             )));
         }
-        let types = match object_types {
-            Some(v) if v.len() != n => {
-                return Err(PyValueError::new_err(format!(
-                    "object_types has {} names for {n} agents",
-                    v.len()
-                )));
-            }
-            Some(v) => v
-                .iter()
-                .map(|s| object_type(s))
-                .collect::<PyResult<Vec<_>>>()?,
-            None => vec![ObjectType::Vehicle; n],
-        };
-        let tracks = (0..n)
-            .map(|i| Track {
-                id: ids[i],
-                object_type: types[i],
-                states: (0..t)
-                    .map(|k| {
-                        let s = states.slice(numpy::ndarray::s![i, k, ..]);
-                        AgentState {
-                            x_m: s[0],
-                            y_m: s[1],
-                            z_m: 0.0,
-                            heading_rad: s[2] as f32,
-                            velocity_x_mps: s[3] as f32,
-                            velocity_y_mps: s[4] as f32,
-                            length_m: s[5] as f32,
-                            width_m: s[6] as f32,
-                            height_m: 1.6,
-                            valid: valid[[i, k]],
-                        }
-                    })
-                    .collect(),
-            })
-            .collect::<Vec<_>>();
-        let sdc_track_index = match sdc_id {
-            None => None,
-            Some(id) => Some(tracks.iter().position(|tr| tr.id == id).ok_or_else(|| {
-                PyValueError::new_err(format!("sdc_id {id} is not one of the ids"))
-            })?),
-        };
-        let mut id = 0i64;
-        let mut next = || {
-            id += 1;
-            id
-        };
-        let map = Map {
-            lanes: polylines(lanes, "lanes")?
-                .into_iter()
-                .map(|polyline| Lane {
-                    id: next(),
-                    polyline,
-                    ..Default::default()
-                })
-                .collect(),
-            road_edges: polylines(road_edges, "road_edges")?
-                .into_iter()
-                .map(|polyline| RoadEdge {
-                    id: next(),
-                    edge_type: RoadEdgeType::Boundary,
-                    polyline,
-                })
-                .collect(),
-            road_lines: polylines(road_lines, "road_lines")?
-                .into_iter()
-                .map(|polyline| RoadLine {
-                    id: next(),
-                    line_type: RoadLineType::BrokenSingleWhite,
-                    polyline,
-                })
-                .collect(),
-            ..Default::default()
-        };
-        let scene = RustScene {
+        let scene = SceneArrays {
             scenario_id,
-            timestamps_secs: (0..t).map(|k| k as f64 * 0.1).collect(),
+            ids: ids.to_vec(),
+            states: (0..n)
+                .map(|i| {
+                    (0..t)
+                        .map(|k| std::array::from_fn(|j| states[[i, k, j]]))
+                        .collect()
+                })
+                .collect(),
+            valid: (0..n)
+                .map(|i| (0..t).map(|k| valid[[i, k]]).collect())
+                .collect(),
+            object_types,
             current_step,
-            sdc_track_index,
-            tracks,
+            sdc_id,
             objects_of_interest,
-            tracks_to_predict: Vec::new(),
-            map,
-            signals_per_step: Vec::new(),
-        };
-        scene
-            .validate()
-            .map_err(|e| PyValueError::new_err(format!("invalid scene: {e}")))?;
+            lanes: polylines(lanes, "lanes")?,
+            road_edges: polylines(road_edges, "road_edges")?,
+            road_lines: polylines(road_lines, "road_lines")?,
+        }
+        .build()
+        .map_err(|e| PyValueError::new_err(e.0))?;
         Ok(Self {
             inner: Arc::new(scene),
         })
@@ -274,30 +182,10 @@ impl Scene {
     }
 }
 
-type Contexts = HashMap<(usize, i64, i64), (Arc<RustScene>, Arc<PairContext>)>;
-
-/// Pair contexts kept per model.
-const MAX_CONTEXTS: usize = 256;
-
 /// A trained generator folder.
 #[pyclass(module = "scbg", frozen)]
 struct Model {
-    inner: Arc<LoadedScbg>,
-    /// Pair contexts by (scene object, A, B): repeated generation on a loaded scene costs the
-    /// generator and J_φ only. The entry holds the scene, so its address names it while
-    /// cached (another scene with the same id gets its own context).
-    contexts: Mutex<Contexts>,
-}
-
-fn courtesy_of(quantile: Option<f32>, psi: Option<f32>) -> PyResult<Courtesy> {
-    match (quantile, psi) {
-        (Some(q), None) => Ok(Courtesy::Quantile(q)),
-        (None, Some(p)) => Ok(Courtesy::Psi(p)),
-        (Some(_), Some(_)) => Err(PyValueError::new_err(
-            "give either quantile or psi, not both",
-        )),
-        (None, None) => Err(PyValueError::new_err("give quantile (in [0, 1]) or psi")),
-    }
+    inner: Arc<scbg::Model>,
 }
 
 #[pymethods]
@@ -312,33 +200,35 @@ impl Model {
         predictor: Option<std::path::PathBuf>,
         policy: &str,
     ) -> PyResult<Self> {
-        let policy: scbg::choices::Policy = policy.parse().map_err(PyValueError::new_err)?;
-        let mut model = py
-            .detach(|| scbg::generator::load_scbg(&path, predictor.as_deref()))
+        let options = scbg::LoadOptions {
+            predictor,
+            policy: policy.parse().map_err(PyValueError::new_err)?,
+            cached_pairs: 256,
+        };
+        let model = py
+            .detach(|| scbg::Model::load(&path, &options))
             .map_err(py_err)?;
-        model.scbg.policy = policy;
         Ok(Self {
             inner: Arc::new(model),
-            contexts: Mutex::new(HashMap::new()),
         })
     }
 
     #[getter]
     fn variant(&self) -> String {
-        self.inner.checkpoint.variant.name().to_string()
+        self.inner.variant().name().to_string()
     }
 
     /// How a courtesy becomes B's future: `generator` or `ranked`.
     #[getter]
     fn policy(&self) -> String {
-        self.inner.scbg.policy.name().to_string()
+        self.inner.policy().name().to_string()
     }
 
     /// Whose reward the model's courtesy counts: `pair` (A alone) or
     /// `neighbours <radius> m <sum|proximity>`.
     #[getter]
     fn audience(&self) -> String {
-        self.inner.checkpoint.labels.audience.describe()
+        self.inner.audience()
     }
 
     #[pyo3(signature = (scene, a, b, quantile=None, psi=None))]
@@ -351,31 +241,13 @@ impl Model {
         quantile: Option<f32>,
         psi: Option<f32>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let courtesy = courtesy_of(quantile, psi)?;
-        let key = (Arc::as_ptr(&scene.inner) as usize, a, b);
-        let cached = self
-            .contexts
-            .lock()
-            .expect("contexts")
-            .get(&key)
-            .map(|(_, c)| c.clone());
+        let courtesy =
+            Courtesy::from_request(quantile, psi).map_err(|e| PyValueError::new_err(e.0))?;
         let (model, s) = (self.inner.clone(), scene.inner.clone());
-        let (ctx, out) = py
-            .detach(move || -> anyhow::Result<_> {
-                let ctx = match cached {
-                    Some(c) => c,
-                    None => Arc::new(scbg::generate::pair_context(&model, &s, a, b)?),
-                };
-                let out = scbg::generate::generate_in(&model, &ctx, &[courtesy])?;
-                Ok((ctx, out))
-            })
+        let out = py
+            .detach(move || model.generate(&s, a, b, &[courtesy]))
             .map_err(py_err)?;
-        let mut contexts = self.contexts.lock().expect("contexts");
-        if contexts.len() >= MAX_CONTEXTS {
-            contexts.clear();
-        }
-        contexts.insert(key, (scene.inner.clone(), ctx));
-        let g = &out[0];
+        let g = &out.trajectories[0];
         let d = PyDict::new(py);
         d.set_item("quantile", g.quantile)?;
         d.set_item("psi", g.psi)?;
@@ -410,7 +282,7 @@ impl Model {
         let future: Vec<[f64; 2]> = f.rows().into_iter().map(|r| [r[0], r[1]]).collect();
         let (model, s) = (self.inner.clone(), scene.inner.clone());
         let c = py
-            .detach(move || scbg::generate::courtesy(&model, &s, a, b, &future))
+            .detach(move || model.courtesy_of(&s, a, b, &future))
             .map_err(py_err)?;
         let d = PyDict::new(py);
         d.set_item("psi", c.psi)?;
@@ -434,36 +306,25 @@ impl Model {
         others: &str,
         replan_every: Option<usize>,
     ) -> PyResult<Simulation> {
-        let ego_mode: scbg::sim::EgoMode = ego_mode.parse().map_err(PyValueError::new_err)?;
-        let others: scbg::sim::OthersMode = others.parse().map_err(PyValueError::new_err)?;
-        let mut controlled: Vec<scbg::sim::ControlledAgent> = controlled
-            .into_iter()
-            .map(|(id, q)| scbg::sim::ControlledAgent {
-                id,
-                courtesy: Courtesy::Quantile(q),
-            })
-            .collect();
-        controlled.sort_by_key(|c| c.id);
-        let config = scbg::sim::SimConfig {
-            replan_every: replan_every
-                .unwrap_or_else(|| scbg::sim::default_replan_every(self.inner.scbg.policy)),
-            ego: ego_mode,
-            others,
+        let options = scbg::LoopOptions {
+            ego: ego_mode.parse().map_err(PyValueError::new_err)?,
+            others: others.parse().map_err(PyValueError::new_err)?,
+            replan_every,
             ..Default::default()
         };
-        let s = scene.inner.clone();
-        let ctl = controlled.clone();
-        let sim = py
-            .detach(move || scbg::sim::start(&s, ego, &ctl, config, None))
+        let controlled = controlled
+            .into_iter()
+            .map(|(id, q)| {
+                Courtesy::quantile(q)
+                    .map(|c| scbg::ControlledAgent::new(id, c))
+                    .map_err(|e| PyValueError::new_err(format!("agent {id}: {}", e.0)))
+            })
+            .collect::<PyResult<Vec<_>>>()?;
+        let (model, s) = (self.inner.clone(), scene.inner.clone());
+        let session = py
+            .detach(move || scbg::Session::start(model, s, ego, controlled, &options))
             .map_err(py_err)?;
-        Ok(Simulation {
-            model: self.inner.clone(),
-            scene: scene.inner.clone(),
-            ego,
-            controlled,
-            config,
-            sim,
-        })
+        Ok(Simulation { session })
     }
 
     fn __repr__(&self) -> String {
@@ -479,12 +340,7 @@ impl Model {
 /// A closed-loop simulation.
 #[pyclass(module = "scbg")]
 struct Simulation {
-    model: Arc<LoadedScbg>,
-    scene: Arc<RustScene>,
-    ego: Option<i64>,
-    controlled: Vec<scbg::sim::ControlledAgent>,
-    config: scbg::sim::SimConfig,
-    sim: scbg::sim::Simulation,
+    session: scbg::Session,
 }
 
 type StepArrays<'py> = (
@@ -493,7 +349,7 @@ type StepArrays<'py> = (
     Bound<'py, PyArray1<bool>>,
 );
 
-fn snapshot_arrays<'py>(py: Python<'py>, snap: &[scbg::sim::AgentSnapshot]) -> StepArrays<'py> {
+fn snapshot_arrays<'py>(py: Python<'py>, snap: &[scbg::Snapshot]) -> StepArrays<'py> {
     let ids = Array1::from_iter(snap.iter().map(|a| a.id));
     let states = Array2::from_shape_fn((snap.len(), 5), |(i, j)| {
         let s = &snap[i].state;
@@ -516,16 +372,9 @@ fn snapshot_arrays<'py>(py: Python<'py>, snap: &[scbg::sim::AgentSnapshot]) -> S
 #[pymethods]
 impl Simulation {
     fn reset<'py>(&mut self, py: Python<'py>) -> PyResult<StepArrays<'py>> {
-        let (s, ego, ctl, config) = (
-            self.scene.clone(),
-            self.ego,
-            self.controlled.clone(),
-            self.config,
-        );
-        self.sim = py
-            .detach(move || scbg::sim::start(&s, ego, &ctl, config, None))
-            .map_err(py_err)?;
-        Ok(snapshot_arrays(py, &self.sim.snapshot()))
+        let session = &mut self.session;
+        py.detach(|| session.reset()).map_err(py_err)?;
+        Ok(snapshot_arrays(py, &self.session.snapshot()))
     }
 
     #[pyo3(signature = (ego_state=None))]
@@ -544,41 +393,38 @@ impl Simulation {
                         a.len()
                     )));
                 }
-                Some(self.sim.external_ego_state(
-                    a[0],
-                    a[1],
-                    a[2] as f32,
-                    [a[3] as f32, a[4] as f32],
-                ))
+                Some(scbg::EgoPose {
+                    x_m: a[0],
+                    y_m: a[1],
+                    heading_rad: a[2] as f32,
+                    velocity_mps: [a[3] as f32, a[4] as f32],
+                })
             }
         };
-        let (model, ctl) = (self.model.clone(), self.controlled.clone());
-        let sim = &mut self.sim;
-        let snap = py
-            .detach(|| scbg::sim::step(&model, sim, &ctl, ego))
-            .map_err(py_err)?;
+        let session = &mut self.session;
+        let snap = py.detach(|| session.step(ego)).map_err(py_err)?;
         Ok(snapshot_arrays(py, &snap))
     }
 
     #[getter]
     fn step_index(&self) -> usize {
-        self.sim.step_index()
+        self.session.step_index()
     }
 
     #[getter]
     fn finished(&self) -> bool {
-        self.sim.finished()
+        self.session.finished()
     }
 
     #[getter]
     fn ego_id(&self) -> i64 {
-        self.sim.ego_id()
+        self.session.ego_id()
     }
 
     /// The scene with the simulated steps as its future.
     fn scene(&self) -> Scene {
         Scene {
-            inner: Arc::new(self.sim.to_scene()),
+            inner: Arc::new(self.session.to_scene()),
         }
     }
 }

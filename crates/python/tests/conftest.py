@@ -21,8 +21,11 @@ def trained_dirs(tmp_path_factory):
     _scbg("data", "prepare", "--input", data, "--out", cache)
     _scbg("train", "predictor", "--config", os.environ["SCBG_TINY_CONFIG"], "--data", cache,
           "--out", model)
+    settings = d / "tiny.toml"
+    settings.write_text("[labels]\nsamples = 2\n[generator]\nepochs = 1\nbatch_size = 8\n"
+                        "range_steps = 100\n")
     _scbg("train", "generator", "--predictor", model, "--data", cache, "--out", gen,
-          "--epochs", "1", "--samples", "2", "--batch-size", "8", "--range-steps", "100")
+          "--config", str(settings))
     return gen, os.path.join(data, "synth-00000.tfrecord")
 
 

@@ -106,7 +106,7 @@ fn python_module_passes_its_pytest_suite() {
         .env("SCBG_BIN", &bin)
         .env(
             "SCBG_TINY_CONFIG",
-            root.join("crates/scbg/tests/tiny_train.toml"),
+            root.join("crates/lab/tests/tiny_train.toml"),
         )
         .output()
         .expect("run pytest");

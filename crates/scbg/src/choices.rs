@@ -4,8 +4,9 @@
 
 pub use scbg_courtesy::label::{LabelOptions, MarginalEstimate};
 pub use scbg_courtesy::{Audience, Reward, Weighting};
-pub use scbg_generator::{Courtesy, Policy, SelectorLoss, Threshold, Variant};
+pub use scbg_generator::{Policy, SelectorLoss, Threshold, Variant};
+pub use scbg_sim::{EgoMode, OthersMode};
+
+pub use crate::Courtesy;
 pub use scbg_model::{Mode, Preset};
 pub use scbg_synth::Family;
-
-pub use crate::predictor::{ModeSelection, SplitSelection};

@@ -3,14 +3,64 @@
 
 use std::path::Path;
 
-use scbg_generator::{Courtesy, Generated};
-
 pub use scbg_generator::PairContext;
 use scbg_scene::Scene;
 use serde::Serialize;
 
-use crate::generator::LoadedScbg;
-use crate::{InvalidRequest, ROAD_SUBSAMPLE};
+use crate::artefact::LoadedScbg;
+use crate::{Courtesy, InvalidRequest, ROAD_SUBSAMPLE};
+
+/// One generated future of B and what the model expects of it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Generated {
+    /// The quantile asked for, or the one an explicit ψ corresponds to (linear between the
+    /// predicted 0.1 and 0.9 quantiles, extended beyond them).
+    pub quantile: f32,
+    /// The ψ the quantile maps to (m/s for the default reward); with sample and rank and a
+    /// quantile, the label of the chosen sampled future.
+    pub psi: f32,
+    /// The predicted 0.1 quantile of ψ for this scene and pair.
+    pub psi_low: f32,
+    /// The predicted 0.9 quantile.
+    pub psi_high: f32,
+    /// J_φ of the generated future: what the predictor expects it does to A.
+    pub achieved_psi: f32,
+    /// E[r(Y_A) | x, ŷ_B] (toward the model's audience).
+    pub a_expected_reward_conditional: f32,
+    /// E[r(Y_A) | x].
+    pub a_expected_reward_marginal: f32,
+    /// B's future, world frame, metres, at `step_secs` intervals after the current step.
+    pub world_xy_m: Vec<[f64; 2]>,
+    /// Time between points, seconds.
+    pub step_secs: f32,
+}
+
+impl From<scbg_generator::Generated> for Generated {
+    fn from(g: scbg_generator::Generated) -> Self {
+        Self {
+            quantile: g.quantile,
+            psi: g.psi,
+            psi_low: g.psi_low,
+            psi_high: g.psi_high,
+            achieved_psi: g.achieved_psi,
+            a_expected_reward_conditional: g.a_expected_reward_conditional,
+            a_expected_reward_marginal: g.a_expected_reward_marginal,
+            world_xy_m: g.world_xy_m,
+            step_secs: g.step_secs,
+        }
+    }
+}
+
+/// ψ of a given future of B toward A (paper eq. 2), with both expectations.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CourtesyOf {
+    /// ψ = E[r(Y_A) | x, y_B] − E[r(Y_A) | x].
+    pub psi: f32,
+    /// E[r(Y_A) | x, y_B] (toward the model's audience).
+    pub a_expected_reward_conditional: f32,
+    /// E[r(Y_A) | x], estimated as in the labels.
+    pub a_expected_reward_marginal: f32,
+}
 
 /// B's generated futures for one pair of one scenario (the `scbg generate` JSON).
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -96,9 +146,11 @@ pub fn generate_in(
     context: &PairContext,
     courtesy: &[Courtesy],
 ) -> anyhow::Result<Vec<Generated>> {
+    let courtesy: Vec<scbg_generator::Courtesy> = courtesy.iter().map(|c| c.get()).collect();
     model
         .scbg
-        .generate_in(context, courtesy, &model.device)
+        .generate_in(context, &courtesy, &model.device)
+        .map(|g| g.into_iter().map(Generated::from).collect())
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 
@@ -113,10 +165,14 @@ pub fn generate(
 ) -> anyhow::Result<Generation> {
     let prepared = prepare(scene)?;
     let window = &prepared.windows[0];
+    let courtesy: Vec<scbg_generator::Courtesy> = courtesy.iter().map(|c| c.get()).collect();
     let trajectories = model
         .scbg
-        .generate(&prepared, window, a, b, courtesy, &model.device)
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
+        .generate(&prepared, window, a, b, &courtesy, &model.device)
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?
+        .into_iter()
+        .map(Generated::from)
+        .collect();
     Ok(Generation {
         scenario_id: scene.scenario_id.clone(),
         a_id: a,
@@ -141,7 +197,7 @@ pub fn plan(
     let window = &prepared.windows[0];
     model
         .scbg
-        .plan(&prepared, window, a, b, courtesy, &model.device)
+        .plan(&prepared, window, a, b, courtesy.get(), &model.device)
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 
@@ -168,7 +224,7 @@ pub fn plan_from(
 ) -> anyhow::Result<Vec<[f64; 2]>> {
     model
         .scbg
-        .plan_from(basis, courtesy, &model.device)
+        .plan_from(basis, courtesy.get(), &model.device)
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 
@@ -180,12 +236,17 @@ pub fn courtesy(
     a: i64,
     b: i64,
     future_world: &[[f64; 2]],
-) -> anyhow::Result<scbg_generator::CourtesyOf> {
+) -> anyhow::Result<CourtesyOf> {
     let prepared = prepare(scene)?;
     let window = &prepared.windows[0];
     model
         .scbg
         .courtesy_of(&prepared, window, a, b, future_world, &model.device)
+        .map(|c| CourtesyOf {
+            psi: c.psi,
+            a_expected_reward_conditional: c.a_expected_reward_conditional,
+            a_expected_reward_marginal: c.a_expected_reward_marginal,
+        })
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 

@@ -1,51 +1,47 @@
-//! scbg: socially-controllable behavior generation for traffic simulation — the application
-//! library.
+//! scbg: socially-controllable behavior generation for traffic simulation — the runtime.
 //!
-//! Every front end (the `scbg` command line, the HTTP server, the Python module, the
-//! closed-loop simulator) calls this crate and nothing below it: it owns the artefacts (predictor
-//! and generator folders, the label table), the pipelines (prepare, label, train, generate,
-//! evaluate, the demo) and the reports, as plain Rust APIs with typed inputs and outputs.
+//! Every front end (the `scbg` command line, the HTTP server, the Python module) calls this
+//! crate and nothing below it to load a trained model, measure courtesy, generate B's future at
+//! a courtesy and run closed-loop simulations. The research pipeline (training, labelling,
+//! evaluations, the demo, benches) lives in `scbg-lab`, which only the command line uses.
 //!
 //! | module | what | paper |
 //! |---|---|---|
-//! | [`data`] | inspect, render, prepare WOMD files into the feature cache | — |
-//! | [`synth`] | synthetic interactive scenarios + ground-truth sidecar | — |
-//! | [`predictor`] | train / evaluate Multipath++ (marginal + conditional), external predictions | Sec. III-B, Table I |
-//! | [`labels`] | courtesy labels ψ of every pair role (one labelling path), the Parquet label table | eq. (2), Sec. III-C, Fig. 3 |
-//! | [`generator`] | generator + range predictor training, the generator artefact, loading | eq. (1), Sec. III-D |
-//! | [`generate`] | B's world-frame future at a courtesy quantile or ψ | Sec. III-E |
-//! | [`scbg_eval`] | CourtesyMSE, TrajADE, correlations, Figs. 4–5 | Table II, Figs. 4–5 |
+//! | [`Model`] | a loaded model: generate B's future at a [`Courtesy`], ψ of a given future | Sec. III-E, eq. (2) |
+//! | [`Session`] | a closed-loop simulation stepped by a front end | beyond the paper |
+//! | [`model`] | a trained model folder: its description and loading | eq. (1), Sec. III-D |
+//! | [`generate`] | B's world-frame future at a courtesy quantile or ψ, ψ of a given future | Sec. III-E, eq. (2) |
 //! | [`sim`] | closed-loop simulation with courtesy-controlled agents, WOSAC rollouts, export | beyond the paper |
-//! | [`sim_eval`] | realised courtesy and WOSAC realism against the quantile, with baselines | beyond the paper |
-//! | [`demo`] | the whole pipeline with report.md / report.json | — |
-//! | [`bench`] | throughput measurements | — |
+//! | [`data`] | scenes from WOMD files and bytes, inspect, render, the synthetic ground truth | — |
+//! | [`scene_arrays`] | a scene from plain arrays | — |
+//! | [`inputs`] | paths and glob patterns to input files | — |
 //!
 //! Long-running functions take a [`Progress`]; [`Quiet`] ignores everything.
 //!
 //! **Architecture invariant:** no argument parsing, no terminal output (progress and notes go
-//! through [`Progress`]), no process exit codes. Errors are `anyhow` chains whose messages name
-//! the file, record or field (as cargo's library does); a request that is the caller's fault
-//! carries an [`InvalidRequest`] in its chain, so a server can answer 4xx.
+//! through [`Progress`]), no process exit codes, no training. Errors are `anyhow` chains whose
+//! messages name the file, record or field; a request that is the caller's fault carries an
+//! [`InvalidRequest`] in its chain, so a server can answer 4xx.
 
 #![warn(missing_docs)]
 
-pub mod bench;
+mod artefact;
 pub mod choices;
+mod courtesy;
 pub mod data;
-pub mod demo;
-pub mod fidelity;
-mod figures;
 pub mod generate;
-pub mod generator;
 pub mod inputs;
-mod label_table;
-pub mod labels;
-pub mod predictor;
+pub mod model;
 mod progress;
-pub mod scbg_eval;
+pub mod scene_arrays;
+pub mod session;
 pub mod sim;
-pub mod sim_eval;
-pub mod synth;
+
+pub use courtesy::Courtesy;
+pub use model::{LoadOptions, Model};
+pub use scene_arrays::SceneArrays;
+pub use session::{EgoPose, Session, Snapshot};
+pub use sim::{ControlledAgent, LoopOptions};
 
 pub use progress::{Bar, Progress, Quiet};
 pub use scbg_base::atomic::{write as write_atomic, write_json};
@@ -70,6 +66,8 @@ pub const ROAD_SUBSAMPLE: usize = 4;
 pub struct InvalidRequest(pub String);
 
 /// Returns `Err(InvalidRequest(message))` from the enclosing function unless `cond` holds.
+#[doc(hidden)]
+#[macro_export]
 macro_rules! ensure_request {
     ($cond:expr, $($arg:tt)+) => {
         if !$cond {
@@ -77,7 +75,6 @@ macro_rules! ensure_request {
         }
     };
 }
-pub(crate) use ensure_request;
 
 /// Whether an error chain holds an [`InvalidRequest`] (the caller's fault).
 pub fn is_invalid_request(err: &anyhow::Error) -> bool {

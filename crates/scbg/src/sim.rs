@@ -12,18 +12,19 @@
 //! rollouts spread evenly over a band around the requested quantile. An explicit ψ is used as
 //! given in every rollout.
 
-use std::path::Path;
-
-use anyhow::Context;
-use scbg_generator::Courtesy;
-use scbg_metrics::wosac::{Rollouts, SimPose};
 use scbg_scene::Scene;
 use scbg_sim::{PlanError, Planner, SimError};
 use scbg_synth::GroundTruth;
 use serde::Serialize;
 
-use crate::generator::LoadedScbg;
-use crate::{InvalidRequest, ensure_request};
+use crate::artefact::LoadedScbg;
+use crate::{Courtesy, InvalidRequest, ensure_request};
+
+mod export;
+mod run;
+
+pub use export::{ExportFormat, scene_of_rollout, wosac_rollouts, write_scenarios, write_wosac};
+pub use run::{SimOutput, SimRun, run_sim};
 
 pub use scbg_sim::rollout::DEFAULT_LANE_KEEPING_M;
 pub use scbg_sim::{
@@ -58,6 +59,57 @@ pub fn default_replan_every(policy: scbg_generator::Policy) -> usize {
     }
 }
 
+/// How a closed-loop simulation runs, as a front end asks for it: who drives the ego and the
+/// others, how often the controlled agents re-plan (by default the policy's own cadence,
+/// [`default_replan_every`]) and the controlled agents' safety settings.
+/// [`LoopOptions::config`] is the one place a front end's request becomes a [`SimConfig`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LoopOptions {
+    /// How the ego moves.
+    pub ego: EgoMode,
+    /// How the other agents move.
+    pub others: OthersMode,
+    /// Steps between a controlled agent's plans (`None`: the policy's default).
+    pub replan_every: Option<usize>,
+    /// The controlled agents' safety guard ([`SimConfig::safety_guard`]).
+    pub safety_guard: bool,
+    /// Lane keeping of the plans ([`SimConfig::lane_keeping_m`]).
+    pub lane_keeping_m: Option<f64>,
+    /// The world's B may take the right of way ([`SimConfig::take_right_of_way`]).
+    pub take_right_of_way: bool,
+}
+
+impl Default for LoopOptions {
+    fn default() -> Self {
+        let config = SimConfig::default();
+        Self {
+            ego: config.ego,
+            others: config.others,
+            replan_every: None,
+            safety_guard: config.safety_guard,
+            lane_keeping_m: config.lane_keeping_m,
+            take_right_of_way: config.take_right_of_way,
+        }
+    }
+}
+
+impl LoopOptions {
+    /// The simulator's settings for these options under `policy`.
+    pub fn config(&self, policy: scbg_generator::Policy) -> SimConfig {
+        SimConfig {
+            replan_every: self
+                .replan_every
+                .unwrap_or_else(|| default_replan_every(policy)),
+            ego: self.ego,
+            others: self.others,
+            safety_guard: self.safety_guard,
+            lane_keeping_m: self.lane_keeping_m,
+            take_right_of_way: self.take_right_of_way,
+            ..SimConfig::default()
+        }
+    }
+}
+
 /// An agent the generator drives, and the courtesy asked of it toward the ego.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct ControlledAgent {
@@ -65,6 +117,13 @@ pub struct ControlledAgent {
     pub id: i64,
     /// Its courtesy toward the ego: a quantile in [0, 1] or an explicit ψ.
     pub courtesy: Courtesy,
+}
+
+impl ControlledAgent {
+    /// Agent `id` driven at `courtesy` toward the ego.
+    pub fn new(id: i64, courtesy: Courtesy) -> Self {
+        Self { id, courtesy }
+    }
 }
 
 /// The courtesy-free part of the first plans ([`scbg_generator::PlanBasis`]) that rollouts of
@@ -211,27 +270,6 @@ fn sim_error(err: SimError) -> anyhow::Error {
     }
 }
 
-/// Checks the controlled agents' courtesies (quantile in [0, 1], finite ψ).
-fn check_courtesy(controlled: &[ControlledAgent]) -> anyhow::Result<()> {
-    for c in controlled {
-        match c.courtesy {
-            Courtesy::Quantile(q) => ensure_request!(
-                (0.0..=1.0).contains(&q),
-                "agent {}: quantile {q} is outside [0, 1]",
-                c.id
-            ),
-            Courtesy::Psi(p) => {
-                ensure_request!(
-                    p.is_finite(),
-                    "agent {}: ψ {p} is not a finite number",
-                    c.id
-                )
-            }
-        }
-    }
-    Ok(())
-}
-
 /// Starts a closed-loop simulation of `scene`: `ego` (default: the SDC) and the controlled
 /// agents with their courtesies; `truth` (a synthetic scene's ground truth) makes the
 /// synthetic world's rule the reactive one.
@@ -242,7 +280,6 @@ pub fn start(
     config: SimConfig,
     truth: Option<&GroundTruth>,
 ) -> anyhow::Result<Simulation> {
-    check_courtesy(controlled)?;
     let world = truth
         .map(|t| {
             scbg_synth::Scenario::of_truth(t)
@@ -361,340 +398,28 @@ pub fn rollout_quantiles(q: f32, n: usize, spread: f32) -> Vec<f32> {
         .collect()
 }
 
-/// The WOSAC form of simulated scenes of one scenario: every sim agent of `log` (valid at the
-/// current step), 80 poses per rollout; a pose the simulation left invalid (an agent replayed
-/// past the end of its log) repeats the last valid one.
-pub fn wosac_rollouts(log: &Scene, simulated: &[Scene]) -> Rollouts {
-    let object_ids = scbg_metrics::wosac::sim_agent_ids(log);
-    let start = log.current_step;
-    let trajectories = simulated
-        .iter()
-        .map(|scene| {
-            object_ids
-                .iter()
-                .map(|&id| {
-                    let states = scene
-                        .track_index(id)
-                        .map(|i| &scene.tracks[i].states[..])
-                        .unwrap_or_default();
-                    let mut last = states.get(start).copied().unwrap_or_default();
-                    (start + 1..=start + HORIZON_STEPS)
-                        .map(|t| {
-                            if let Some(s) = states.get(t).filter(|s| s.valid) {
-                                last = *s;
-                            }
-                            SimPose {
-                                x_m: last.x_m as f32,
-                                y_m: last.y_m as f32,
-                                z_m: last.z_m as f32,
-                                heading_rad: last.heading_rad,
-                            }
-                        })
-                        .collect()
-                })
-                .collect()
-        })
-        .collect();
-    Rollouts {
-        object_ids,
-        trajectories,
-    }
-}
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scbg_generator::Policy;
 
-/// `log` with one rollout's poses as its future (velocities by finite differences), for the
-/// rollout metrics of a baseline given as WOSAC rollouts.
-pub fn scene_of_rollout(log: &Scene, rollouts: &Rollouts, r: usize) -> Scene {
-    let start = log.current_step;
-    let mut scene = log.clone();
-    let len = start + 1 + HORIZON_STEPS;
-    for tr in &mut scene.tracks {
-        tr.states.truncate(start + 1);
-        tr.states.resize(len, scbg_scene::AgentState::default());
-    }
-    scene.timestamps_secs = (0..len)
-        .map(|k| log.timestamps_secs.first().copied().unwrap_or(0.0) + k as f64 * 0.1)
-        .collect();
-    if !scene.signals_per_step.is_empty() {
-        scene.signals_per_step.resize(len, Vec::new());
-    }
-    for (o, &id) in rollouts.object_ids.iter().enumerate() {
-        let Some(i) = scene.track_index(id) else {
-            continue;
+    #[test]
+    fn each_policy_replans_at_its_own_cadence_unless_told() {
+        let cadence = |policy, replan_every| {
+            LoopOptions {
+                replan_every,
+                ..LoopOptions::default()
+            }
+            .config(policy)
+            .replan_every
         };
-        let tr = &mut scene.tracks[i];
-        for (k, p) in rollouts.trajectories[r][o].iter().enumerate() {
-            let prev = tr.states[start + k];
-            let (x, y) = (f64::from(p.x_m), f64::from(p.y_m));
-            tr.states[start + k + 1] = scbg_scene::AgentState {
-                x_m: x,
-                y_m: y,
-                z_m: f64::from(p.z_m),
-                heading_rad: p.heading_rad,
-                velocity_x_mps: ((x - prev.x_m) / 0.1) as f32,
-                velocity_y_mps: ((y - prev.y_m) / 0.1) as f32,
-                valid: true,
-                ..prev
-            };
-        }
+        assert_eq!(cadence(Policy::Generator, None), GENERATOR_REPLAN_EVERY);
+        assert_eq!(cadence(Policy::Generator, None), 20);
+        assert_eq!(cadence(Policy::Ranked, None), RANKED_REPLAN_EVERY);
+        assert_eq!(cadence(Policy::Ranked, None), 20);
+        assert_eq!(cadence(Policy::Ranked, Some(5)), 5);
+        assert_eq!(cadence(Policy::Generator, Some(1)), 1);
+        // The simulator's own default differs: the options always say which they mean.
+        assert_ne!(SimConfig::default().replan_every, GENERATOR_REPLAN_EVERY);
     }
-    scene
-}
-
-/// Writes simulated scenes as WOMD Scenario TFRecords (the simulated future in place of the
-/// logged one), atomically.
-pub fn write_scenarios(path: &Path, scenes: &[Scene]) -> anyhow::Result<usize> {
-    scbg_womd::write_scenes(path, scenes).with_context(|| format!("writing {}", path.display()))
-}
-
-/// Writes WOSAC submission shards (`name.binproto-0000i-of-0000N` in `dir`) for scenarios with
-/// 32 rollouts each, after checking each against the challenge's rules.
-pub fn write_wosac(
-    dir: &Path,
-    name: &str,
-    header: &scbg_womd::wosac::SubmissionHeader,
-    scenarios: &[(Scene, Rollouts)],
-    shards: usize,
-) -> anyhow::Result<Vec<std::path::PathBuf>> {
-    let inputs = scenarios
-        .iter()
-        .map(|(log, r)| {
-            let input = scbg_womd::wosac::ScenarioRolloutsInput {
-                scenario_id: log.scenario_id.clone(),
-                joint_scenes: r
-                    .trajectories
-                    .iter()
-                    .map(|joint| {
-                        r.object_ids
-                            .iter()
-                            .zip(joint)
-                            .map(|(&id, poses)| scbg_womd::wosac::ObjectTrajectory {
-                                object_id: id,
-                                x_m: poses.iter().map(|p| p.x_m).collect(),
-                                y_m: poses.iter().map(|p| p.y_m).collect(),
-                                z_m: poses.iter().map(|p| p.z_m).collect(),
-                                heading_rad: poses.iter().map(|p| p.heading_rad).collect(),
-                            })
-                            .collect()
-                    })
-                    .collect(),
-            };
-            scbg_womd::wosac::validate_rollouts(log, &input)
-                .with_context(|| format!("rollouts of {}", log.scenario_id))?;
-            Ok(input)
-        })
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    scbg_womd::wosac::write_submission_shards(dir, name, header, &inputs, shards)
-        .with_context(|| format!("writing WOSAC shards into {}", dir.display()))
-}
-
-/// What `scbg sim` writes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, serde::Deserialize)]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-#[serde(rename_all = "snake_case")]
-pub enum ExportFormat {
-    /// WOMD Scenario TFRecord (`rollouts.tfrecord`, one scenario per rollout).
-    #[default]
-    Scenario,
-    /// WOSAC submission shard (`NAME.binproto-00000-of-00001`, 32 rollouts).
-    Wosac,
-}
-
-/// One `scbg sim` run.
-#[derive(Debug, Clone)]
-pub struct SimRun {
-    /// Generator folder.
-    pub model: std::path::PathBuf,
-    /// Predictor folder overriding generator.json's.
-    pub predictor: Option<std::path::PathBuf>,
-    /// How the controlled agents' courtesy becomes their plans.
-    pub policy: scbg_generator::Policy,
-    /// WOMD file holding the scenario.
-    pub scenario: std::path::PathBuf,
-    /// Which scenario (default: the first with A and the first controlled agent).
-    pub scenario_id: Option<String>,
-    /// A, the ego (whose reward courtesy is about).
-    pub ego: i64,
-    /// The controlled agents (at least one).
-    pub controlled: Vec<ControlledAgent>,
-    /// Closed-loop settings.
-    pub config: SimConfig,
-    /// Synthetic ground truth: the synthetic world's rule drives the reactive agents. Default:
-    /// `ground_truth.jsonl` beside the scenario file, when it describes the scenario.
-    pub ground_truth: Option<std::path::PathBuf>,
-    /// Do not look for a ground truth beside the file (IDM everywhere).
-    pub no_synthetic_world: bool,
-    /// Rollouts (32 for WOSAC).
-    pub rollouts: usize,
-    /// Band of quantiles the rollouts spread over.
-    pub spread: f32,
-    /// Output folder.
-    pub out: std::path::PathBuf,
-    /// Export format.
-    pub format: ExportFormat,
-    /// Method name of a WOSAC submission.
-    pub name: String,
-}
-
-/// What `scbg sim` did (also `sim.json`).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct SimOutput {
-    /// The scenario.
-    pub scenario_id: String,
-    /// Whether the synthetic world's rule drove the reactive agents.
-    pub synthetic_world: bool,
-    /// Quantile each rollout asked of each controlled agent (`[rollout][agent]`; ψ requests
-    /// are `null`).
-    pub quantiles: Vec<Vec<Option<f32>>>,
-    /// Metrics per rollout.
-    pub reports: Vec<RolloutReport>,
-    /// Files written.
-    pub files: Vec<std::path::PathBuf>,
-}
-
-/// The ground truth of `scenario_id` from `path`, or from `ground_truth.jsonl` beside `file`.
-fn truth_for(
-    file: &Path,
-    explicit: Option<&Path>,
-    scenario_id: &str,
-) -> anyhow::Result<Option<GroundTruth>> {
-    let path = match explicit {
-        Some(p) => p.to_path_buf(),
-        None => match file
-            .parent()
-            .map(|d| d.join(crate::synth::GROUND_TRUTH_FILE))
-        {
-            Some(p) if p.is_file() => p,
-            _ => return Ok(None),
-        },
-    };
-    let truth = crate::synth::read_ground_truth(&path)?;
-    let found = truth.into_iter().find(|t| t.scenario_id == scenario_id);
-    ensure_request!(
-        found.is_some() || explicit.is_none(),
-        "{}: no ground truth for scenario {scenario_id}",
-        path.display()
-    );
-    Ok(found)
-}
-
-/// Runs `scbg sim`: `rollouts` closed-loop rollouts of one scenario, exported as Scenario
-/// TFRecords or a WOSAC shard, with `sim.json` (metrics per rollout) beside them.
-pub fn run_sim(run: &SimRun, progress: &dyn crate::Progress) -> anyhow::Result<SimOutput> {
-    ensure_request!(
-        !run.controlled.is_empty(),
-        "at least one controlled agent (--b)"
-    );
-    ensure_request!(run.rollouts >= 1, "at least one rollout");
-    ensure_request!(
-        run.format != ExportFormat::Wosac
-            || run.rollouts == scbg_metrics::wosac::ROLLOUTS_PER_SCENARIO,
-        "a WOSAC submission needs {} rollouts per scenario (got {})",
-        scbg_metrics::wosac::ROLLOUTS_PER_SCENARIO,
-        run.rollouts
-    );
-    check_courtesy(&run.controlled)?;
-    let mut model = crate::generator::load_scbg(&run.model, run.predictor.as_deref())?;
-    model.scbg.policy = run.policy;
-    let (_, scene) = crate::generate::find_scene(
-        &run.scenario,
-        run.scenario_id.as_deref(),
-        run.ego,
-        run.controlled[0].id,
-    )?;
-    let truth = if run.no_synthetic_world {
-        None
-    } else {
-        truth_for(
-            &run.scenario,
-            run.ground_truth.as_deref(),
-            &scene.scenario_id,
-        )?
-    };
-    let bar = progress.bar("closed-loop rollouts", run.rollouts as u64);
-    let mut scenes = Vec::with_capacity(run.rollouts);
-    let mut quantiles = Vec::with_capacity(run.rollouts);
-    for r in 0..run.rollouts {
-        let controlled: Vec<ControlledAgent> = run
-            .controlled
-            .iter()
-            .map(|c| ControlledAgent {
-                courtesy: match c.courtesy {
-                    Courtesy::Quantile(q) if run.rollouts > 1 => {
-                        Courtesy::Quantile(rollout_quantiles(q, run.rollouts, run.spread)[r])
-                    }
-                    other => other,
-                },
-                ..*c
-            })
-            .collect();
-        quantiles.push(
-            controlled
-                .iter()
-                .map(|c| match c.courtesy {
-                    Courtesy::Quantile(q) => Some(q),
-                    Courtesy::Psi(_) => None,
-                })
-                .collect(),
-        );
-        scenes.push(rollout(
-            &model,
-            &scene,
-            Some(run.ego),
-            &controlled,
-            run.config,
-            truth.as_ref(),
-        )?);
-        bar.inc(1);
-    }
-    drop(bar);
-    let ids: Vec<i64> = run.controlled.iter().map(|c| c.id).collect();
-    let reports = scenes
-        .iter()
-        .map(|s| report(s, run.ego, &ids))
-        .collect::<anyhow::Result<Vec<_>>>()?;
-    std::fs::create_dir_all(&run.out).with_context(|| format!("creating {}", run.out.display()))?;
-    let files = match run.format {
-        ExportFormat::Scenario => {
-            let path = run.out.join("rollouts.tfrecord");
-            write_scenarios(&path, &scenes)?;
-            vec![path]
-        }
-        ExportFormat::Wosac => {
-            let header = scbg_womd::wosac::SubmissionHeader {
-                account_name: String::new(),
-                unique_method_name: run.name.clone(),
-                authors: vec!["scbg".into()],
-                affiliation: String::new(),
-                description: format!(
-                    "scbg: courtesy-controlled agents (generator re-planning every {} steps, kinematic bicycle), reactive others",
-                    run.config.replan_every
-                ),
-                method_link: String::new(),
-                uses_lidar_data: false,
-                uses_camera_data: false,
-                uses_public_model_pretraining: false,
-                num_model_parameters: String::new(),
-                public_model_names: Vec::new(),
-                // The challenge asks for a policy that acts on the simulated state every step.
-                acknowledge_closed_loop: run.config.replan_every == 1,
-            };
-            let rollouts = wosac_rollouts(&scene, &scenes);
-            write_wosac(
-                &run.out,
-                &run.name,
-                &header,
-                &[(scene.clone(), rollouts)],
-                1,
-            )?
-        }
-    };
-    let output = SimOutput {
-        scenario_id: scene.scenario_id.clone(),
-        synthetic_world: truth.is_some(),
-        quantiles,
-        reports,
-        files,
-    };
-    crate::write_json(run.out.join("sim.json"), &output)?;
-    Ok(output)
 }

@@ -110,14 +110,9 @@ pub struct CourtesyAsk {
 }
 
 impl CourtesyAsk {
-    /// The library's courtesy; exactly one of the two must be given.
-    pub fn to_courtesy(self) -> Result<scbg::choices::Courtesy, String> {
-        match (self.quantile, self.psi) {
-            (Some(q), None) => Ok(scbg::choices::Courtesy::Quantile(q)),
-            (None, Some(p)) => Ok(scbg::choices::Courtesy::Psi(p)),
-            (Some(_), Some(_)) => Err("give either `quantile` or `psi`, not both".into()),
-            (None, None) => Err("give `quantile` (in [0, 1]) or `psi`".into()),
-        }
+    /// The runtime's checked courtesy; exactly one of the two must be given.
+    pub fn to_courtesy(self) -> Result<scbg::Courtesy, scbg::InvalidRequest> {
+        scbg::Courtesy::from_request(self.quantile, self.psi)
     }
 }
 

@@ -106,9 +106,9 @@ pub(crate) async fn method_not_allowed() -> ApiError {
 pub(crate) async fn healthz(State(state): State<Arc<AppState>>) -> Json<Health> {
     Json(Health {
         status: "ok".into(),
-        variant: state.model.checkpoint.variant.name().to_string(),
-        policy: state.model.scbg.policy.name().to_string(),
-        audience: state.model.checkpoint.labels.audience.describe(),
+        variant: state.model.variant().name().to_string(),
+        policy: state.model.policy().name().to_string(),
+        audience: state.model.audience(),
         scenarios: state.scenarios.lock().expect("scenarios lock").0.len(),
         sessions: state.expire_sessions(),
     })
@@ -305,16 +305,17 @@ pub(crate) async fn generate(
         psi: req.psi,
     }
     .to_courtesy()
-    .map_err(ApiError::bad)?;
+    .map_err(|e| ApiError::bad(e.0))?;
     let scene = state.scenario(&req.scenario_id)?;
-    let shared = state.clone();
     let out = state
         .blocking(move |model| {
-            let ctx = shared.context(model, &scene, req.a, req.b)?;
-            scbg::generate::generate_in(model, &ctx, &[courtesy]).map_err(ApiError::from)
+            model
+                .generate(&scene, req.a, req.b, &[courtesy])
+                .map_err(ApiError::from)
         })
         .await?;
     let g = out
+        .trajectories
         .into_iter()
         .next()
         .ok_or_else(|| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "no trajectory"))?;
@@ -350,7 +351,8 @@ pub(crate) async fn courtesy(
     let scene = state.scenario(&req.scenario_id)?;
     let c = state
         .blocking(move |model| {
-            scbg::generate::courtesy(model, &scene, req.a, req.b, &req.future_xy_m)
+            model
+                .courtesy_of(&scene, req.a, req.b, &req.future_xy_m)
                 .map_err(ApiError::from)
         })
         .await?;
@@ -361,7 +363,7 @@ pub(crate) async fn courtesy(
     }))
 }
 
-fn session_state(id: &str, sim: &scbg::sim::Simulation) -> SessionState {
+fn session_state(id: &str, sim: &scbg::Session) -> SessionState {
     SessionState {
         session_id: id.to_string(),
         step: sim.step_index(),
@@ -405,13 +407,13 @@ pub(crate) async fn create_session(
 ) -> Result<Json<SessionState>, ApiError> {
     let req = body(req)?;
     let scene = state.scenario(&req.scenario_id)?;
-    let ego: scbg::sim::EgoMode = req
+    let ego: scbg::choices::EgoMode = req
         .ego_mode
         .as_deref()
         .unwrap_or("external")
         .parse()
         .map_err(ApiError::bad)?;
-    let others: scbg::sim::OthersMode = req
+    let others: scbg::choices::OthersMode = req
         .others
         .as_deref()
         .unwrap_or("log")
@@ -426,7 +428,7 @@ pub(crate) async fn create_session(
                 psi: c.psi,
             }
             .to_courtesy()
-            .map(|courtesy| scbg::sim::ControlledAgent { id: c.id, courtesy })
+            .map(|courtesy| scbg::ControlledAgent::new(c.id, courtesy))
             .map_err(|e| ApiError::bad(format!("controlled agent {}: {e}", c.id)))
         })
         .collect::<Result<Vec<_>, _>>()?;
@@ -439,28 +441,25 @@ pub(crate) async fn create_session(
             ),
         ));
     }
-    let config = scbg::sim::SimConfig {
-        replan_every: req
-            .replan_every
-            .unwrap_or_else(|| scbg::sim::default_replan_every(state.model.scbg.policy)),
+    let options = scbg::LoopOptions {
         ego,
         others,
+        replan_every: req.replan_every,
         ..Default::default()
     };
     let ego_id = req.ego;
-    let ctl = controlled.clone();
-    let sim = state
-        .blocking(move |_| {
-            scbg::sim::start(&scene, ego_id, &ctl, config, None).map_err(ApiError::from)
+    let session = state
+        .blocking(move |model| {
+            scbg::Session::start(model.clone(), scene, ego_id, controlled, &options)
+                .map_err(ApiError::from)
         })
         .await?;
     let id = new_session_id();
-    let answer = session_state(&id, &sim);
+    let answer = session_state(&id, &session);
     state.sessions.lock().expect("sessions lock").insert(
         id,
         Arc::new(Mutex::new(Session {
-            sim,
-            controlled,
+            session,
             last_used: Instant::now(),
         })),
     );
@@ -494,22 +493,20 @@ pub(crate) async fn step_session(
         .cloned()
         .ok_or_else(|| ApiError::not_found(format!("no session {id:?} (closed or expired)")))?;
     let answer = state
-        .blocking(move |model| {
+        .blocking(move |_| {
             let mut s = session.lock().map_err(|_| {
                 ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "the session is broken")
             })?;
             let s = &mut *s;
-            let ego_state = req.ego.map(|e| {
-                s.sim.external_ego_state(
-                    e.x_m,
-                    e.y_m,
-                    e.heading_rad,
-                    [e.velocity_x_mps, e.velocity_y_mps],
-                )
+            let ego = req.ego.map(|e| scbg::EgoPose {
+                x_m: e.x_m,
+                y_m: e.y_m,
+                heading_rad: e.heading_rad,
+                velocity_mps: [e.velocity_x_mps, e.velocity_y_mps],
             });
-            scbg::sim::step(model, &mut s.sim, &s.controlled, ego_state).map_err(ApiError::from)?;
+            s.session.step(ego).map_err(ApiError::from)?;
             s.last_used = Instant::now();
-            Ok(session_state(&id, &s.sim))
+            Ok(session_state(&id, &s.session))
         })
         .await?;
     Ok(Json(answer))

@@ -46,8 +46,8 @@ use axum::http::{HeaderMap, StatusCode};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use axum::routing::{delete, get, post};
+use scbg::Model;
 use scbg::Scene;
-use scbg::generator::LoadedScbg;
 use tokio::sync::Semaphore;
 
 pub use error::ApiError;
@@ -112,23 +112,20 @@ impl ServeConfig {
 /// Scenarios by id, and their insertion order (the oldest goes first).
 pub(crate) type Scenarios = (HashMap<String, Arc<Scene>>, VecDeque<String>);
 
-/// One closed-loop session.
+/// One closed-loop session and when it was last stepped.
 #[derive(Debug)]
 pub(crate) struct Session {
-    pub sim: scbg::sim::Simulation,
-    pub controlled: Vec<scbg::sim::ControlledAgent>,
+    pub session: scbg::Session,
     pub last_used: Instant,
 }
 
 /// What the handlers share.
 #[derive(Debug)]
 pub struct AppState {
-    pub(crate) model: Arc<LoadedScbg>,
+    pub(crate) model: Arc<Model>,
     pub(crate) config: ServeConfig,
     pub(crate) scenarios: Mutex<Scenarios>,
     pub(crate) sessions: Mutex<HashMap<String, Arc<Mutex<Session>>>>,
-    /// Pair contexts of `generate` by (scenario, A, B): what every courtesy of a pair shares.
-    pub(crate) contexts: Mutex<HashMap<(String, i64, i64), Arc<scbg::generate::PairContext>>>,
     pub(crate) workers: Arc<Semaphore>,
     pub(crate) metrics: Metrics,
     pub(crate) data_dir: Option<PathBuf>,
@@ -136,7 +133,7 @@ pub struct AppState {
 
 impl AppState {
     /// The state for `model` under `config` (the data folder resolved once).
-    pub fn new(model: LoadedScbg, config: ServeConfig) -> anyhow::Result<Arc<Self>> {
+    pub fn new(model: Model, config: ServeConfig) -> anyhow::Result<Arc<Self>> {
         let data_dir = config
             .data_dir
             .as_ref()
@@ -151,7 +148,6 @@ impl AppState {
             config,
             scenarios: Mutex::new((HashMap::new(), VecDeque::new())),
             sessions: Mutex::new(HashMap::new()),
-            contexts: Mutex::new(HashMap::new()),
             metrics: Metrics::default(),
             data_dir,
         }))
@@ -162,21 +158,14 @@ impl AppState {
         let mut guard = self.scenarios.lock().expect("scenarios lock");
         let (map, order) = &mut *guard;
         let id = scene.scenario_id.clone();
-        let mut dropped = vec![id.clone()];
         if map.insert(id.clone(), Arc::new(scene)).is_none() {
             order.push_back(id);
         }
         while order.len() > self.config.max_scenarios {
             if let Some(old) = order.pop_front() {
                 map.remove(&old);
-                dropped.push(old);
             }
         }
-        // A replaced or dropped scenario's pair contexts go with it.
-        self.contexts
-            .lock()
-            .expect("contexts lock")
-            .retain(|k, _| !dropped.contains(&k.0));
     }
 
     /// The scenario `id`, or a 404 naming it.
@@ -194,27 +183,6 @@ impl AppState {
             })
     }
 
-    /// The pair context of (scenario, A, B), computed on first use (at most 4096 kept).
-    pub(crate) fn context(
-        &self,
-        model: &LoadedScbg,
-        scene: &Scene,
-        a: i64,
-        b: i64,
-    ) -> Result<Arc<scbg::generate::PairContext>, ApiError> {
-        let key = (scene.scenario_id.clone(), a, b);
-        if let Some(c) = self.contexts.lock().expect("contexts lock").get(&key) {
-            return Ok(c.clone());
-        }
-        let ctx = Arc::new(scbg::generate::pair_context(model, scene, a, b)?);
-        let mut map = self.contexts.lock().expect("contexts lock");
-        if map.len() >= 4096 {
-            map.clear();
-        }
-        map.insert(key, ctx.clone());
-        Ok(ctx)
-    }
-
     /// Closes sessions idle longer than the TTL; returns how many are left.
     pub(crate) fn expire_sessions(&self) -> usize {
         let ttl = self.config.session_ttl;
@@ -226,7 +194,7 @@ impl AppState {
     /// Runs `f` on a blocking worker (at most `workers` at once) within the time limit.
     pub(crate) async fn blocking<T: Send + 'static>(
         self: &Arc<Self>,
-        f: impl FnOnce(&LoadedScbg) -> Result<T, ApiError> + Send + 'static,
+        f: impl FnOnce(&Arc<Model>) -> Result<T, ApiError> + Send + 'static,
     ) -> Result<T, ApiError> {
         use std::sync::atomic::Ordering;
         self.metrics.in_flight.fetch_add(1, Ordering::Relaxed);
@@ -358,7 +326,7 @@ pub async fn serve(
 }
 
 /// `scbg serve`: loads the model, binds, serves until Ctrl-C (or SIGTERM).
-pub fn run(model: LoadedScbg, config: ServeConfig) -> anyhow::Result<()> {
+pub fn run(model: Model, config: ServeConfig) -> anyhow::Result<()> {
     config.check()?;
     let mode = scbg::fp::Mode::current();
     let runtime = tokio::runtime::Builder::new_multi_thread()

@@ -9,7 +9,7 @@ use http_body_util::{BodyExt, Full};
 use hyper::body::Bytes;
 use hyper_util::client::legacy::Client;
 use hyper_util::rt::TokioExecutor;
-use scbg::generator::LoadedScbg;
+use scbg::Model;
 use serde::Serialize;
 
 use crate::{AppState, ServeConfig};
@@ -77,7 +77,7 @@ pub fn peak_rss_mib() -> f64 {
 /// Serves `model` on loopback, uploads `scenario` (WOMD bytes), and sends `generate` for the
 /// pair (`a`, `b`) at `rate` per second for `seconds`, quantiles cycling 0.1…0.9.
 pub fn load_test(
-    model: LoadedScbg,
+    model: Model,
     scenario: Vec<u8>,
     (a, b): (i64, i64),
     rate: f64,

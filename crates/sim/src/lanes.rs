@@ -29,7 +29,8 @@ pub const MOVING_M: f64 = 0.2;
 /// behind it to the first point at least this far ahead (either end alone where the other does
 /// not exist), m: a plan that slows to a stand wiggles by decimetres, and a direction taken
 /// over two steps there can point across the road — onto the crossing road's lanes at an
-/// intersection, which then pulled B's points 5 m sideways into A's lane (BENCHMARKS.md).
+/// intersection, which then pulled B's points 5 m sideways into A's lane (docs/findings.md,
+/// *The safety guard, rule by rule*).
 pub const CHORD_M: f64 = 2.0;
 
 /// The car-lane centre-line segments of a map (every lane but bike lanes), listed once per

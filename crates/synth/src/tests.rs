@@ -105,7 +105,7 @@ fn courtesy_raises_a_speed_in_every_family() {
 
 #[test]
 fn family_statistics_report() {
-    // Not an assertion: prints per-family numbers that the README and issue notes quote.
+    // Not an assertion: prints the per-family numbers that BENCHMARKS.md quotes.
     for family in Family::ALL {
         let mut bins = [(0.0, 0.0, 0usize); 4];
         let mut coll = 0;
@@ -131,7 +131,7 @@ fn family_statistics_report() {
 
 #[test]
 fn oracle_replays_logged_futures_and_psi_true_tracks_courtesy() {
-    // Item 1 of the fidelity issue: replaying B's logged future reproduces A's logged average
+    // The oracle's fidelity: replaying B's logged future reproduces A's logged average
     // speed within 0.2 m/s in ≥ 95 % of the scenes of every family.
     for family in Family::ALL {
         let n = 200;

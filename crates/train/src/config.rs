@@ -53,7 +53,8 @@ pub struct TrainConfig {
     /// Data-parallel chunks per step: 1 (default) runs the batch in one graph; N > 1 splits
     /// it into N chunks whose forward and backward passes run in parallel, each on its own
     /// fork of the model, and sums their gradients (weighted by chunk size, so the step is the
-    /// batch mean's step up to rounding). Lets a step use many cores (BENCHMARKS.md, issue 14).
+    /// batch mean's step up to rounding). Lets a step use many cores (docs/findings.md,
+    /// *Data-parallel chunks*).
     pub data_parallel_chunks: usize,
     /// A second prepared cache of *counterfactual siblings* (scenes whose id is a training
     /// scene's id + `~…`, sharing its history, with another future of one agent, e.g.

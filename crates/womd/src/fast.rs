@@ -1,14 +1,14 @@
 //! The hot path of `Scenario` decoding: tracks and map points read by a hand-written wire loop,
 //! everything else by prost.
 //!
-//! A WOMD scenario holds 9 000–40 000 `ObjectState`s (every track × every step), each ten
-//! fields. prost's generic decoding spends, per field, a key varint, a dispatch through the
-//! derived `merge_field`, a wire-type check and the `Option` bookkeeping — about a third of the
-//! whole ingest pipeline's time (`perf` in BENCHMARKS.md, *Ingest*). WOMD's writers (and ours)
-//! put each state's fields behind one-byte keys with fixed-width values, which the loop below
-//! reads directly, straight into scene tracks (no intermediate proto states); the same holds
-//! for the map's points (a lane or line is a list of 27-byte `MapPoint`s), which prost decodes
-//! as one message each.
+//! A WOMD scenario holds 9 000–40 000 `ObjectState`s (every track × every step), each ten fields.
+//! prost's generic decoding spends, per field, a key varint, a dispatch through the derived
+//! `merge_field`, a wire-type check and the `Option` bookkeeping — about a third of the whole
+//! ingest pipeline's time in a `perf` profile (docs/findings.md, *Speed work that changed no
+//! number*). WOMD's writers (and ours) put each state's fields behind one-byte keys with
+//! fixed-width values, which the loop below reads directly, straight into scene tracks (no
+//! intermediate proto states); the same holds for the map's points (a lane or line is a list of
+//! 27-byte `MapPoint`s), which prost decodes as one message each.
 //!
 //! **Exactness.** The loop accepts only what it fully understands: the known fields of `Track`,
 //! `ObjectState`, `MapFeature`, `RoadLine`/`RoadEdge` and `MapPoint` with their declared wire

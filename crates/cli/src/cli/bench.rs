@@ -1,7 +1,7 @@
 //! Arguments of `bench`.
 
 use clap::{Args, Subcommand};
-use scbg::choices::{Policy, Preset};
+use scbg::choices::Preset;
 use std::path::PathBuf;
 
 #[derive(Debug, Subcommand)]
@@ -41,20 +41,12 @@ pub struct BenchServeArgs {
 
 #[derive(Debug, Clone, Args)]
 pub struct BenchSimArgs {
-    /// Generator folder (e.g. a demo's `generator_full_s0`).
-    #[arg(long)]
-    pub model: PathBuf,
-    /// Predictor folder, overriding the one recorded in generator.json.
-    #[arg(long)]
-    pub predictor: Option<PathBuf>,
-    /// How a courtesy becomes B's future.
-    #[arg(long, value_enum, default_value_t = Policy::Generator)]
-    pub policy: Policy,
+    #[command(flatten)]
+    pub model: super::run::ModelArgs,
     /// Synthetic scenes to time.
     #[arg(long, default_value_t = 12)]
     pub scenes: usize,
-    /// Steps between plans (default: the policy's own cadence, 20; the speed bar is
-    /// set at 10).
+    /// Steps between plans (default: the policy's own cadence, 20).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=80))]
     pub replan_every: Option<u64>,
 }
@@ -107,7 +99,7 @@ pub struct BenchIngestArgs {
     pub repeat: usize,
     /// Time only these stages (repeatable; default: all), e.g. to profile one of them.
     #[arg(long, value_enum)]
-    pub stage: Vec<scbg::bench::IngestStage>,
+    pub stage: Vec<scbg_lab::bench::IngestStage>,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -1,11 +1,10 @@
 //! Arguments of `eval`.
 
 use clap::{Args, Subcommand};
-use scbg::choices::Policy;
-use scbg::predictor::{ModeSelection, SplitSelection};
+use scbg_lab::predictor::{ModeSelection, SplitSelection};
 use std::path::PathBuf;
 
-use super::run::LoopArgs;
+use super::run::ModelArgs;
 
 #[derive(Debug, Subcommand)]
 pub enum EvalCommand {
@@ -23,15 +22,8 @@ pub enum EvalCommand {
 
 #[derive(Debug, Clone, Args)]
 pub struct EvalSimArgs {
-    /// Generator folder.
-    #[arg(long)]
-    pub model: PathBuf,
-    /// Predictor folder, overriding the one recorded in generator.json.
-    #[arg(long)]
-    pub predictor: Option<PathBuf>,
-    /// How a courtesy becomes B's future.
-    #[arg(long, value_enum, default_value_t = Policy::Generator)]
-    pub policy: Policy,
+    #[command(flatten)]
+    pub model: ModelArgs,
     /// WOMD Scenario files (globs, folders or paths).
     #[arg(long, required = true, num_args = 1..)]
     pub data: Vec<String>,
@@ -47,18 +39,13 @@ pub struct EvalSimArgs {
     /// Scenes scored with WOSAC realism (32 rollouts per quantile and baseline).
     #[arg(long, default_value_t = 8)]
     pub wosac_scenes: usize,
-    /// Quantiles scored with WOSAC realism (32 rollouts each).
-    #[arg(long, num_args = 1.., default_values_t = [0.1f32, 0.5, 0.9])]
-    pub wosac_quantiles: Vec<f32>,
-    /// Width of the band of quantiles a quantile's 32 WOSAC rollouts spread over (1 with
-    /// quantile 0.5: the rollouts cover the whole range, the knob drawn from its prior).
-    #[arg(long, default_value_t = 0.2)]
-    pub spread: f32,
-    #[command(flatten)]
-    pub loop_args: LoopArgs,
     /// Output folder (eval_sim.json, sim_courtesy.png, sim_realism.png).
     #[arg(long)]
     pub out: PathBuf,
+    /// Settings file whose `[closed_loop]` table sets how A and the others move, the
+    /// replanning, the spread of the WOSAC rollouts and their quantiles (docs/pipeline.toml).
+    #[arg(long)]
+    pub config: Option<PathBuf>,
     #[arg(long)]
     pub json: bool,
 }

@@ -7,28 +7,21 @@ use serde_json::Value;
 fn demo_writes_a_report() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("demo");
+    // Settings over the defaults: reaction siblings, made after the first epoch, join the
+    // second; the predictor's batch and learning rate reach its training config.
+    let config = crate::settings(
+        dir.path(),
+        "[data]\nscenarios = 40\n\
+         [predictor]\nepochs = 2\nreaction_siblings = 2\nreaction_epochs = 1\n\
+         batch_size = 64\nlearning_rate = 0.002\n\
+         [generator]\nepochs = 1\nseeds = 2\n",
+    );
     scbg_ok(&[
         "demo",
         "--out",
         out.to_str().unwrap(),
-        "--scenarios",
-        "40",
-        "--epochs",
-        "2",
-        "--generator-epochs",
-        "1",
-        "--generator-seeds",
-        "2",
-        // Reaction siblings, made after the first epoch, join the second.
-        "--reaction-siblings",
-        "2",
-        "--reaction-epochs",
-        "1",
-        // The predictor's batch and learning rate reach its training config.
-        "--batch-size",
-        "64",
-        "--learning-rate",
-        "0.002",
+        "--config",
+        config.to_str().unwrap(),
     ]);
     let config = std::fs::read_to_string(out.join("predictor.toml")).unwrap();
     assert!(
@@ -38,11 +31,22 @@ fn demo_writes_a_report() {
     let report: Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     assert_eq!(report["data"]["scenarios"], 40);
+    // The reference documents every key of the report.
+    let reference = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../docs/reference.md"),
+    )
+    .unwrap();
+    for key in report.as_object().unwrap().keys() {
+        assert!(
+            reference.contains(&format!("`{key}`")),
+            "docs/reference.md does not document report.json's {key}"
+        );
+    }
     assert!(
         report["predictor"]["Marginal (interacting agents)"]["min_ade"].is_number(),
         "{report}"
     );
-    // The issue's report.json layout.
+    // The report's layout of the paper's numbers.
     for variant in ["baseline", "aug", "full"] {
         let v = &report["variants"][variant];
         for key in [
@@ -113,7 +117,7 @@ fn demo_writes_a_report() {
     assert_eq!(report["variants_per_seed"].as_array().unwrap().len(), 2);
     assert!(report["variants_seed_std"]["full"]["traj_ade"]["mean"].is_number());
     assert!(out.join("generator_full_seed1/generator.json").is_file());
-    // The fidelity issue's keys.
+    // The label fidelity keys.
     assert_eq!(
         report["fidelity_all_scenes"]["logged"]["all"]["n"], 40,
         "{report}"

@@ -10,31 +10,21 @@ fn label_writes_parquet_and_resumes() {
     let p = |s: &str| dir.path().join(s).display().to_string();
     tiny_trained_model(dir.path(), 20, 8);
     let gt = format!("{}/ground_truth.jsonl", p("synth"));
-    // `scbg label` of the tiny model's cache with 3 sampled futures and more flags, into
-    // `out`; `label` adds the ground truth, expects success and returns its summary.json.
-    let run_label = |out: &str, more: &[&str]| {
+    // `scbg label` of the tiny model's cache with 3 sampled futures, the `[labels]` settings
+    // `labels` and more flags, into `out`; `label` adds the ground truth, expects success and
+    // returns its summary.json.
+    let run_label = |out: &str, labels: &str, more: &[&str]| {
         let (out_dir, model, cache) = (p(out), p("model"), p("cache"));
+        let config = crate::settings(dir.path(), &format!("[labels]\nsamples = 3\n{labels}"));
+        let config = config.display().to_string();
         let mut args = vec![
-            "label",
-            "--model",
-            &model,
-            "--data",
-            &cache,
-            "--out",
-            &out_dir,
-            "--samples",
-            "3",
+            "label", "--model", &model, "--data", &cache, "--out", &out_dir, "--config", &config,
         ];
         args.extend_from_slice(more);
         scbg(&args)
     };
-    let label = |out: &str, more: &[&str]| -> Value {
-        let more: Vec<&str> = more
-            .iter()
-            .copied()
-            .chain(["--ground-truth", &gt])
-            .collect();
-        let done = run_label(out, &more);
+    let label = |out: &str, labels: &str| -> Value {
+        let done = run_label(out, labels, &["--ground-truth", &gt]);
         assert!(
             done.status.success(),
             "{}",
@@ -45,13 +35,8 @@ fn label_writes_parquet_and_resumes() {
         )
         .unwrap()
     };
-    let old_layout = [
-        "--label-lane-move-steps",
-        "0",
-        "--keep-baseline-samples",
-        "false",
-    ];
-    let summary = label("labels", &old_layout);
+    let old_layout = "lane_move_steps = 0\nkeep_baseline_samples = false\n";
+    let summary = label("labels", old_layout);
     // 20 scenarios × 1 labelled pair × 2 roles × (1 logged + 3 sampled).
     assert_eq!(summary["rows"], 20 * 2 * 4);
     assert_eq!(summary["keep_baseline"], false, "{summary}");
@@ -66,15 +51,15 @@ fn label_writes_parquet_and_resumes() {
     }
     assert!(fidelity["oracle_consistency"]["all"][0].as_f64().unwrap() >= 0.95);
     assert!(dir.path().join("labels/psi_fidelity.png").is_file());
-    let rows =
-        scbg::labels::read_label_table(&dir.path().join("labels/labels-00000.parquet")).unwrap();
+    let rows = scbg_lab::labels::read_label_table(&dir.path().join("labels/labels-00000.parquet"))
+        .unwrap();
     assert_eq!(rows.iter().filter(|r| r.psi_true.is_some()).count(), 80);
     let parquet = dir.path().join("labels/labels-00000.parquet");
     let bytes = std::fs::read(&parquet).unwrap();
     assert_eq!(&bytes[..4], b"PAR1");
     // A second run reads the finished shard instead of relabelling it.
     let before = std::fs::metadata(&parquet).unwrap().modified().unwrap();
-    assert!(run_label("labels", &old_layout).status.success());
+    assert!(run_label("labels", old_layout, &[]).status.success());
     assert_eq!(
         std::fs::metadata(&parquet).unwrap().modified().unwrap(),
         before
@@ -82,7 +67,7 @@ fn label_writes_parquet_and_resumes() {
     // A run asking for other options (the default layout) is refused, naming what differs,
     // and the folder's tables are left alone; so is a folder of tables without the record of
     // their options (labelled before it existed).
-    let other = run_label("labels", &[]);
+    let other = run_label("labels", "", &[]);
     let err = String::from_utf8_lossy(&other.stderr);
     assert!(!other.status.success(), "{err}");
     assert!(
@@ -100,88 +85,58 @@ fn label_writes_parquet_and_resumes() {
         dir.path().join("labels_unrecorded/labels-00000.parquet"),
     )
     .unwrap();
-    let unrecorded = run_label("labels_unrecorded", &[]);
+    let unrecorded = run_label("labels_unrecorded", "", &[]);
     let err = String::from_utf8_lossy(&unrecorded.stderr);
     assert!(
         !unrecorded.status.success() && err.contains("no label_options.json"),
         "{err}"
     );
-    // A record written before `lane_move_room` existed reads as MOBIL's polite room, the one
-    // its moves were kept with: a resume asking for that room goes on, the new default is
-    // refused, naming it.
+    // A record without `lane_move_room` reads as MOBIL's polite room, the one its moves were
+    // kept with: today's room is refused, naming it.
     let record = dir.path().join("labels/label_options.json");
-    let mut old: serde_json::Value =
+    let current: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(&record).unwrap()).unwrap();
-    assert_eq!(old["lane_move_room"]["braking_mps2"], 7.0, "{old}");
+    assert_eq!(current["lane_move_room"]["braking_mps2"], 7.0, "{current}");
+    let mut old = current.clone();
     old.as_object_mut().unwrap().remove("lane_move_room");
     std::fs::write(&record, old.to_string()).unwrap();
-    let polite_room = [
-        old_layout.as_slice(),
-        &[
-            "--lane-move-room-braking",
-            "4",
-            "--lane-move-room-reaction",
-            "1",
-        ],
-    ]
-    .concat();
-    let resumed = run_label("labels", &polite_room);
-    assert!(
-        resumed.status.success(),
-        "{}",
-        String::from_utf8_lossy(&resumed.stderr)
-    );
-    let refused = run_label("labels", &old_layout);
+    let refused = run_label("labels", old_layout, &[]);
     let err = String::from_utf8_lossy(&refused.stderr);
     assert!(
         !refused.status.success() && err.contains("lane_move_room"),
         "{err}"
     );
     // A field this build does not know (a newer run's) is a difference too.
-    old.as_object_mut()
+    let mut newer = current.clone();
+    newer
+        .as_object_mut()
         .unwrap()
         .insert("newer_field".into(), true.into());
-    std::fs::write(&record, old.to_string()).unwrap();
-    let newer = run_label("labels", &polite_room);
-    let err = String::from_utf8_lossy(&newer.stderr);
+    std::fs::write(&record, newer.to_string()).unwrap();
+    let refused = run_label("labels", old_layout, &[]);
+    let err = String::from_utf8_lossy(&refused.stderr);
     assert!(
-        !newer.status.success() && err.contains("newer_field: true there, - asked"),
+        !refused.status.success() && err.contains("newer_field: true there, - asked"),
         "{err}"
     );
     assert_eq!(
         std::fs::metadata(&parquet).unwrap().modified().unwrap(),
         before
     );
-    // ψ toward B's neighbours (issue 12): same rows, each counting its audience; a bad radius
-    // is refused before anything is written.
-    let bad = scbg(&[
-        "label",
-        "--model",
-        &p("model"),
-        "--data",
-        &p("cache"),
-        "--out",
-        &p("labels_bad"),
-        "--audience",
-        "neighbours",
-        "--audience-radius-m",
-        "0",
-    ]);
-    let err = String::from_utf8_lossy(&bad.stderr);
-    assert!(!bad.status.success() && err.contains("radius 0"), "{err}");
-    assert!(!dir.path().join("labels_bad").exists());
+    // ψ toward B's neighbours: same rows, each counting its audience; a bad radius or an
+    // unknown setting is refused before anything is written.
+    for (bad_settings, needle) in [
+        ("audience = \"neighbours:0\"\n", "radius 0"),
+        ("lane_moves = 3\n", "lane_moves"),
+    ] {
+        let bad = run_label("labels_bad", bad_settings, &[]);
+        let err = String::from_utf8_lossy(&bad.stderr);
+        assert!(!bad.status.success() && err.contains(needle), "{err}");
+        assert!(!dir.path().join("labels_bad").exists());
+    }
     let summary = label(
         "labels_neighbours",
-        &[
-            "--audience",
-            "neighbours",
-            "--audience-weighting",
-            "proximity",
-            "--label-lane-move-steps",
-            "0",
-            "--keep-baseline-samples",
-            "false",
-        ],
+        &format!("audience = \"neighbours:30:proximity\"\n{old_layout}"),
     );
     assert_eq!(summary["rows"], 20 * 2 * 4);
     assert_eq!(summary["audience"]["kind"], "neighbours", "{summary}");
@@ -190,34 +145,11 @@ fn label_writes_parquet_and_resumes() {
     assert!(summary["fidelity"].is_null(), "{summary}");
     // With lane moves (the default): the logged and sampled futures as before, then the
     // moves of the sampled ones, scored by the oracle apart from them.
-    let summary = label("labels_moves", &["--keep-baseline-samples", "false"]);
+    let summary = label("labels_moves", "keep_baseline_samples = false\n");
     assert_eq!(summary["lane_move_steps"], 30, "{summary}");
     assert_eq!(summary["lane_move_room"]["braking_mps2"], 7.0, "{summary}");
     assert_eq!(summary["lane_move_room"]["reaction_s"], 0.5, "{summary}");
     let moves = summary["lane_moves"].as_u64().unwrap();
-    // MOBIL's polite limit leaves A more room, so it keeps no more moves; a braking of 0 is
-    // refused before anything is written.
-    let polite = label(
-        "labels_polite",
-        &[
-            "--keep-baseline-samples",
-            "false",
-            "--lane-move-room-braking",
-            "4",
-            "--lane-move-room-reaction",
-            "1",
-        ],
-    );
-    assert_eq!(polite["lane_move_room"]["braking_mps2"], 4.0, "{polite}");
-    assert_eq!(polite["lane_move_room"]["reaction_s"], 1.0, "{polite}");
-    assert!(polite["lane_moves"].as_u64().unwrap() <= moves, "{polite}");
-    let bad = run_label("labels_no_room", &["--lane-move-room-braking", "0"]);
-    let err = String::from_utf8_lossy(&bad.stderr);
-    assert!(
-        !bad.status.success() && err.contains("--lane-move-room-braking 0"),
-        "{err}"
-    );
-    assert!(!dir.path().join("labels_no_room").exists());
     assert_eq!(summary["rows"].as_u64().unwrap(), 20 * 2 * 4 + moves);
     let fidelity = &summary["fidelity"];
     assert_eq!(fidelity["sampled"]["all"]["n"], 60, "{summary}");
@@ -226,7 +158,7 @@ fn label_writes_parquet_and_resumes() {
     assert!(scored <= moves, "{summary}");
     // The baseline's futures kept (the default): labelled after the 3 sampled ones (5 in
     // all), the moves after them; none left over for E[r(Y_A) | x] alone.
-    let summary = label("labels_kept", &["--baseline-samples", "2"]);
+    let summary = label("labels_kept", "baseline_samples = 2\n");
     assert_eq!(summary["samples_per_pair"], 5, "{summary}");
     assert_eq!(summary["baseline_samples"], 0, "{summary}");
     assert_eq!(summary["keep_baseline"], true, "{summary}");
@@ -240,6 +172,16 @@ fn train_generator_saves_generator_and_range_predictor() {
     let dir = tempfile::tempdir().unwrap();
     let p = |s: &str| dir.path().join(s).display().to_string();
     tiny_trained_model(dir.path(), 16, 12);
+    let tiny = |epochs: usize| {
+        crate::settings(
+            dir.path(),
+            &format!(
+                "[labels]\nsamples = 2\n[generator]\nepochs = {epochs}\nbatch_size = 8\nrange_steps = 20\n"
+            ),
+        )
+        .display()
+        .to_string()
+    };
     scbg_ok(&[
         "train",
         "generator",
@@ -249,14 +191,8 @@ fn train_generator_saves_generator_and_range_predictor() {
         &p("cache"),
         "--out",
         &p("gen"),
-        "--epochs",
-        "2",
-        "--samples",
-        "2",
-        "--batch-size",
-        "8",
-        "--range-steps",
-        "20",
+        "--config",
+        &tiny(2),
     ]);
     let saved: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("gen/generator.json")).unwrap(),
@@ -293,26 +229,15 @@ fn train_generator_saves_generator_and_range_predictor() {
         &p("gen_base"),
         "--variant",
         "baseline",
-        "--epochs",
-        "1",
-        "--samples",
-        "2",
-        "--batch-size",
-        "8",
-        "--range-steps",
-        "20",
-        "--relative-mode-courtesy",
-        "false",
+        "--config",
+        &tiny(1),
     ]);
-    // Without the relative input the scorer reads ψ and ψ_k alone, as before the option.
     let base: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("gen_base/generator.json")).unwrap(),
     )
     .unwrap();
-    assert!(
-        base["generator"]["relative_courtesy_floor"].is_null(),
-        "{base}"
-    );
+    assert_eq!(base["variant"], "baseline");
+    assert_eq!(base["history"].as_array().unwrap().len(), 1);
 
     // `scbg generate` on a pair of the synthetic ground truth.
     let gt = std::fs::read_to_string(dir.path().join("synth/ground_truth.jsonl")).unwrap();
@@ -504,7 +429,13 @@ fn train_generator_saves_generator_and_range_predictor() {
             .unwrap();
     assert_eq!(report["reports"].as_array().unwrap().len(), 1);
     assert!(report["synthetic_world"].as_bool().unwrap());
-    let ok = sim(&p("simw"), &["--format", "wosac", "--name", "mine"]);
+    let closed_loop = |text: &str| {
+        crate::settings(dir.path(), &format!("[closed_loop]\n{text}"))
+            .display()
+            .to_string()
+    };
+    let wosac = closed_loop("format = \"wosac\"\nname = \"mine\"\n");
+    let ok = sim(&p("simw"), &["--config", &wosac]);
     assert!(
         ok.status.success(),
         "{}",
@@ -516,11 +447,15 @@ fn train_generator_saves_generator_and_range_predictor() {
             .is_file()
     );
     // Bad requests: named, exit 2, nothing written.
+    let few = closed_loop("format = \"wosac\"\nrollouts = 3\n");
+    let never = closed_loop("replan_every = 0\n");
+    let unknown = closed_loop("spred = 0.1\n");
     for (rest, needle) in [
         (&["--quantile", "1.5"][..], "quantile 1.5"),
         (&["--also", "4242=0.5"][..], "4242"),
-        (&["--format", "wosac", "--rollouts", "3"][..], "32 rollouts"),
-        (&["--replan-every", "0"][..], "replan_every"),
+        (&["--config", &few][..], "32 rollouts"),
+        (&["--config", &never][..], "replan_every"),
+        (&["--config", &unknown][..], "spred"),
     ] {
         let bad = sim(&p("simbad"), rest);
         assert_eq!(bad.status.code(), Some(2), "{rest:?}");
@@ -543,10 +478,8 @@ fn train_generator_saves_generator_and_range_predictor() {
         "2",
         "--wosac-scenes",
         "1",
-        "--wosac-quantiles",
-        "0.5",
-        "--spread",
-        "0.1",
+        "--config",
+        &closed_loop("wosac_quantiles = [0.5]\nspread = 0.1\n"),
         "--out",
         &p("evalsim"),
         "--json",
@@ -573,7 +506,8 @@ fn train_generator_saves_generator_and_range_predictor() {
         assert!(dir.path().join("evalsim").join(f).is_file(), "{f}");
     }
 
-    // A malformed threshold is a clear error.
+    // A malformed threshold is a clear error naming the setting.
+    let qx = crate::settings(dir.path(), "[generator]\nthreshold = \"qx\"\n");
     let bad = scbg(&[
         "train",
         "generator",
@@ -583,9 +517,10 @@ fn train_generator_saves_generator_and_range_predictor() {
         &p("cache"),
         "--out",
         &p("gen2"),
-        "--threshold",
-        "qx",
+        "--config",
+        qx.to_str().unwrap(),
     ]);
     assert_eq!(bad.status.code(), Some(2));
-    assert!(String::from_utf8_lossy(&bad.stderr).contains("--threshold"));
+    let err = String::from_utf8_lossy(&bad.stderr);
+    assert!(err.contains("threshold") && err.contains("qx"), "{err}");
 }

@@ -12,6 +12,7 @@ mod generator;
 mod pipeline;
 mod predictor;
 mod real_data;
+mod repo;
 mod scale;
 
 pub fn scbg(args: &[&str]) -> Output {
@@ -20,6 +21,18 @@ pub fn scbg(args: &[&str]) -> Output {
         .env("SCBG_LOG", "error")
         .output()
         .expect("run scbg")
+}
+
+/// A pipeline settings file (docs/pipeline.toml's format) with `text`, in `dir`.
+pub fn settings(dir: &Path, text: &str) -> PathBuf {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static NEXT: AtomicUsize = AtomicUsize::new(0);
+    let path = dir.join(format!(
+        "settings-{}.toml",
+        NEXT.fetch_add(1, Ordering::Relaxed)
+    ));
+    std::fs::write(&path, text).unwrap();
+    path
 }
 
 /// Runs scbg and asserts success; returns stdout.

@@ -5,7 +5,7 @@ use crate::{real_dir, scbg, scbg_ok};
 use serde_json::{Value, json};
 
 /// The tiny predictor config of the library's tests.
-const TINY_CONFIG: &str = include_str!("../../../scbg/tests/tiny_train.toml");
+const TINY_CONFIG: &str = include_str!("../../../lab/tests/tiny_train.toml");
 
 /// synth → prepare → train (tiny config) in `dir`: `synth/`, `cache/`, `train.toml`, `model/`.
 pub(crate) fn tiny_trained_model(dir: &std::path::Path, scenarios: usize, seed: u64) {

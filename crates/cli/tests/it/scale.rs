@@ -140,7 +140,7 @@ fn ray_shards_merge_to_the_single_process_result_and_k8s_jobs_validate() {
     // label: 2 Ray tasks over the 3 cache shards, then the merge writes the summary.
     std::fs::write(
         p("train.toml"),
-        include_str!("../../../scbg/tests/tiny_train.toml"),
+        include_str!("../../../lab/tests/tiny_train.toml"),
     )
     .unwrap();
     scbg_ok(&[
@@ -153,6 +153,9 @@ fn ray_shards_merge_to_the_single_process_result_and_k8s_jobs_validate() {
         "--out",
         &s("model"),
     ]);
+    let two_samples = crate::settings(dir.path(), "[labels]\nsamples = 2\n")
+        .display()
+        .to_string();
     let record = ray_stage(
         &python,
         &[
@@ -166,8 +169,8 @@ fn ray_shards_merge_to_the_single_process_result_and_k8s_jobs_validate() {
             "--shards",
             "2",
             "--",
-            "--samples",
-            "2",
+            "--config",
+            &two_samples,
             "--ground-truth",
             &gt,
         ],
@@ -189,16 +192,16 @@ fn ray_shards_merge_to_the_single_process_result_and_k8s_jobs_validate() {
         &s("cache"),
         "--out",
         &s("labels_one"),
-        "--samples",
-        "2",
+        "--config",
+        &two_samples,
         "--ground-truth",
         &gt,
     ]);
     for shard in 0..3 {
-        let name = scbg::labels::shard_table_name(shard);
+        let name = scbg_lab::labels::shard_table_name(shard);
         assert_eq!(
-            scbg::labels::read_label_table(&p("labels").join(&name)).unwrap(),
-            scbg::labels::read_label_table(&p("labels_one").join(&name)).unwrap(),
+            scbg_lab::labels::read_label_table(&p("labels").join(&name)).unwrap(),
+            scbg_lab::labels::read_label_table(&p("labels_one").join(&name)).unwrap(),
             "{name}"
         );
     }
@@ -237,14 +240,13 @@ fn ray_shards_merge_to_the_single_process_result_and_k8s_jobs_validate() {
         &s("cache"),
         "--out",
         &s("gen"),
-        "--epochs",
-        "1",
-        "--samples",
-        "2",
-        "--batch-size",
-        "8",
-        "--range-steps",
-        "10",
+        "--config",
+        &crate::settings(
+            dir.path(),
+            "[labels]\nsamples = 2\n[generator]\nepochs = 1\nbatch_size = 8\nrange_steps = 10\n",
+        )
+        .display()
+        .to_string(),
     ]);
     let record = ray_stage(
         &python,

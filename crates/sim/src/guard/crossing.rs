@@ -14,8 +14,8 @@ pub(super) const CONFLICT_HORIZON_STEPS: u32 = 10;
 pub(super) const CONFLICT_STEP_S: f64 = 0.5;
 /// A crossing conflict is two arrivals at the same point less than this many seconds apart.
 /// (With 3 s and 1 s, the controlled B of the synthetic crossings stopped with its nose in the
-/// cross traffic's lane in 2–4 % of closed-loop rollouts; with 5 s and 2 s in ≤ 1 %,
-/// BENCHMARKS.md.)
+/// cross traffic's lane in 2–4 % of closed-loop rollouts; with 5 s and 2 s in ≤ 1 %;
+/// docs/findings.md, *The safety guard, rule by rule*.)
 pub(super) const CONFLICT_WINDOW_S: f64 = 2.0;
 
 /// Margin beyond its stopping distance a yielding agent must have before my corridor, m.
@@ -195,7 +195,7 @@ pub(crate) fn crossing_conflict(
 /// Margin by which my box is taken to reach a crossing agent's box early and leave it late,
 /// m: the tracker may run past the point where a plan stops, and the other need not keep its
 /// velocity (held-out synthetic scenes: B's crossing collisions 20 → 11 of 2 745 rollouts at
-/// 2 m, none fewer at 3 m; BENCHMARKS.md).
+/// 2 m, none fewer at 3 m; docs/findings.md, *The safety guard, rule by rule*).
 pub(super) const CONFLICT_MARGIN_M: f64 = 2.0;
 
 /// Heading difference between two agents' ways above which one crosses the other (and below
@@ -216,7 +216,8 @@ pub(super) const WAY_MARGIN_M: f64 = 0.5;
 /// `None` when the way crosses my path at under 45° (or over 135°) there, or my box does not
 /// reach it within `limit_m`. (Measured from my box, not my path's centre line: a B turning
 /// right into a road from the side had its nose in the cross traffic's lane while the way's
-/// crossing of its path's centre line was still 4 m ahead; BENCHMARKS.md.)
+/// crossing of its path's centre line was still 4 m ahead; docs/findings.md, *The safety
+/// guard, rule by rule*.)
 pub(super) fn crossing_way(
     path: &RefPath,
     s_m: f64,

@@ -14,7 +14,7 @@ pub(super) const SIDE_CLEARANCE_M: f64 = 0.8;
 /// drift keeps [`SIDE_KEEP_M`] of the clearance (down to [`SIDE_MIN_ALIGN_S`]), and the bound
 /// starts where the drift of the full time would take more than the clearance. (A B at 24 m/s
 /// moving over at 6° toward A, 3 m ahead of it, was bounded at 0.7 m and drifted 1.2 m into it;
-/// BENCHMARKS.md.)
+/// docs/findings.md, *The safety guard, rule by rule*.)
 pub(super) const SIDE_ALIGN_S: f64 = 0.5;
 /// The least alignment time constant, s (a yaw rate the bicycle's steering reaches in ~0.1 s).
 pub(super) const SIDE_MIN_ALIGN_S: f64 = 0.1;
@@ -23,7 +23,7 @@ pub(super) const SIDE_KEEP_M: f64 = 0.2;
 /// An agent behind that catches up counts as alongside from as far back as it closes in this
 /// many seconds (a slow B at 13 m/s moving over into the lane of A coming up at 24 m/s was hit
 /// from behind-left, A's centre 1.6 m behind B's: bounded only once A was alongside, B was
-/// already in its way; BENCHMARKS.md).
+/// already in its way; docs/findings.md, *The safety guard, rule by rule*).
 pub(super) const SIDE_CATCH_UP_S: f64 = 3.0;
 /// A catching-up agent whose box overlaps mine sideways by more than this is behind me in my
 /// lane, not in the next one, m.
@@ -131,8 +131,9 @@ pub(crate) fn side_steer_bounds(
         // Gap acceptance: a follower in the next lane that could not stay behind me without
         // braking harder than the least courteous driver asks keeps me out of its lane
         // altogether, however far behind (moving in slowly ahead of a fast one, then braking,
-        // was side-swiped; BENCHMARKS.md) — behind me as my plan slows me down, too (a B
-        // merging 30 m ahead of A, then stopping at the end of the ramp, was run into).
+        // was side-swiped; docs/findings.md, *The safety guard, rule by rule*) — behind me as
+        // my plan slows me down, too (a B merging 30 m ahead of A, then stopping at the end of
+        // the ramp, was run into).
         let closing_gap = closing + speed_mps - gap_speed_mps.min(speed_mps);
         let (clearance, trigger, reach) = match behind_next_lane
             .then(|| refused_gap(me, o, closing_gap))

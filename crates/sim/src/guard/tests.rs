@@ -332,9 +332,10 @@ fn a_follower_that_could_not_stay_behind_keeps_me_out_of_its_lane() {
     assert!(!cut_in_unsafe(1.0, 0.0));
     assert!(cut_in_unsafe(0.0, 2.0));
     // Me at 12 m/s, turned 5° toward the next lane on my left; A there 17 m behind at
-    // 23.3 m/s (a side-swipe of the lane moves; BENCHMARKS.md). In my turned frame A is
-    // 4.9 m to the side; in its lane's, 3.6 m (1.7 m between the boxes): in the next
-    // lane, and too close for its speed, so I may turn no further toward it.
+    // 23.3 m/s (a side-swipe of the lane moves; docs/findings.md, *The safety guard, rule by
+    // rule*). In my turned frame A is 4.9 m to the side; in its lane's, 3.6 m (1.7 m between
+    // the boxes): in the next lane, and too close for its speed, so I may turn no further
+    // toward it.
     let me = AgentState {
         heading_rad: 5f32.to_radians(),
         velocity_x_mps: 12.0 * 5f32.to_radians().cos(),

@@ -1,0 +1,194 @@
+//! A trained SCBG model folder (`generator.json` beside `generator.bpk` and `range.bpk`, and the
+//! predictor it names): its description and loading.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use burn::module::Module;
+use burn::tensor::Device;
+use scbg_courtesy::label::LabelOptions;
+use scbg_generator::{GeneratorConfig, RangePredictor, Scbg, SelectorLoss, Threshold, Variant};
+use scbg_train::Checkpoint;
+use serde::{Deserialize, Serialize};
+
+use crate::ensure_request;
+
+/// The generator folder's description file.
+pub const GENERATOR_JSON: &str = "generator.json";
+/// The generator weights in a generator folder.
+pub const GENERATOR_WEIGHTS: &str = "generator.bpk";
+/// The range-predictor weights in a generator folder.
+pub const RANGE_WEIGHTS: &str = "range.bpk";
+/// `kind` of a generator folder's `generator.json`.
+pub const GENERATOR_KIND: &str = "scbg-generator";
+/// The format of `generator.json` this build reads and writes.
+pub const GENERATOR_FORMAT_VERSION: u32 = 2;
+
+/// Weights of the generator and the range predictor, and what they were trained with
+/// (`generator.json`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct GeneratorCheckpoint {
+    /// Always [`GENERATOR_KIND`]: tells a generator folder from a predictor folder.
+    pub kind: String,
+    /// [`GENERATOR_FORMAT_VERSION`] when written by this build.
+    pub format_version: u32,
+    /// Which of the paper's three training variants.
+    pub variant: Variant,
+    /// The predictor checkpoint folder (its encoder is frozen in the generator; it is J_φ).
+    pub predictor: String,
+    /// The generator's architecture.
+    pub generator: GeneratorConfig,
+    /// Hidden width of the range predictor.
+    pub range_hidden: usize,
+    /// How the training labels were made (futures sampled per pair role, reward, estimator of
+    /// E[r(Y_A) | x], noise scale of the samples): inference labels the same way.
+    pub labels: LabelOptions,
+    /// Whether the labels were the simulator's ψ_true ([`crate::labels::oracle_labelled`];
+    /// synthetic data, an experiment) instead of the predictor's.
+    #[serde(default)]
+    pub oracle_labels: bool,
+    /// With oracle labels: B's sampled futures replaced by this many futures of the synthetic
+    /// world's own B at spread courtesies ([`crate::labels::oracle_labelled`]; 0: none).
+    #[serde(default)]
+    pub world_futures: usize,
+    /// Weight α of the sampled futures' trajectory loss.
+    pub alpha: f32,
+    /// Weight β of the courtesy loss.
+    pub beta: f32,
+    /// How the trajectory loss trained the choice among B's candidates (`blend` for every
+    /// generator trained before the option).
+    #[serde(default)]
+    pub selector_loss: SelectorLoss,
+    /// The high-courtesy threshold of the 50/50 batches as given (`q0.8` or m/s).
+    pub threshold: Threshold,
+    /// That threshold in ψ units: |ψ| above it counted as high courtesy in training.
+    pub threshold_psi: f32,
+    /// Smallest ψ label in training (the *arbitrary* range of the evaluation starts here).
+    pub psi_min: f32,
+    /// Largest ψ label in training.
+    pub psi_max: f32,
+    /// Seed of initialisation, batches and labels.
+    pub seed: u64,
+    /// Mean total / trajectory / courtesy loss per epoch.
+    pub history: Vec<[f32; 3]>,
+    /// Final pinball loss of the range predictor.
+    pub range_loss: f32,
+    /// Training examples (pair roles).
+    pub examples: usize,
+    /// Training time, seconds.
+    pub seconds: f64,
+}
+
+impl GeneratorCheckpoint {
+    /// Reads `dir/generator.json`; an old, foreign or unreadable file is an error that says
+    /// which and what to do.
+    pub fn read(dir: &Path) -> anyhow::Result<Self> {
+        let json = dir.join(GENERATOR_JSON);
+        if !json.is_file() {
+            let hint = if dir.join(scbg_train::checkpoint::CHECKPOINT_FILE).is_file() {
+                " (it is a predictor checkpoint; pass a folder from `scbg train generator`)"
+            } else {
+                ""
+            };
+            return Err(anyhow::Error::new(crate::InvalidRequest(format!(
+                "{} is not a generator folder: no {GENERATOR_JSON}{hint}",
+                dir.display()
+            ))));
+        }
+        let text = std::fs::read_to_string(&json)
+            .with_context(|| format!("reading {}", json.display()))?;
+        let value: serde_json::Value =
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", json.display()))?;
+        let kind = value.get("kind").and_then(|k| k.as_str());
+        let version = value.get("format_version").and_then(|v| v.as_u64());
+        match (kind, version) {
+            (Some(GENERATOR_KIND), Some(v)) if v == u64::from(GENERATOR_FORMAT_VERSION) => {}
+            (Some(GENERATOR_KIND), Some(v)) => anyhow::bail!(
+                "{}: generator format {v}, this build reads format {GENERATOR_FORMAT_VERSION}: retrain with `scbg train generator`",
+                json.display()
+            ),
+            (None, None) if value.get("variant").is_some() => anyhow::bail!(
+                "{}: written by an older scbg (before format versions): retrain with `scbg train generator`",
+                json.display()
+            ),
+            _ => anyhow::bail!(
+                "{}: not a scbg generator description (kind {kind:?})",
+                json.display()
+            ),
+        }
+        let checkpoint: Self =
+            serde_json::from_value(value).with_context(|| format!("parsing {}", json.display()))?;
+        checkpoint
+            .labels
+            .lane_move_room
+            .checked()
+            .map_err(|e| anyhow::anyhow!("{}: labels.lane_move_room: {e}", json.display()))?;
+        Ok(checkpoint)
+    }
+
+    /// Writes `dir/generator.json` atomically.
+    pub fn write(&self, dir: &Path) -> anyhow::Result<()> {
+        scbg_base::atomic::write_json(dir.join(GENERATOR_JSON), self)?;
+        Ok(())
+    }
+}
+
+/// A trained SCBG model folder, loaded on the plain device.
+#[derive(Debug)]
+pub struct LoadedScbg {
+    /// Predictor, generator and range predictor with their feature settings.
+    pub scbg: Scbg,
+    /// The generator folder's description.
+    pub checkpoint: GeneratorCheckpoint,
+    /// The predictor's description.
+    pub predictor: Checkpoint,
+    /// The device everything is on.
+    pub device: Device,
+}
+
+/// Loads `dir` (from `scbg train generator`) and its predictor (`predictor` overrides the
+/// folder recorded in generator.json).
+pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedScbg> {
+    let checkpoint = GeneratorCheckpoint::read(dir)?;
+    let predictor_dir =
+        predictor.map_or_else(|| PathBuf::from(&checkpoint.predictor), Path::to_path_buf);
+    let ckpt = Checkpoint::read(&predictor_dir)
+        .with_context(|| format!("predictor of {} (override with --predictor)", dir.display()))?;
+    let modes = checkpoint.generator.modes;
+    ensure_request!(
+        modes == 0 || modes == ckpt.model_config.num_modes,
+        "{}: the generator chooses among {modes} modes of B, but the predictor {} predicts {}",
+        dir.display(),
+        predictor_dir.display(),
+        ckpt.model_config.num_modes
+    );
+    let device = scbg_model::device::device(&ckpt.train_config.backend)?;
+    let model = ckpt.load_model(&predictor_dir, &device)?;
+    let load = |name: &str| dir.join(name);
+    let generator = checkpoint
+        .generator
+        .init(&device)
+        .try_load_file(load(GENERATOR_WEIGHTS))
+        .map_err(|e| anyhow::anyhow!("{}: {e:?}", load(GENERATOR_WEIGHTS).display()))?;
+    let range = RangePredictor::init(
+        ckpt.model_config.embedding_width() + checkpoint.generator.a_context_width,
+        checkpoint.range_hidden,
+        &device,
+    )
+    .try_load_file(load(RANGE_WEIGHTS))
+    .map_err(|e| anyhow::anyhow!("{}: {e:?}", load(RANGE_WEIGHTS).display()))?;
+    Ok(LoadedScbg {
+        scbg: Scbg {
+            predictor: model,
+            generator,
+            range,
+            stats: ckpt.stats.clone(),
+            features: ckpt.train_config.feature_config(),
+            labels: checkpoint.labels,
+            policy: scbg_generator::Policy::Generator,
+        },
+        checkpoint,
+        predictor: ckpt,
+        device,
+    })
+}

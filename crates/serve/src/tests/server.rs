@@ -1,0 +1,237 @@
+//! Closed-loop sessions, a real TCP server that shuts down gracefully, the data folder's fence,
+//! and the web viewer in a headless browser.
+
+use super::*;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn closed_loop_sessions() {
+    let app = router(state(None, 16 << 20));
+    let (dir, _, t) = fixture();
+    let sid = uploaded(&app).await;
+    let log = scbg::data::read_scenes(&dir.path().join("data/synth-00000.tfrecord"))
+        .unwrap()
+        .into_iter()
+        .find(|s| s.scenario_id == sid)
+        .unwrap();
+    let ia = log.track_index(t.a_id).unwrap();
+    let (status, v) = json_call(
+        &app,
+        "POST",
+        "/v1/sessions",
+        json!({"scenario_id": sid, "ego": t.a_id, "controlled": [{"id": t.b_id, "quantile": 0.9}]}),
+    )
+    .await;
+    assert_eq!(status, StatusCode::OK, "{v}");
+    let id = v["session_id"].as_str().unwrap().to_string();
+    assert_eq!(v["step"], 10);
+    let step_uri = format!("/v1/sessions/{id}/step");
+    // The ego is driven from outside: a step without its state is refused, nothing moves.
+    let (status, e) = json_call(&app, "POST", &step_uri, json!({})).await;
+    assert_error(status, &e, StatusCode::BAD_REQUEST, "ego");
+    for step in 11..=15 {
+        let s = &log.tracks[ia].states[step];
+        let (status, v) = json_call(
+            &app,
+            "POST",
+            &step_uri,
+            json!({"ego": {"x_m": s.x_m, "y_m": s.y_m, "heading_rad": s.heading_rad,
+                           "velocity_x_mps": s.velocity_x_mps, "velocity_y_mps": s.velocity_y_mps}}),
+        )
+        .await;
+        assert_eq!(status, StatusCode::OK, "{v}");
+        assert_eq!(v["step"], step);
+        let ego = v["agents"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|a| a["id"] == t.a_id)
+            .unwrap();
+        assert!((ego["x_m"].as_f64().unwrap() - s.x_m).abs() < 1e-9);
+    }
+    // Bad session requests.
+    for (body, want, needle) in [
+        (
+            json!({"scenario_id": sid, "controlled": [{"id": 4242, "quantile": 0.5}]}),
+            StatusCode::BAD_REQUEST,
+            "no agent with id 4242",
+        ),
+        (
+            json!({"scenario_id": sid, "controlled": [{"id": t.b_id, "quantile": 2.0}]}),
+            StatusCode::BAD_REQUEST,
+            "quantile 2",
+        ),
+        (
+            json!({"scenario_id": sid, "controlled": [{"id": t.b_id, "quantile": 0.5}], "ego_mode": "flying"}),
+            StatusCode::BAD_REQUEST,
+            "ego_mode",
+        ),
+        (
+            json!({"scenario_id": sid, "controlled": [{"id": t.b_id}]}),
+            StatusCode::BAD_REQUEST,
+            "quantile",
+        ),
+    ] {
+        let (status, v) = json_call(&app, "POST", "/v1/sessions", body).await;
+        assert_error(status, &v, want, needle);
+    }
+    let (status, v) = json_call(&app, "DELETE", &format!("/v1/sessions/{id}"), Value::Null).await;
+    assert_eq!(status, StatusCode::NO_CONTENT, "{v}");
+    let (status, v) = json_call(&app, "POST", &step_uri, json!({})).await;
+    assert_error(status, &v, StatusCode::NOT_FOUND, "no session");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tcp_server_finishes_in_flight_requests_on_shutdown() {
+    use http_body_util::Full;
+    use hyper::body::Bytes;
+    use hyper_util::client::legacy::Client;
+    use hyper_util::rt::TokioExecutor;
+    let (_, bytes, t) = fixture();
+    let st = state(None, 16 << 20);
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let held = st.clone();
+    let server = tokio::spawn(serve(st, listener, async move {
+        let _ = stop_rx.await;
+    }));
+    let client: Client<_, Full<Bytes>> = Client::builder(TokioExecutor::new()).build_http();
+    let post = |path: &str, ct: &'static str, body: Vec<u8>| {
+        hyper::Request::post(format!("http://{addr}{path}"))
+            .header("content-type", ct)
+            .body(Full::new(Bytes::from(body)))
+            .unwrap()
+    };
+    let up = client
+        .request(post(
+            "/v1/scenarios",
+            "application/octet-stream",
+            bytes.clone(),
+        ))
+        .await
+        .unwrap();
+    assert!(up.status().is_success());
+    // Several generate requests in flight (every worker held, so they wait inside the
+    // server), then shutdown, then the workers free: every one is answered.
+    let permits = held.workers.clone().acquire_many_owned(2).await.unwrap();
+    let mut pending = Vec::new();
+    for q in [0.1, 0.3, 0.5, 0.7, 0.9] {
+        let body = json!({"scenario_id": t.scenario_id, "a": t.a_id, "b": t.b_id, "quantile": q});
+        pending.push(tokio::spawn(client.request(post(
+            "/v1/generate",
+            "application/json",
+            body.to_string().into_bytes(),
+        ))));
+    }
+    while held
+        .metrics
+        .in_flight
+        .load(std::sync::atomic::Ordering::Relaxed)
+        < 5
+    {
+        tokio::time::sleep(std::time::Duration::from_millis(1)).await;
+    }
+    stop_tx.send(()).unwrap();
+    tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    drop(permits);
+    for p in pending {
+        let r = p.await.unwrap().unwrap();
+        assert_eq!(r.status(), StatusCode::OK);
+    }
+    server.await.unwrap().unwrap();
+    assert!(
+        tokio::net::TcpStream::connect(addr).await.is_err(),
+        "still listening"
+    );
+}
+
+#[test]
+fn scenario_paths_are_checked_before_reading() {
+    // The fence does not depend on the file existing: `..` is refused outright.
+    let rel = Path::new("a/../../b");
+    assert!(
+        rel.components()
+            .any(|c| !matches!(c, std::path::Component::Normal(_)))
+    );
+}
+
+/// The browser to drive (`SCBG_CHROMIUM`, else chromium on the PATH); `None` prints why. Under
+/// CI (`CI` set) a missing browser is a failure, never a silent pass.
+fn chromium() -> Option<std::path::PathBuf> {
+    if let Some(p) = std::env::var_os("SCBG_CHROMIUM") {
+        return Some(p.into());
+    }
+    for name in ["chromium", "chromium-browser", "google-chrome"] {
+        if let Ok(out) = std::process::Command::new("which").arg(name).output()
+            && out.status.success()
+        {
+            let path = String::from_utf8_lossy(&out.stdout).trim().to_string();
+            if !path.is_empty() {
+                return Some(path.into());
+            }
+        }
+    }
+    assert!(
+        std::env::var_os("CI").is_none(),
+        "no chromium in CI (.ci/run installs Debian's chromium; or set SCBG_CHROMIUM)"
+    );
+    eprintln!("SKIPPED: no chromium found (install Debian's chromium or set SCBG_CHROMIUM)");
+    None
+}
+
+/// The web viewer in a real headless browser: the page loads a scenario from the data folder,
+/// the slider moves from 0.1 to 0.9 and the drawn trajectory changes, and a closed-loop
+/// session plays three steps.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn viewer_in_a_headless_browser() {
+    let Some(browser) = chromium() else {
+        return;
+    };
+    let st = state(None, 16 << 20);
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let server = tokio::spawn(serve(st, listener, async move {
+        let _ = stop_rx.await;
+    }));
+    let profile = tempfile::tempdir().unwrap();
+    let url = format!("http://{addr}/?selftest=1");
+    let out = tokio::task::spawn_blocking(move || {
+        std::process::Command::new(browser)
+            .args([
+                "--headless",
+                "--no-sandbox",
+                "--disable-gpu",
+                "--disable-dev-shm-usage",
+                "--window-size=1200,800",
+                "--virtual-time-budget=20000",
+                &format!("--user-data-dir={}", profile.path().display()),
+                "--dump-dom",
+                &url,
+            ])
+            .output()
+            .unwrap()
+    })
+    .await
+    .unwrap();
+    stop_tx.send(()).unwrap();
+    server.await.unwrap().unwrap();
+    let dom = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        dom.contains("data-result=\"changed\""),
+        "the viewer's self-test did not see the trajectory change:\n{}\nstderr: {}",
+        dom.lines()
+            .filter(|l| l.contains("selftest") || l.contains("error"))
+            .collect::<Vec<_>>()
+            .join("\n"),
+        String::from_utf8_lossy(&out.stderr)
+            .lines()
+            .take(20)
+            .collect::<Vec<_>>()
+            .join("\n")
+    );
+    assert!(
+        dom.contains("data-steps=\"13\""),
+        "the closed loop did not step"
+    );
+}
