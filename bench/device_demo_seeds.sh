@@ -1,24 +1,24 @@
 #!/bin/bash
-# Issue 11's chunk question on a device machine's 16 CPU cores (no GPU used): eight `scbg demo`
-# runs side by side, two threads each -- data seeds 0-3, each with one graph per training step
-# (`--data-parallel-chunks 1`) and with two data-parallel chunks (the demo's default). Paired by
-# seed, they say whether two chunks cost label fidelity or control (BENCHMARKS.md, "Two
-# data-parallel chunks, paired over four data seeds"). Carries target/devcarry/scbg.xz (a stripped
-# `cargo build --release -p scbg-cli`, xz). Stops at a deadline and keeps what each run wrote.
-# On the H100 machine's Xeon, eight runs side by side took ~2x as long per epoch as one demo on
-# a 2-core EPYC: a 600 s call reaches epoch ~20 of 30 (BENCHMARKS.md).
+# Eight `scbg demo` runs side by side on a device machine's 16 CPU cores (no GPU used), two
+# threads each: data seeds 0-3, each with one graph per training step (`--data-parallel-chunks 1`)
+# and with two data-parallel chunks (the demo's default). Paired by seed, they say whether two
+# chunks cost label fidelity or control (docs/findings.md, "Data-parallel chunks"). Carries
+# target/devcarry/scbg.xz (a stripped `cargo build --release -p scbg-cli`, xz). Stops at a deadline
+# ($DEADLINE seconds) and keeps what each run wrote. On the H100 machine's Xeon, eight runs side by
+# side took ~2x as long per epoch as one demo on a 2-core EPYC: a 600 s call reaches epoch ~20.
 set -u
-LOG=${OUT:-/tmp}/log.txt
+W=$(mktemp -d)
+LOG=${OUT:-$W}/log.txt
 exec > >(tee -a "$LOG") 2>&1
 T0=$(date +%s)
 DEADLINE=${DEADLINE:-560}
 lscpu | grep -E "^Model name|^CPU\(s\)"
-mkdir -p /tmp/bin && xz -dc target/devcarry/scbg.xz > /tmp/bin/scbg && chmod +x /tmp/bin/scbg
+mkdir -p $W/bin && xz -dc target/devcarry/scbg.xz > $W/bin/scbg && chmod +x $W/bin/scbg
 export SCBG_REAL_DATA=/nonexistent
-D=/tmp/d; mkdir -p $D
+D=$W/d; mkdir -p $D
 for s in 0 1 2 3; do
   for c in 1 2; do
-    /tmp/bin/scbg --threads 2 demo --out $D/s${s}_c$c --seed $s --data-parallel-chunks $c \
+    $W/bin/scbg --threads 2 demo --out $D/s${s}_c$c --seed $s --data-parallel-chunks $c \
       > $D/s${s}_c$c.log 2>&1 &
   done
 done

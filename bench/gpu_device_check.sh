@@ -1,6 +1,6 @@
 #!/bin/bash
-# Issue 14's device checks, as run on an H100 machine in the twentieth session (BENCHMARKS.md,
-# "On an H100 machine"). Not part of the test suite: it needs an NVIDIA GPU with its Vulkan
+# The GPU and many-core checks of BENCHMARKS.md ("Predictor training", "On the H100 machine").
+# Not part of the test suite: it needs an NVIDIA GPU with its Vulkan
 # driver, PyTorch with CUDA, and binaries built beforehand on the build machine:
 #
 #   cargo build --release -p scbg-cli --features vulkan            # -> .dev/scbg-vk.xz
@@ -11,8 +11,10 @@
 #
 # Where the machine lacks the Vulkan loader, unpack libvulkan1 (and the GL libraries) first.
 # Sections run in priority order, each under its own time limit; the log goes to $OUT/log.txt.
+# Scratch files go to a fresh temporary folder ($W).
 set -u
-LOG=${OUT:-/tmp}/log.txt
+W=$(mktemp -d)
+LOG=${OUT:-$W}/log.txt
 exec > >(tee -a "$LOG") 2>&1
 T0=$(date +%s)
 sec() { echo; echo "=== [$(( $(date +%s) - T0 )) s] $*"; }
@@ -20,21 +22,21 @@ sec env
 nvidia-smi --query-gpu=name,driver_version,memory.total,clocks.max.sm --format=csv
 lscpu | grep -E "^Model name|^CPU\(s\)|^Thread|^Core|^Socket|^L3"
 grep -o -w -E "avx2|avx512f|avx512_bf16|amx_tile|amx_bf16" /proc/cpuinfo | sort | uniq -c
-mkdir -p /tmp/bin
-for b in scbg-vk gpu-test scbg-vkf; do [ -f .dev/$b.xz ] && xz -dc .dev/$b.xz > /tmp/bin/$b && chmod +x /tmp/bin/$b; done
-ls -la /tmp/bin
-S=/tmp/bin/scbg-vk; V=$S; F=/tmp/bin/scbg-vkf
+mkdir -p $W/bin
+for b in scbg-vk gpu-test scbg-vkf; do [ -f .dev/$b.xz ] && xz -dc .dev/$b.xz > $W/bin/$b && chmod +x $W/bin/$b; done
+ls -la $W/bin
+S=$W/bin/scbg-vk; V=$S; F=$W/bin/scbg-vkf
 export SCBG_REAL_DATA=/nonexistent
 PY=python3
 
 sec "gpu test (forward + backward on vulkan vs flex)"
 ls /usr/share/vulkan/icd.d /etc/vulkan/icd.d /usr/local/nvidia/share/vulkan/icd.d 2>&1 | head
-timeout 90 /tmp/bin/gpu-test --test-threads 1 > /tmp/gt.txt 2>&1; cat /tmp/gt.txt | tail -12
-if grep -q "no GPU answers" /tmp/gt.txt; then
+timeout 90 $W/bin/gpu-test --test-threads 1 > $W/gt.txt 2>&1; cat $W/gt.txt | tail -12
+if grep -q "no GPU answers" $W/gt.txt; then
   echo "retrying with the NVIDIA ICD named explicitly"
   export VK_DRIVER_FILES=$(ls /usr/local/nvidia/share/vulkan/icd.d/*.json /usr/share/vulkan/icd.d/nvidia*.json /etc/vulkan/icd.d/nvidia*.json 2>/dev/null | head -1)
   echo "VK_DRIVER_FILES=$VK_DRIVER_FILES"
-  timeout 90 /tmp/bin/gpu-test --test-threads 1 2>&1 | tail -12
+  timeout 90 $W/bin/gpu-test --test-threads 1 2>&1 | tail -12
 fi
 
 sec "scbg vulkan, paper, batch 32 and 256"
@@ -54,7 +56,7 @@ done
 RAYON_NUM_THREADS=16 timeout 60 $S bench train --backend flex --presets paper --steps 4 --chunks 8
 
 sec "demo predictor epoch: data"
-D=/tmp/d; mkdir -p $D
+D=$W/d; mkdir -p $D
 timeout 60 $S synth --scenarios 1500 --counterfactuals 3 --out $D/synth > /dev/null
 timeout 60 $S data prepare --input $D/synth --out $D/cache --files-per-shard 4 > /dev/null
 timeout 60 $S data prepare --input $D/synth/counterfactual --out $D/cache_cf --files-per-shard 4 > /dev/null
@@ -68,7 +70,7 @@ for run in flex:1 flex:8 flex:16 vulkan:1; do
 done
 
 sec "vulkan + fusion + autotune, batch 32"
-timeout 110 $F bench train --backend vulkan --presets cpu-small,paper --batch 32 --steps 10 --warmup 5 | tee /tmp/f32.txt
+timeout 110 $F bench train --backend vulkan --presets cpu-small,paper --batch 32 --steps 10 --warmup 5 | tee $W/f32.txt
 sec "vulkan + fusion + autotune, paper, batch 256"
 timeout 90 $F bench train --backend vulkan --presets paper --batch 256 --steps 10 --warmup 5
 
