@@ -43,12 +43,12 @@ pub struct GeneratorCheckpoint {
     /// How the training labels were made (futures sampled per pair role, reward, estimator of
     /// E[r(Y_A) | x], noise scale of the samples): inference labels the same way.
     pub labels: LabelOptions,
-    /// Whether the labels were the simulator's ψ_true ([`crate::labels::oracle_labelled`];
+    /// Whether the labels were the simulator's ψ_true (the lab's oracle labelling;
     /// synthetic data, an experiment) instead of the predictor's.
     #[serde(default)]
     pub oracle_labels: bool,
     /// With oracle labels: B's sampled futures replaced by this many futures of the synthetic
-    /// world's own B at spread courtesies ([`crate::labels::oracle_labelled`]; 0: none).
+    /// world's own B at spread courtesies (the lab's oracle labelling; 0: none).
     #[serde(default)]
     pub world_futures: usize,
     /// Weight α of the sampled futures' trajectory loss.
