@@ -128,7 +128,7 @@ impl Session {
         &self.controlled
     }
 
-    /// The simulator's settings this session runs with.
+    /// The simulator's settings it runs with.
     pub fn config(&self) -> &SimConfig {
         &self.config
     }
