@@ -189,8 +189,6 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 &a.data,
                 &a.out,
                 &settings,
-                false,
-                None,
                 progress,
             )?;
         }

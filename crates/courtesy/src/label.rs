@@ -151,17 +151,16 @@ pub fn label_role(
         samples,
         reward,
         marginal,
-        sample_noise,
         ..
     } = options;
     let members: Vec<(&AgentSample, f32)> = std::iter::once(a)
         .chain(others.iter().map(|m| (&m.sample, m.weight)))
         .collect();
     let t = a.0.condition_future_valid.len();
-    let mut sampled = b_mixture.sample(samples, sample_noise, rng);
+    let mut sampled = b_mixture.sample(samples, 1.0, rng);
     // The baseline's futures are drawn after the labelled ones either way (the same draws);
     // kept, they are labelled futures like the first `samples` (and `baseline` is left empty).
-    let mut baseline = b_mixture.sample(options.baseline_futures(), sample_noise, rng);
+    let mut baseline = b_mixture.sample(options.baseline_futures(), 1.0, rng);
     if options.keep_baseline {
         sampled.append(&mut baseline);
     }

@@ -1,8 +1,7 @@
-//! B's marginal modes as the choices of a mode-selecting generator (with their slowed copies
-//! and lane moves), and the courtesy J_φ gives each of them.
+//! B's marginal modes as the generator's choices (with their slowed copies), and the courtesy
+//! J_φ gives each of them.
 
 use burn::tensor::Device;
-use scbg_features::lane_path_points;
 use scbg_model::Multipath;
 
 use crate::audience::{EncodedA, audience_courtesy_with};
@@ -13,7 +12,7 @@ use crate::range::stored_embeddings;
 use crate::tensors::to_vec;
 
 /// B's marginal modes decoded by the frozen predictor from B's embeddings (`[n, e]`, the
-/// predictor's own embedding width, without A's context), for a mode-selecting generator.
+/// predictor's own embedding width), for the generator.
 pub fn b_modes_of(predictor: &Multipath, b_embedding: burn::tensor::Tensor<2>) -> BModes {
     let out = predictor.decode_means(b_embedding);
     let mixture_modes = out.logits.dims()[1];
@@ -25,13 +24,9 @@ pub fn b_modes_of(predictor: &Multipath, b_embedding: burn::tensor::Tensor<2>) -
     }
 }
 
-/// [`b_modes_of`] the examples' stored B embeddings (their A context, if any, left out).
+/// [`b_modes_of`] the examples' stored B embeddings.
 pub fn b_modes(predictor: &Multipath, examples: &[&Example], device: &Device) -> BModes {
-    let b_width = examples.first().map_or(0, |x| x.b_embedding.len());
-    b_modes_of(
-        predictor,
-        stored_embeddings(examples, device).narrow(1, 0, b_width),
-    )
+    b_modes_of(predictor, stored_embeddings(examples, device))
 }
 
 /// Each of B's modes' courtesy toward the example's audience: `ψ_k = E[r | x, μ_k] −
@@ -76,16 +71,15 @@ fn mode_courtesy_with(
     (e_cond - mean).detach()
 }
 
-/// B's modes for `generator` (`None` when it does not select modes), with each mode's
-/// courtesy when it scores them: the examples' stored [`Example::mode_psi`] when every one
-/// has it, else [`mode_courtesy`] computed here.
+/// B's candidates for `generator` with each one's courtesy: the examples' stored
+/// [`Example::mode_psi`] when every one has it, else [`mode_courtesy`] computed here.
 pub fn b_modes_for(
     generator: &Generator,
     predictor: &Multipath,
     examples: &[&Example],
     reward: scbg_courtesy::Reward,
     device: &Device,
-) -> Option<BModes> {
+) -> BModes {
     b_modes_with(generator, predictor, examples, reward, None, device)
 }
 
@@ -98,59 +92,44 @@ pub(crate) fn b_modes_with(
     reward: scbg_courtesy::Reward,
     a_encoded: Option<EncodedA>,
     device: &Device,
-) -> Option<BModes> {
-    if !generator.selects_modes() {
-        return None;
-    }
-    let mut modes =
-        generator.candidates_of(b_modes(predictor, examples, device), &lane_paths(examples));
-    if generator.scores_mode_courtesy() {
-        let [n, k, _, _] = modes.xy.dims();
-        let stored = examples.iter().all(|e| e.mode_psi.len() == k);
-        modes.psi = Some(if stored {
-            burn::tensor::Tensor::from_data(
-                burn::tensor::TensorData::new(
-                    examples
-                        .iter()
-                        .flat_map(|e| e.mode_psi.iter().copied())
-                        .collect(),
-                    [n, k],
-                ),
-                device,
-            )
-        } else {
-            mode_courtesy_with(predictor, examples, &modes, reward, a_encoded, device)
-        });
-    }
-    Some(modes)
-}
-
-/// B's lane path in B's frame for each example ([`lane_path_points`]).
-fn lane_paths(examples: &[&Example]) -> Vec<Vec<[f32; 2]>> {
-    examples.iter().map(|e| lane_path_points(&e.b)).collect()
+) -> BModes {
+    let mut modes = generator.candidates_of(b_modes(predictor, examples, device));
+    let [n, k, _, _] = modes.xy.dims();
+    let stored = examples.iter().all(|e| e.mode_psi.len() == k);
+    modes.psi = Some(if stored {
+        burn::tensor::Tensor::from_data(
+            burn::tensor::TensorData::new(
+                examples
+                    .iter()
+                    .flat_map(|e| e.mode_psi.iter().copied())
+                    .collect(),
+                [n, k],
+            ),
+            device,
+        )
+    } else {
+        mode_courtesy_with(predictor, examples, &modes, reward, a_encoded, device)
+    });
+    modes
 }
 
 /// Stores every example's [`Example::mode_psi`] (in chunks of 64 pair roles), so that
-/// training does not recompute J_φ of B's modes at every step: of the modes, their copies
-/// slowed by `slowdowns` ([`crate::GeneratorConfig::mode_slowdowns`]; empty: none) and their
-/// lane moves completed within `lane_move_steps` ([`crate::GeneratorConfig::lane_move_steps`];
-/// 0: none), the generator's choices in [`crate::Generator::candidates_of`]'s order. Run it
-/// on a plain device.
+/// training does not recompute J_φ of B's modes at every step: of the modes and their copies
+/// slowed by `slowdowns` ([`crate::GeneratorConfig::mode_slowdowns`]; empty: none), the
+/// generator's choices in [`crate::Generator::candidates_of`]'s order. Run it on a plain
+/// device.
 pub fn fill_mode_courtesy(
     predictor: &Multipath,
     examples: &mut [Example],
     reward: scbg_courtesy::Reward,
     slowdowns: &[f32],
-    lane_move_steps: usize,
     device: &Device,
 ) {
     for chunk in examples.chunks_mut(64) {
         let refs: Vec<&Example> = chunk.iter().collect();
         let modes = b_modes(predictor, &refs, device);
         let warp = slowdown_warp(slowdowns, modes.xy.dims()[2], device);
-        let modes = modes
-            .with_slowdowns(warp.as_ref())
-            .with_lane_moves(&lane_paths(&refs), lane_move_steps);
+        let modes = modes.with_slowdowns(warp.as_ref());
         let k = modes.log_prob.dims()[1];
         let psi = to_vec(mode_courtesy(predictor, &refs, &modes, reward, device));
         for (e, psi) in chunk.iter_mut().zip(psi.chunks_exact(k)) {
@@ -159,7 +138,7 @@ pub fn fill_mode_courtesy(
     }
 }
 
-/// One choice of a mode-selecting generator: a future of B in B's frame and its courtesy.
+/// One choice of the generator: a future of B in B's frame and its courtesy.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ScoredCandidate {
     /// `[T]` positions in B's frame (metres), the steps after the current one.
@@ -168,24 +147,20 @@ pub struct ScoredCandidate {
     pub psi: f32,
 }
 
-/// Every choice `generator` has for each example — B's modes, their slowed copies and lane
-/// moves, as [`b_modes_for`] gives them — with J_φ's courtesy of each (the examples' stored
-/// [`Example::mode_psi`] when there is one, else measured here; in chunks of 64 examples);
-/// `None` for a generator that does not select modes. What a selector among them could
-/// reach is what the generator's mode choice can.
+/// Every choice `generator` has for each example — B's modes and their slowed copies, as
+/// [`b_modes_for`] gives them — with J_φ's courtesy of each (the examples' stored
+/// [`Example::mode_psi`] when there is one, else measured here; in chunks of 64 examples).
+/// What a selector among them could reach is what the generator's choice can.
 pub fn scored_candidates(
     generator: &Generator,
     predictor: &Multipath,
     examples: &[&Example],
     reward: scbg_courtesy::Reward,
     device: &Device,
-) -> Option<Vec<Vec<ScoredCandidate>>> {
-    if !generator.selects_modes() {
-        return None;
-    }
+) -> Vec<Vec<ScoredCandidate>> {
     let mut out = Vec::with_capacity(examples.len());
     for chunk in examples.chunks(64) {
-        let mut modes = b_modes_for(generator, predictor, chunk, reward, device)?;
+        let mut modes = b_modes_for(generator, predictor, chunk, reward, device);
         let [_, k, t, _] = modes.xy.dims();
         let psi = match modes.psi.take() {
             Some(psi) => psi,
@@ -209,5 +184,5 @@ pub fn scored_candidates(
             );
         }
     }
-    Some(out)
+    out
 }

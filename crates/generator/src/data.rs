@@ -8,7 +8,6 @@ use scbg_courtesy::label::{
 };
 use scbg_features::{AgentSample, FeatureConfig, FeatureStats, PreparedScene};
 use scbg_model::Multipath;
-use scbg_scene::Pose2;
 
 /// One pair role with its labelled futures.
 #[derive(Debug, Clone)]
@@ -37,10 +36,6 @@ pub struct Example {
     /// The members of B's audience besides A: each one's standardised sample (conditioned on
     /// B's logged future) and B's frame in its frame (as [`Self::a_from_b`]).
     pub others: Vec<(AgentSample, [f32; 3])>,
-    /// A as B sees it ([`a_context`]); empty for a model that is not told who A is (artefacts
-    /// trained before it was). The generator and range predictor read
-    /// `b_embedding ‖ a_context` ([`crate::stored_embeddings`]).
-    pub a_context: Vec<f32>,
     /// `[K]` the courtesy ψ_k of each of B's marginal modes ([`mode_courtesy`](crate::mode_courtesy)), stored
     /// by [`fill_mode_courtesy`](crate::fill_mode_courtesy) for a generator that scores them;
     /// empty when not computed ([`b_modes_for`](crate::b_modes_for) then computes it on the fly).
@@ -83,7 +78,6 @@ impl Example {
             logged_valid: a.condition_future_valid.clone(),
             a_from_b: a_from_b(&a, &b),
             b_embedding,
-            a_context: a_context_of(&a, &b).to_vec(),
             mode_psi: Vec::new(),
             futures_b,
             psi: labels.psi,
@@ -142,42 +136,6 @@ pub fn a_from_b(a: &AgentSample, b: &AgentSample) -> [f32; 3] {
         tx as f32,
         ty as f32,
     ]
-}
-
-/// Values of [`a_context`].
-pub const A_CONTEXT_WIDTH: usize = 7;
-
-/// A as B sees it at the current step — who "the other" of the courtesy is, which B's own
-/// embedding does not say (A is one of its other agents, unmarked): A's position in B's frame
-/// (÷ 50 m), the heading difference (cos, sin), A's velocity in B's frame (÷ 20 m/s) and the
-/// distance (÷ 50 m).
-pub fn a_context(
-    a_pose: Pose2,
-    a_velocity_world_mps: [f64; 2],
-    b_pose: Pose2,
-) -> [f32; A_CONTEXT_WIDTH] {
-    let (x, y) = b_pose.agent_from_world(a_pose.x_m, a_pose.y_m);
-    let dh = a_pose.heading_rad - b_pose.heading_rad;
-    let (s, c) = b_pose.heading_rad.sin_cos();
-    let [vx, vy] = a_velocity_world_mps;
-    let (vbx, vby) = (c * vx + s * vy, -s * vx + c * vy);
-    [
-        (x / 50.0) as f32,
-        (y / 50.0) as f32,
-        dh.cos() as f32,
-        dh.sin() as f32,
-        (vbx / 20.0) as f32,
-        (vby / 20.0) as f32,
-        (x.hypot(y) / 50.0) as f32,
-    ]
-}
-
-/// [`a_context`] of two samples (their frames and A's current velocity).
-pub fn a_context_of(a: &AgentSample, b: &AgentSample) -> [f32; A_CONTEXT_WIDTH] {
-    let pa = a.world_from_agent;
-    let [vx, vy] = a.current_velocity_mps.map(f64::from);
-    let (s, c) = pa.heading_rad.sin_cos();
-    a_context(pa, [c * vx - s * vy, s * vx + c * vy], b.world_from_agent)
 }
 
 /// The frozen predictor's scene embedding of a (standardised) sample in marginal mode.

@@ -63,8 +63,7 @@ pub fn generate_and_measure(
             .flat_map(|j| (0..n).map(move |i| psi[c * chunk + i][j]))
             .collect();
         let embedding = repeat_rows(stored_embeddings(exs, device), k);
-        let modes =
-            b_modes_for(generator, predictor, exs, reward, device).map(|m| m.repeat_rows(k));
+        let modes = b_modes_for(generator, predictor, exs, reward, device).repeat_rows(k);
         let pred = generator.forward(
             embedding,
             Tensor::from_data(TensorData::new(psi_rows, [rows]), device),

@@ -5,10 +5,13 @@
 //! variants ([`Variant`]).
 //!
 //! The scene encoder is the predictor's, frozen: the embedding of B (marginal mode) is computed
-//! once per example on a plain device and stored, so only the decoder learns. The decoder has
-//! no anchors: an MLP of `[embedding ‖ MLP(ψ)]` gives one displacement per knot (every 5th of
-//! the 80 steps by default), summed into knot positions in B's frame and interpolated linearly
-//! to every step.
+//! once per example on a plain device and stored, so only the decoder learns. The generator
+//! chooses among B's predicted modes and their slowed copies, each scored by its own courtesy
+//! under J_φ, and adds a displacement: an MLP of `[embedding ‖ MLP(ψ)]` gives one per knot
+//! (every 5th of the 80 steps by default), interpolated linearly to every step.
+//!
+//! Inference has one path ([`Scbg::plan_basis`] → [`Scbg::plan_from`]); [`Scbg::generate`]
+//! is that choice measured by J_φ.
 //!
 //! **Architecture invariant:** no files or CLI; the predictor is passed in and never updated.
 
@@ -19,6 +22,7 @@ mod candidates;
 mod courtesy;
 mod data;
 pub mod eval;
+mod generate;
 mod infer;
 mod model;
 mod modes;
@@ -33,12 +37,12 @@ pub use candidates::{
     scored_candidates,
 };
 pub use courtesy::{Courtesy, Policy};
-pub use data::{
-    A_CONTEXT_WIDTH, Example, a_context, a_context_of, a_from_b, build_examples, marginal_embedding,
-};
-pub use infer::{CourtesyOf, GenerateError, Generated, PairContext, Scbg};
+pub use data::{Example, a_from_b, build_examples, marginal_embedding};
+pub use generate::{CourtesyOf, Generated, PairContext};
+pub use infer::{GenerateError, Scbg};
 pub use model::{
-    CandidateFutures, Generator, GeneratorConfig, RELATIVE_COURTESY_FLOOR, relative_courtesy,
+    CandidateFutures, DEFAULT_MODE_SLOWDOWNS, Generator, GeneratorConfig, RELATIVE_COURTESY_FLOOR,
+    relative_courtesy,
 };
 pub use modes::{BModes, MAX_SPEEDUP, slowdown_warp};
 pub use plan::PlanBasis;
@@ -46,10 +50,9 @@ pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,
     stored_embeddings,
 };
-pub use scbg_features::{LANE_MOVE_M, lane_move, lane_path_points};
 pub use train::{
-    SelectorLoss, StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss,
-    threshold_value, train_step,
+    StepLosses, StepOptions, Threshold, Variant, balanced_batches, step_loss, threshold_value,
+    train_step,
 };
 
 #[cfg(test)]

@@ -1,10 +1,8 @@
-//! B's predicted modes as the choices of a mode-selecting generator, their slowed copies and
-//! their lane moves completed ([`scbg_features::lane_move`]).
+//! B's predicted modes as the generator's choices, and their slowed copies.
 
 use burn::tensor::{Device, Tensor};
-use scbg_features::lane_move;
 
-/// B's predicted marginal modes, the choices of a mode-selecting generator
+/// B's predicted marginal modes, the generator's choices
 /// ([`crate::GeneratorConfig::modes`]); see [`crate::b_modes`].
 #[derive(Debug, Clone)]
 pub struct BModes {
@@ -12,8 +10,8 @@ pub struct BModes {
     pub xy: Tensor<4>,
     /// `[batch, K]` log-probabilities of the modes.
     pub log_prob: Tensor<2>,
-    /// `[batch, K]` each mode's courtesy ψ_k ([`crate::mode_courtesy`]); required by a
-    /// generator that scores them ([`crate::Generator::scores_mode_courtesy`]).
+    /// `[batch, K]` each mode's courtesy ψ_k ([`crate::mode_courtesy`]); required by
+    /// [`crate::Generator::forward`].
     pub psi: Option<Tensor<2>>,
     /// The leading modes that form the predicted mixture (their probabilities sum to 1);
     /// the rest are copies derived from them ([`BModes::with_slowdowns`]).
@@ -59,56 +57,6 @@ impl BModes {
         Self {
             xy: Tensor::cat(xy, 1),
             log_prob: Tensor::cat(vec![self.log_prob; 1 + s], 1),
-            psi: None,
-            mixture_modes: self.mixture_modes,
-        }
-    }
-
-    /// The choices followed by one *lane move* per mixture mode ([`lane_move`]): a mode that
-    /// drifts off B's lane path, with that move completed to a full lane within `steps` steps
-    /// along `paths[row]` (B's lane path in B's frame, [`lane_path_points`]); a mode that keeps
-    /// its lane, or a row without a path, repeats the mode. Each copy has its mode's
-    /// log-probability. Unchanged when `steps` is 0. Call it before the courtesy is measured.
-    ///
-    /// # Shapes
-    /// `xy: [batch, C, T, 2]` → `[batch, C + K, T, 2]` (`K` = [`Self::mixture_modes`])
-    ///
-    /// # Panics
-    /// If the modes' courtesy is already set (it would not cover the copies).
-    pub fn with_lane_moves(self, paths: &[Vec<[f32; 2]>], steps: usize) -> Self {
-        if steps == 0 {
-            return self;
-        }
-        assert!(
-            self.psi.is_none(),
-            "add the lane moves before scoring the modes"
-        );
-        let [b, c, t, _] = self.xy.dims();
-        let k = self.mixture_modes.clamp(1, c);
-        let device = self.xy.device();
-        let xy: Vec<f32> = self
-            .xy
-            .clone()
-            .narrow(1, 0, k)
-            .into_data()
-            .try_to_vec()
-            .expect("f32 tensor");
-        let mut moved = Vec::with_capacity(xy.len());
-        for (row, modes) in xy.chunks_exact(k * t * 2).enumerate() {
-            let path = paths.get(row).map_or(&[][..], Vec::as_slice);
-            for mode in modes.chunks_exact(t * 2) {
-                let points: Vec<[f32; 2]> = mode.chunks_exact(2).map(|p| [p[0], p[1]]).collect();
-                match lane_move(&points, path, steps) {
-                    Some(m) => moved.extend(m.iter().flatten().copied()),
-                    None => moved.extend_from_slice(mode),
-                }
-            }
-        }
-        let moved = Tensor::from_data(burn::tensor::TensorData::new(moved, [b, k, t, 2]), &device);
-        let log_prob = self.log_prob.clone().narrow(1, 0, k);
-        Self {
-            xy: Tensor::cat(vec![self.xy, moved], 1),
-            log_prob: Tensor::cat(vec![self.log_prob, log_prob], 1),
             psi: None,
             mixture_modes: self.mixture_modes,
         }
@@ -303,72 +251,5 @@ mod tests {
             .try_to_vec()
             .unwrap();
         assert_eq!(warp, vec![1.25]);
-    }
-
-    /// `with_lane_moves` appends one copy per mixture mode with its log-probability: the
-    /// completed move for a mode that leaves its lane, the mode itself otherwise and on a
-    /// row without a lane path; no copies at 0 steps.
-    #[test]
-    fn lane_moves_join_the_choices_after_the_copies() {
-        let device = Device::flex();
-        // A straight lane along x (points every 5 m from 20 m behind); the point `offset`
-        // metres left of it at arc length `s`. `lane_move`'s own tests cover curved lanes.
-        let path: Vec<[f32; 2]> = (0..80).map(|k| [k as f32 * 5.0 - 20.0, 0.0]).collect();
-        let at = |s: f32, offset: f32| [s, offset];
-        let row = |drift: f32| -> Vec<f32> {
-            (0..80)
-                .flat_map(|t| at(2.0 * (t + 1) as f32, drift * (t + 1) as f32 / 80.0))
-                .collect()
-        };
-        // Two rows of two modes (keeps its lane, drifts 2 m left) and one slowed copy each.
-        let mut xy = Vec::new();
-        for _ in 0..2 {
-            xy.extend(row(0.0));
-            xy.extend(row(2.0));
-            xy.extend(row(0.0));
-            xy.extend(row(0.0));
-        }
-        let modes = BModes {
-            xy: Tensor::from_data(burn::tensor::TensorData::new(xy, [2, 4, 80, 2]), &device),
-            log_prob: Tensor::from_data(
-                [[-0.1f32, -2.0, -0.1, -2.0], [-0.2, -1.0, -0.2, -1.0]],
-                &device,
-            ),
-            psi: None,
-            mixture_modes: 2,
-        };
-        assert_eq!(
-            modes
-                .clone()
-                .with_lane_moves(std::slice::from_ref(&path), 0)
-                .xy
-                .dims(),
-            [2, 4, 80, 2]
-        );
-        let out = modes.with_lane_moves(std::slice::from_ref(&path), 30);
-        assert_eq!(out.xy.dims(), [2, 6, 80, 2]);
-        assert_eq!(out.mixture_modes, 2);
-        let lp: Vec<f32> = out.log_prob.into_data().try_to_vec().unwrap();
-        assert_eq!(&lp[4..6], &[-0.1, -2.0]);
-        assert_eq!(&lp[10..12], &[-0.2, -1.0]);
-        let xy: Vec<f32> = out.xy.into_data().try_to_vec().unwrap();
-        let at_xy = |r: usize, c: usize, s: usize| {
-            let i = ((r * 6 + c) * 80 + s) * 2;
-            [xy[i], xy[i + 1]]
-        };
-        let moved = lane_move(
-            &(0..80).map(|s| at_xy(0, 1, s)).collect::<Vec<_>>(),
-            &path,
-            30,
-        )
-        .unwrap();
-        for (s, m) in moved.iter().enumerate() {
-            // Row 0: the keeping mode repeats itself, the drifting one is moved.
-            assert_eq!(at_xy(0, 4, s), at_xy(0, 0, s));
-            assert_eq!(at_xy(0, 5, s), *m);
-            // Row 1 has no path: both modes repeat themselves.
-            assert_eq!(at_xy(1, 4, s), at_xy(1, 0, s));
-            assert_eq!(at_xy(1, 5, s), at_xy(1, 1, s));
-        }
     }
 }

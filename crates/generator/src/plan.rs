@@ -1,24 +1,26 @@
-//! Closed-loop planning: B's future toward A for a requested courtesy, without J_φ's
-//! measurement of the achieved ψ. [`Scbg::plan_basis`] computes what every courtesy shares
-//! once, [`Scbg::plan_from`] makes the choice.
+//! The one inference path: B's future toward A for a requested courtesy. [`Scbg::plan_basis`]
+//! computes what every courtesy shares once, [`Scbg::plan_from`] makes the choice; the
+//! open-loop [`Scbg::generate`] is the same choice followed by J_φ's measurement of the
+//! achieved ψ ([`crate::infer`]).
 
-use burn::tensor::Device;
-use scbg_features::{PreparedScene, SampleBuilder, SampleError, Window, lane_path_points};
+use burn::tensor::{Device, Tensor, TensorData};
+use scbg_courtesy::label::{LabelledRole, change_frame};
+use scbg_features::{PreparedScene, SampleError, Window};
 
-use crate::candidates::{b_modes_of, b_modes_with};
+use crate::candidates::b_modes_with;
 use crate::courtesy::{Courtesy, Policy};
-use crate::data::{Example, a_context, marginal_embedding};
+use crate::data::Example;
 use crate::infer::{GenerateError, Scbg, check_request, world_xy};
 use crate::modes::BModes;
 use crate::range::{psi_for_quantile, stored_embeddings};
 use crate::ranked::ranked_choice;
-use crate::tensors::to_vec;
+use crate::tensors::{repeat_rows, to_vec};
 
-/// What a closed-loop plan of B toward A shares across requested courtesies
-/// ([`Scbg::plan_basis`]): everything but the choice. With [`Policy::Generator`], B's
-/// embedding, pose, choices (scored by J_φ) and predicted range of ψ; with [`Policy::Ranked`],
-/// B's labelled sampled futures. Rollouts of one scene at different quantiles start from the
-/// same view, so their first plans can share it ([`Scbg::plan_from`]).
+/// What a plan of B toward A shares across requested courtesies ([`Scbg::plan_basis`]):
+/// everything but the choice. With [`Policy::Generator`], B's embedding, pose, candidates
+/// (scored by J_φ) and predicted range of ψ; with [`Policy::Ranked`], B's labelled sampled
+/// futures. Rollouts of one scene at different quantiles start from the same view, so their
+/// first plans can share it ([`Scbg::plan_from`]).
 #[derive(Debug, Clone)]
 pub struct PlanBasis(Basis);
 
@@ -37,20 +39,38 @@ enum Basis {
 
 #[derive(Debug, Clone)]
 struct GeneratorBasis {
-    embedding: burn::tensor::Tensor<2>,
+    embedding: Tensor<2>,
     pose: scbg_scene::Pose2,
-    modes: Option<BModes>,
+    modes: BModes,
     low: f32,
     high: f32,
 }
 
+impl PlanBasis {
+    /// The predicted 0.1 and 0.9 quantiles of ψ, when the basis holds them (the generator's).
+    pub(crate) fn range(&self) -> Option<(f32, f32)> {
+        match &self.0 {
+            Basis::Generator(g) => Some((g.low, g.high)),
+            Basis::Ranked { .. } => None,
+        }
+    }
+}
+
+/// B's futures (B's frame) for requested courtesies, and the ψ each stands for
+/// ([`Scbg::choose`]).
+pub(crate) struct Choices {
+    /// The requested ψ, or with [`Policy::Ranked`] and a quantile the chosen future's label.
+    pub psi: Vec<f32>,
+    /// `[courtesy][T]` B's futures in B's frame.
+    pub futures_b: Vec<Vec<[f32; 2]>>,
+    /// B's frame.
+    pub b_pose: scbg_scene::Pose2,
+}
+
 impl Scbg {
-    /// B's future only (world frame, 80 points at 10 Hz), for closed-loop planning: the
-    /// encoder, the range predictor and the generator, without J_φ's measurement of the
-    /// achieved ψ (which [`Scbg::generate`] adds); with [`Policy::Ranked`], the labelling of
-    /// B's sampled futures and the choice among them. A must be a track valid at the window's
-    /// current step; the same future as `generate` gives for the same request.
-    /// [`Scbg::plan_basis`] then [`Scbg::plan_from`].
+    /// B's future only (world frame, 80 points at 10 Hz), for closed-loop planning:
+    /// [`Scbg::plan_basis`] then [`Scbg::plan_from`]. A must be a track valid at the window's
+    /// current step. [`Scbg::generate`] makes the same choice and measures it.
     pub fn plan(
         &self,
         scene: &PreparedScene,
@@ -60,13 +80,14 @@ impl Scbg {
         courtesy: Courtesy,
         device: &Device,
     ) -> Result<Vec<[f64; 2]>, GenerateError> {
-        // Checked before the basis is paid for (`plan_from` checks again, for its own callers).
         let basis = self.plan_basis(scene, window, a_id, b_id, device)?;
         self.plan_from(&basis, courtesy, device)
     }
 
     /// The part of [`Scbg::plan`] that does not depend on the requested courtesy: all of its
-    /// cost but the choice (the selector's MLPs, or a sort of the labels).
+    /// cost but the choice (the selector's MLPs, or a sort of the labels). The generator
+    /// needs A's and B's samples and no label of B's sampled futures (its candidates' courtesy
+    /// is measured against their own mean); sample and rank needs the labels.
     pub fn plan_basis(
         &self,
         scene: &PreparedScene,
@@ -75,7 +96,25 @@ impl Scbg {
         b_id: i64,
         device: &Device,
     ) -> Result<PlanBasis, GenerateError> {
-        let (ia, ib) = check_request(scene, a_id, b_id)?;
+        let label = self.policy == Policy::Ranked;
+        Ok(self
+            .basis_and_example(scene, window, a_id, b_id, label, device)?
+            .0)
+    }
+
+    /// The plan's basis and the pair's example (A's and B's samples, B's audience and, with
+    /// `label`, the labels of B's futures and E[r(Y_A) | x], which J_φ's measurement of a
+    /// generated future needs).
+    pub(crate) fn basis_and_example(
+        &self,
+        scene: &PreparedScene,
+        window: &Window,
+        a_id: i64,
+        b_id: i64,
+        label: bool,
+        device: &Device,
+    ) -> Result<(PlanBasis, Example), GenerateError> {
+        let (ia, _) = check_request(scene, a_id, b_id)?;
         let now = window.current_step;
         if !scene.tracks[ia].valid_at(now as isize) {
             return Err(GenerateError::Sample {
@@ -86,93 +125,62 @@ impl Scbg {
                 },
             });
         }
-        if self.policy == Policy::Ranked {
-            // The labels alone, no embedding of B and no range: the choice `generate_in` makes
-            // (its candidates are these futures, in B's frame).
-            let role = self.labelled_role(scene, window, a_id, b_id, true, device)?;
-            return Ok(PlanBasis(Basis::Ranked {
-                psi: role.labels.psi.get(1..).unwrap_or_default().to_vec(),
-                futures_in_a: role.labels.futures_in_a,
-                a_pose: role.a.world_from_agent,
-                b_pose: role.b.world_from_agent,
-            }));
-        }
-        // B's embedding (and A's context when the generator is told who A is), B's pose, and
-        // the choices of a mode-selecting generator (scored by J_φ, from the pair's example,
-        // for a generator scoring its modes' courtesy).
-        let (embedding, pose, modes) = if self.generator.scores_mode_courtesy() {
-            // A's and B's samples and B's audience, no label: the modes' courtesy is measured
-            // against their own mean, so no E[r(Y_A) | x] from B's samples is needed.
-            let role = self.labelled_role(scene, window, a_id, b_id, false, device)?;
-            // B's and A's scenes in one encoder pass (the framework's cost per operation,
-            // most of a plan's, paid once for both): B's marginal embedding, then A's scene
-            // for J_φ of B's modes below.
-            let batch = scbg_model::Batch::for_mode(
-                &[&role.b, &role.a],
-                scbg_model::Mode::Marginal,
-                device,
-            );
-            let encoded = self.predictor.encode_scene(&batch);
-            let b_embedding = to_vec(self.predictor.encode_marginal(encoded.clone().narrow(0, 1)));
-            let a_lane_path = batch
-                .lane_path
-                .as_ref()
-                .map(|(p, m)| (p.clone().narrow(0, 1, 1), m.clone().narrow(0, 1, 1)));
-            let mut example =
-                Example::from_role_embedded(scene.scenario_id.clone(), role, b_embedding);
-            if self.generator.a_context_width == 0 {
-                example.a_context.clear();
-            }
-            let embedding = stored_embeddings(&[&example], device);
-            let modes = b_modes_with(
-                &self.generator,
-                &self.predictor,
-                &[&example],
-                self.labels.reward,
-                Some((encoded.narrow(1, 1), a_lane_path)),
-                device,
-            );
-            (embedding, example.b.world_from_agent, modes)
-        } else {
-            let mut b = SampleBuilder::new(scene, &self.features)
-                .sample(window, ib, None)
-                .map_err(|error| GenerateError::Sample { id: b_id, error })?;
-            self.stats.normalize(&mut b);
-            let mut embedding = marginal_embedding(&self.predictor, &b, device);
-            if self.generator.a_context_width > 0 {
-                // A's pose and velocity at the current step, from its track (no sample needed).
-                let t = &scene.tracks[ia];
-                let o = scene.origin_xy_m;
-                let a_pose = scbg_scene::Pose2::new(
-                    f64::from(t.x_m[now]) + o[0],
-                    f64::from(t.y_m[now]) + o[1],
-                    f64::from(t.heading_rad[now]),
-                );
-                let v = [f64::from(t.vx_mps[now]), f64::from(t.vy_mps[now])];
-                embedding.extend(a_context(a_pose, v, b.world_from_agent));
-            }
-            let e = embedding.len();
-            let embedding = burn::tensor::Tensor::from_data(
-                burn::tensor::TensorData::new(embedding, [1, e]),
-                device,
-            );
-            let modes = self.generator.selects_modes().then(|| {
-                let b_width = embedding.dims()[1] - self.generator.a_context_width;
-                self.generator.candidates_of(
-                    b_modes_of(&self.predictor, embedding.clone().narrow(1, 0, b_width)),
-                    &[lane_path_points(&b)],
+        let role = self.labelled_role(scene, window, a_id, b_id, label, device)?;
+        let id = scene.scenario_id.clone();
+        Ok(match self.policy {
+            Policy::Ranked => {
+                let basis = Basis::Ranked {
+                    psi: role.labels.psi.get(1..).unwrap_or_default().to_vec(),
+                    futures_in_a: role.labels.futures_in_a.clone(),
+                    a_pose: role.a.world_from_agent,
+                    b_pose: role.b.world_from_agent,
+                };
+                // B's embedding is left to whoever needs the range ([`Scbg::pair_context`]).
+                (
+                    PlanBasis(basis),
+                    Example::from_role_embedded(id, role, Vec::new()),
                 )
-            });
-            (embedding, b.world_from_agent, modes)
-        };
+            }
+            Policy::Generator => self.generator_basis(id, role, device),
+        })
+    }
+
+    /// The generator's basis: B's and A's scenes in one encoder pass (the framework's cost per
+    /// operation, most of a plan's, paid once for both), B's marginal embedding, its
+    /// candidates scored by J_φ toward the audience, and the predicted range of ψ.
+    fn generator_basis(
+        &self,
+        scenario_id: String,
+        role: LabelledRole,
+        device: &Device,
+    ) -> (PlanBasis, Example) {
+        let batch =
+            scbg_model::Batch::for_mode(&[&role.b, &role.a], scbg_model::Mode::Marginal, device);
+        let encoded = self.predictor.encode_scene(&batch);
+        let b_embedding = to_vec(self.predictor.encode_marginal(encoded.clone().narrow(0, 1)));
+        let a_lane_path = batch
+            .lane_path
+            .as_ref()
+            .map(|(p, m)| (p.clone().narrow(0, 1, 1), m.clone().narrow(0, 1, 1)));
+        let example = Example::from_role_embedded(scenario_id, role, b_embedding);
+        let embedding = stored_embeddings(&[&example], device);
+        let modes = b_modes_with(
+            &self.generator,
+            &self.predictor,
+            &[&example],
+            self.labels.reward,
+            Some((encoded.narrow(1, 1), a_lane_path)),
+            device,
+        );
         let (low, high) = self.range.forward(embedding.clone());
-        Ok(PlanBasis(Basis::Generator(Box::new(GeneratorBasis {
+        let basis = GeneratorBasis {
             embedding,
-            pose,
+            pose: example.b.world_from_agent,
             modes,
             low: to_vec(low)[0],
             high: to_vec(high)[0],
-        }))))
+        };
+        (PlanBasis(Basis::Generator(Box::new(basis))), example)
     }
 
     /// B's future (world frame) for `courtesy` from a [`Scbg::plan_basis`] of this model: the
@@ -183,6 +191,20 @@ impl Scbg {
         courtesy: Courtesy,
         device: &Device,
     ) -> Result<Vec<[f64; 2]>, GenerateError> {
+        let choices = self.choose(basis, &[courtesy], device)?;
+        Ok(world_xy(&choices.b_pose, &choices.futures_b[0]))
+    }
+
+    /// The choice for each requested courtesy (in one forward of the generator): the
+    /// quantile becomes a ψ through the predicted range ([`psi_for_quantile`]) and the
+    /// generator turns ψ into B's future; sample and rank takes the labelled future of that
+    /// rank, or nearest that ψ ([`ranked_choice`]).
+    pub(crate) fn choose(
+        &self,
+        basis: &PlanBasis,
+        courtesy: &[Courtesy],
+        device: &Device,
+    ) -> Result<Choices, GenerateError> {
         match &basis.0 {
             Basis::Ranked {
                 psi,
@@ -190,37 +212,56 @@ impl Scbg {
                 a_pose,
                 b_pose,
             } => {
-                let k = ranked_choice(psi, courtesy)
-                    .ok_or(GenerateError::NoCandidates(self.labels.labelled_samples()))?;
-                // Through B's frame, as `generate_in`'s candidates are: the same numbers.
-                let in_b = scbg_courtesy::label::change_frame(&futures_in_a[1 + k], a_pose, b_pose);
-                Ok(world_xy(b_pose, &in_b))
+                let mut out = Choices {
+                    psi: Vec::with_capacity(courtesy.len()),
+                    futures_b: Vec::with_capacity(courtesy.len()),
+                    b_pose: *b_pose,
+                };
+                for &c in courtesy {
+                    let k = ranked_choice(psi, c)
+                        .ok_or(GenerateError::NoCandidates(self.labels.labelled_samples()))?;
+                    out.psi.push(match c {
+                        // The ψ the rank stands for: the chosen future's label.
+                        Courtesy::Quantile(_) => psi[k],
+                        Courtesy::Psi(p) => p,
+                    });
+                    out.futures_b
+                        .push(change_frame(&futures_in_a[1 + k], a_pose, b_pose));
+                }
+                Ok(out)
             }
             Basis::Generator(g) => {
-                let GeneratorBasis {
-                    embedding,
-                    pose,
-                    modes,
-                    low,
-                    high,
-                } = g.as_ref();
-                let psi = match courtesy {
-                    Courtesy::Psi(p) => p,
-                    Courtesy::Quantile(q) => psi_for_quantile(q, *low, *high),
-                };
-                let future = self.generator.forward(
-                    embedding.clone(),
-                    burn::tensor::Tensor::from_data(
-                        burn::tensor::TensorData::new(vec![psi], [1]),
-                        device,
-                    ),
-                    modes.clone(),
-                );
-                let xy: Vec<[f32; 2]> = to_vec(future)
-                    .chunks_exact(2)
-                    .map(|p| [p[0], p[1]])
+                let n = courtesy.len();
+                let psi: Vec<f32> = courtesy
+                    .iter()
+                    .map(|&c| match c {
+                        Courtesy::Psi(p) => p,
+                        Courtesy::Quantile(q) => psi_for_quantile(q, g.low, g.high),
+                    })
                     .collect();
-                Ok(world_xy(pose, &xy))
+                if n == 0 {
+                    return Ok(Choices {
+                        psi,
+                        futures_b: Vec::new(),
+                        b_pose: g.pose,
+                    });
+                }
+                let future = self.generator.forward(
+                    repeat_rows(g.embedding.clone(), n),
+                    Tensor::from_data(TensorData::new(psi.clone(), [n]), device),
+                    g.modes.clone().repeat_rows(n),
+                );
+                let xy = to_vec(future);
+                let t = xy.len() / (2 * n);
+                let futures_b = xy
+                    .chunks_exact(2 * t)
+                    .map(|f| f.chunks_exact(2).map(|p| [p[0], p[1]]).collect())
+                    .collect();
+                Ok(Choices {
+                    psi,
+                    futures_b,
+                    b_pose: g.pose,
+                })
             }
         }
     }

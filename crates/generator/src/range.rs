@@ -62,19 +62,16 @@ pub fn quantile_for_psi(psi: f32, q_low: f32, q_high: f32) -> f32 {
     LOW_QUANTILE + (HIGH_QUANTILE - LOW_QUANTILE) * (psi - q_low) / span
 }
 
-/// The examples' inputs — B's stored frozen embedding followed by A's context when present —
-/// as one tensor on `device`.
+/// The examples' stored frozen embeddings of B as one tensor on `device`.
 ///
 /// # Shapes
-/// `-> [examples, e]` (`e` = embedding width + `a_context.len()`)
+/// `-> [examples, e]` (`e` = the predictor's embedding width)
 pub fn stored_embeddings(examples: &[&Example], device: &Device) -> Tensor<2> {
     let n = examples.len();
-    let e = examples
-        .first()
-        .map_or(0, |x| x.b_embedding.len() + x.a_context.len());
+    let e = examples.first().map_or(0, |x| x.b_embedding.len());
     let flat: Vec<f32> = examples
         .iter()
-        .flat_map(|x| x.b_embedding.iter().chain(&x.a_context).copied())
+        .flat_map(|x| x.b_embedding.iter().copied())
         .collect();
     Tensor::from_data(TensorData::new(flat, [n, e]), device)
 }

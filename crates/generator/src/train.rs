@@ -56,46 +56,6 @@ impl std::str::FromStr for Variant {
     }
 }
 
-/// How the trajectory loss trains a mode-selecting generator's choice among B's candidates.
-#[derive(
-    Debug, Clone, Copy, Default, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "lowercase")]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-pub enum SelectorLoss {
-    /// The Huber loss of the softmax blend of the candidates plus the displacement (every
-    /// generator trained before the option; what a generator.json without the field means).
-    #[default]
-    Blend,
-    /// MultiPath's: each target future is assigned its nearest candidate (mean distance over
-    /// its valid steps, the candidates' own means without the displacement); the Huber loss of
-    /// that candidate plus the displacement, plus the cross-entropy of the selector's logits
-    /// against the assignment. The selector learns which candidate a future of courtesy ψ
-    /// is, and the likeliest candidate — what B drives outside training — is trained directly
-    /// rather than through a blend. The courtesy loss still acts on the blend.
-    Classify,
-}
-
-impl SelectorLoss {
-    /// The loss's name (`blend`, `classify`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Blend => "blend",
-            Self::Classify => "classify",
-        }
-    }
-}
-
-impl std::str::FromStr for SelectorLoss {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        [Self::Blend, Self::Classify]
-            .into_iter()
-            .find(|v| v.name() == s)
-            .ok_or_else(|| format!("unknown selector loss {s:?} (blend or classify)"))
-    }
-}
-
 /// Which examples count as "high courtesy" for the 50/50 batches. Written `qX` (a quantile)
 /// or a number (m/s), also in `generator.json`.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -226,9 +186,6 @@ pub struct StepOptions {
     pub reward: Reward,
     /// Learning rate of the optimizer step.
     pub learning_rate: f64,
-    /// How the trajectory loss trains a mode-selecting generator's choice (ignored by a plain
-    /// regression).
-    pub selector_loss: SelectorLoss,
 }
 
 /// One step: `L = Huber(y⁰, ŷ⁰) + α Σ_m Huber(y^m, ŷ^m) + β Σ_m (ψ_m − J_φ(x, ŷ^m))²`
@@ -303,55 +260,47 @@ pub fn step_loss(
         .collect();
     let target = Tensor::<3>::from_data(TensorData::new(target_xy.clone(), [rows, t, 2]), device);
     let valid = Tensor::<2>::from_data(TensorData::new(valid_steps.clone(), [rows, t]), device);
-    let modes = b_modes_for(generator, predictor, examples, options.reward, device)
-        .map(|m| m.repeat_rows(m_count));
-    // The future each row's trajectory loss compares with its target, the blend that J_φ
-    // scores, and (classification) the selector's cross-entropy per row.
-    let (pred, fitted, cross_entropy) = match (options.selector_loss, modes) {
-        (SelectorLoss::Classify, Some(modes)) => {
-            let nearest = nearest_candidates(&modes.xy, &target_xy, &valid_steps);
-            let k = modes.xy.dims()[1];
-            let candidates = generator.forward_candidates(embedding, psi.clone(), modes);
-            let onehot = Tensor::<2>::from_data(
-                TensorData::new(
-                    nearest
-                        .iter()
-                        .flat_map(|&j| (0..k).map(move |c| f32::from(u8::from(c == j))))
-                        .collect(),
-                    [rows, k],
-                ),
-                device,
-            );
-            let futures = candidates.futures;
-            let blend = burn::tensor::activation::softmax(candidates.logits.clone(), 1)
-                .reshape([rows, 1, k])
-                .matmul(futures.clone().reshape([rows, k, t * 2]))
-                .reshape([rows, t, 2]);
-            let chosen = (futures * onehot.clone().reshape([rows, k, 1, 1]))
-                .sum_dim(1)
-                .reshape([rows, t, 2]);
-            let ce = (burn::tensor::activation::log_softmax(candidates.logits, 1) * onehot)
-                .sum_dim(1)
-                .reshape([rows])
-                .neg();
-            (blend, chosen, Some(ce))
-        }
-        (_, modes) => {
-            let pred = generator.forward_blend(embedding, psi.clone(), modes);
-            (pred.clone(), pred, None)
-        }
-    };
+    let modes =
+        b_modes_for(generator, predictor, examples, options.reward, device).repeat_rows(m_count);
+    // MultiPath's classification: each target future is assigned its nearest candidate (mean
+    // distance over its valid steps, the candidates' own means without the displacement); the
+    // trajectory loss is the Huber loss of that candidate plus the displacement, plus the
+    // cross-entropy of the selector's logits against the assignment. The selector learns
+    // which candidate a future of courtesy ψ is, and the likeliest candidate — what B drives
+    // outside training — is trained directly; the courtesy loss acts on the softmax blend
+    // (differentiable in the selector).
+    let nearest = nearest_candidates(&modes.xy, &target_xy, &valid_steps);
+    let k = modes.xy.dims()[1];
+    let candidates = generator.forward_candidates(embedding, psi.clone(), modes);
+    let onehot = Tensor::<2>::from_data(
+        TensorData::new(
+            nearest
+                .iter()
+                .flat_map(|&j| (0..k).map(move |c| f32::from(u8::from(c == j))))
+                .collect(),
+            [rows, k],
+        ),
+        device,
+    );
+    let futures = candidates.futures;
+    let blend = burn::tensor::activation::softmax(candidates.logits.clone(), 1)
+        .reshape([rows, 1, k])
+        .matmul(futures.clone().reshape([rows, k, t * 2]))
+        .reshape([rows, t, 2]);
+    let chosen = (futures * onehot.clone().reshape([rows, k, 1, 1]))
+        .sum_dim(1)
+        .reshape([rows, t, 2]);
+    let cross_entropy = (burn::tensor::activation::log_softmax(candidates.logits, 1) * onehot)
+        .sum_dim(1)
+        .reshape([rows])
+        .neg();
     let part = |start: usize, len: usize| {
-        let huber = huber_trajectory(
-            fitted.clone().narrow(0, start, len),
+        huber_trajectory(
+            chosen.clone().narrow(0, start, len),
             target.clone().narrow(0, start, len),
             valid.clone().narrow(0, start, len),
             options.huber_delta,
-        );
-        match &cross_entropy {
-            Some(ce) => huber + ce.clone().narrow(0, start, len).mean(),
-            None => huber,
-        }
+        ) + cross_entropy.clone().narrow(0, start, len).mean()
     };
     let mut traj = part(0, n);
     if m_count > 1 {
@@ -360,7 +309,7 @@ pub fn step_loss(
     }
     let court = (options.variant == Variant::Full).then(|| {
         let (achieved, _) =
-            audience_courtesy(predictor, pred, examples, m_count, options.reward, device);
+            audience_courtesy(predictor, blend, examples, m_count, options.reward, device);
         let scale = generator.psi_scale.max(1e-12);
         courtesy_loss(psi / scale, achieved / scale) * m_count as f32
     });

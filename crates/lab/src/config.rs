@@ -137,7 +137,6 @@ impl ClosedLoopConfig {
             ego: self.ego,
             others: self.others.unwrap_or(others),
             replan_every: self.replan_every,
-            ..LoopOptions::default()
         }
     }
 }

@@ -201,13 +201,8 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
     let (train, validation): (Vec<_>, Vec<_>) = labelled
         .into_iter()
         .partition(|s| split_of(&s.scenario_id, vf) == Split::Train);
-    let mut examples = examples_of(&predictors.plain, &predictors.plain_device, train, false);
-    let mut held_out = examples_of(
-        &predictors.plain,
-        &predictors.plain_device,
-        validation,
-        false,
-    );
+    let mut examples = examples_of(&predictors.plain, &predictors.plain_device, train);
+    let mut held_out = examples_of(&predictors.plain, &predictors.plain_device, validation);
     // The modes' courtesy, once for every variant and seed (training and each evaluation
     // would measure them again).
     for set in [&mut examples, &mut held_out] {
@@ -215,8 +210,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             &predictors.plain,
             set,
             options.labels.reward,
-            &crate::generator::DEFAULT_MODE_SLOWDOWNS,
-            crate::generator::DEFAULT_LANE_MOVE_STEPS,
+            &scbg_generator::DEFAULT_MODE_SLOWDOWNS,
             &predictors.plain_device,
         );
     }

@@ -9,9 +9,7 @@ use burn::tensor::Device;
 use rand::SeedableRng;
 use scbg_courtesy::label::LabelOptions;
 use scbg_features::cache::PreparedDataset;
-use scbg_generator::{
-    Example, GeneratorConfig, RangePredictor, SelectorLoss, StepOptions, Threshold, Variant,
-};
+use scbg_generator::{Example, GeneratorConfig, RangePredictor, StepOptions, Threshold, Variant};
 use scbg_model::Multipath;
 use scbg_train::Checkpoint;
 use scbg_train::data::{Split, split_of};
@@ -56,15 +54,11 @@ pub fn load_predictors(dir: &Path) -> anyhow::Result<Predictors> {
     })
 }
 
-/// Generator examples (with B's frozen embedding) of labelled scenes; with `condition_on_a`
-/// they keep A's context (`scbg_generator::a_context`), and [`train_variant`] then trains a
-/// generator and range predictor told who A is. Off in every command (docs/findings.md, *Telling the generator who A is*: it
-/// removes most of the closed-loop reversal but B collides more).
+/// Generator examples (with B's frozen embedding) of labelled scenes.
 pub fn examples_of(
     predictor: &Multipath,
     device: &Device,
     labelled: Vec<SceneLabels>,
-    condition_on_a: bool,
 ) -> Vec<Example> {
     labelled
         .into_iter()
@@ -72,13 +66,7 @@ pub fn examples_of(
             let id = s.scenario_id;
             s.roles.into_iter().map(move |role| (id.clone(), role))
         })
-        .map(|(id, role)| {
-            let mut e = Example::from_role(id, role, predictor, device);
-            if !condition_on_a {
-                e.a_context.clear();
-            }
-            e
-        })
+        .map(|(id, role)| Example::from_role(id, role, predictor, device))
         .collect()
 }
 
@@ -94,11 +82,10 @@ pub fn examples_for_split(
     split: Option<Split>,
     labels: LabelOptions,
     seed: u64,
-    condition_on_a: bool,
     progress: &dyn Progress,
 ) -> anyhow::Result<Vec<Example>> {
     let labelled = labelled_split(predictor, ckpt, device, data, split, labels, seed, progress)?;
-    Ok(examples_of(predictor, device, labelled, condition_on_a))
+    Ok(examples_of(predictor, device, labelled))
 }
 
 /// Every pair role in one split of a prepared cache (`None` = every scene), labelled through
@@ -133,26 +120,6 @@ pub fn labelled_split(
     )
 }
 
-/// How `scbg train generator` and the demo train a mode-selecting generator's choice among
-/// B's candidates by default ([`SelectorLoss`]; BENCHMARKS.md, *Training the choice among B's
-/// modes as a classification*).
-pub const DEFAULT_SELECTOR_LOSS: SelectorLoss = SelectorLoss::Classify;
-
-/// The slowed copies of B's modes that `scbg train generator` and the demo add to a
-/// mode-selecting generator's choices by default ([`VariantSettings::mode_slowdowns`];
-/// BENCHMARKS.md, *J_φ cheaper per future of B, and the slowed copies by default*).
-pub const DEFAULT_MODE_SLOWDOWNS: [f32; 2] = [0.75, 0.5];
-
-/// The largest factor of a mode's copy ([`scbg_generator::slowdown_warp`]).
-pub const MAX_MODE_SPEEDUP: f32 = scbg_generator::MAX_SPEEDUP;
-
-/// The lane moves of B's modes that `scbg train generator` and the demo add to a
-/// mode-selecting generator's choices by default: none (0). With 30 (3 s) they lift what the
-/// choices allow in truth, but the trained generators follow the truth less
-/// ([`VariantSettings::lane_move_steps`]; BENCHMARKS.md, *Lane moves among the generator's
-/// choices*).
-pub const DEFAULT_LANE_MOVE_STEPS: usize = 0;
-
 /// Training settings of one variant.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VariantSettings {
@@ -176,32 +143,6 @@ pub struct VariantSettings {
     pub seed: u64,
     /// How the examples were labelled (recorded in generator.json).
     pub labels: LabelOptions,
-    /// The examples carry the oracle's ψ_true (recorded in generator.json).
-    pub oracle_labels: bool,
-    /// With `oracle_labels`: B's sampled futures replaced by this many of the synthetic
-    /// world's own futures of B ([`crate::labels::oracle_labelled`]; 0: none).
-    pub world_futures: usize,
-    /// Train a mode-selecting generator ([`GeneratorConfig::modes`] = the predictor's modes;
-    /// the default), else a plain regression.
-    pub select_modes: bool,
-    /// With `select_modes`: the selector also scores each of B's modes by its own courtesy
-    /// ([`GeneratorConfig::mode_courtesy`]), and B's future is its likeliest mode rather than
-    /// the blend outside training ([`GeneratorConfig::likeliest_mode`]).
-    pub mode_courtesy: bool,
-    /// With `mode_courtesy`: the scorer also sees the requested ψ relative to the scene's
-    /// choices ([`GeneratorConfig::relative_courtesy_floor`], floor
-    /// [`scbg_generator::RELATIVE_COURTESY_FLOOR`]).
-    pub relative_mode_courtesy: bool,
-    /// With `select_modes`: slowed copies of B's modes join the choices, one per factor
-    /// ([`GeneratorConfig::mode_slowdowns`]; empty: none).
-    pub mode_slowdowns: Vec<f32>,
-    /// With `select_modes`: each of B's modes that leaves its lane also joins the choices with
-    /// the move completed within this many steps ([`GeneratorConfig::lane_move_steps`]; 0:
-    /// none).
-    pub lane_move_steps: usize,
-    /// With `select_modes`: how the trajectory loss trains the choice
-    /// ([`SelectorLoss`]; the default blends).
-    pub selector_loss: SelectorLoss,
 }
 
 impl VariantSettings {
@@ -218,14 +159,6 @@ impl VariantSettings {
             range_steps: 300,
             seed: 0,
             labels,
-            oracle_labels: false,
-            world_futures: 0,
-            select_modes: true,
-            mode_courtesy: true,
-            relative_mode_courtesy: true,
-            mode_slowdowns: DEFAULT_MODE_SLOWDOWNS.to_vec(),
-            lane_move_steps: DEFAULT_LANE_MOVE_STEPS,
-            selector_loss: DEFAULT_SELECTOR_LOSS,
         }
     }
 }
@@ -269,32 +202,18 @@ pub fn train_variant(
     ensure_request!(!examples.is_empty(), "no labelled pairs to train on");
     let examples = &*training_futures(examples, s.labels.samples);
     let device = &p.device;
-    // Examples with A's context train a generator and range predictor that read
-    // B's embedding ‖ A's context.
-    let width = p.ckpt.model_config.embedding_width();
-    let mut gen_config = if examples[0].a_context.is_empty() {
-        GeneratorConfig::new(width)
-    } else {
-        GeneratorConfig::with_a_context(width)
-    };
+    let mut gen_config = GeneratorConfig::new(
+        p.ckpt.model_config.embedding_width(),
+        p.ckpt.model_config.num_modes,
+    );
     gen_config.psi_scale = psi_spread(examples);
-    if s.select_modes {
-        gen_config.modes = p.ckpt.model_config.num_modes;
-        gen_config.mode_courtesy = s.mode_courtesy;
-        gen_config.likeliest_mode = s.mode_courtesy;
-        gen_config.relative_courtesy_floor = (s.mode_courtesy && s.relative_mode_courtesy)
-            .then_some(scbg_generator::RELATIVE_COURTESY_FLOOR);
-        gen_config.mode_slowdowns.clone_from(&s.mode_slowdowns);
-        gen_config.lane_move_steps = s.lane_move_steps;
-    }
-    // A generator scoring its modes' courtesy reads them at every step: measure them once
-    // (callers that train several variants fill their examples first, see
+    // The generator reads its candidates' courtesy at every step: measure them once (callers
+    // that train several variants fill their examples first, see
     // `scbg_generator::fill_mode_courtesy`).
     let filled: Vec<Example>;
-    let examples = if gen_config.mode_courtesy
-        && examples
-            .iter()
-            .any(|e| e.mode_psi.len() != gen_config.candidates())
+    let examples = if examples
+        .iter()
+        .any(|e| e.mode_psi.len() != gen_config.candidates())
     {
         let mut owned = examples.to_vec();
         scbg_generator::fill_mode_courtesy(
@@ -302,7 +221,6 @@ pub fn train_variant(
             &mut owned,
             s.labels.reward,
             &gen_config.mode_slowdowns,
-            gen_config.lane_move_steps,
             &p.plain_device,
         );
         filled = owned;
@@ -336,7 +254,6 @@ pub fn train_variant(
         trajectory_weight: 1.0,
         reward: s.labels.reward,
         learning_rate: s.learning_rate,
-        selector_loss: s.selector_loss,
     };
     let name = s.variant.name();
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(s.seed);
@@ -422,11 +339,8 @@ pub fn train_variant(
         generator: gen_config,
         range_hidden,
         labels: s.labels,
-        oracle_labels: s.oracle_labels,
-        world_futures: s.world_futures,
         alpha: s.alpha,
         beta: s.beta,
-        selector_loss: s.selector_loss,
         threshold: s.threshold,
         threshold_psi: scbg_generator::threshold_value(examples, s.threshold),
         psi_min,
@@ -450,45 +364,24 @@ pub fn train_variant(
 static DEVICE_STREAM: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 /// What `scbg train generator` does: labels the training split of `data` with the predictor
-/// in `predictor` and trains one variant into `out`, told who A is with `condition_on_a`
-/// (see [`examples_of`]). With `oracle_truth` (the synthetic ground truth; requires
-/// `settings.oracle_labels`) the labels are the simulator's ψ_true instead
-/// ([`crate::labels::oracle_labelled`]).
+/// in `predictor` and trains one variant into `out`.
 pub fn train_generator(
     predictor: &Path,
     data: &Path,
     out: &Path,
     settings: &VariantSettings,
-    condition_on_a: bool,
-    oracle_truth: Option<&[scbg_synth::GroundTruth]>,
     progress: &dyn Progress,
 ) -> anyhow::Result<GeneratorCheckpoint> {
-    ensure_request!(
-        settings.oracle_labels == oracle_truth.is_some(),
-        "oracle labels need the synthetic ground truth, and the ground truth is only read for them"
-    );
-    ensure_request!(
-        settings.world_futures == 0 || settings.oracle_labels,
-        "world futures are scored by the oracle: they need oracle labels"
-    );
     let p = load_predictors(predictor)?;
     progress.note(&format!(
-        "labelling the training split ({} futures of B per pair role{})",
+        "labelling the training split ({} futures of B per pair role)",
         1 + settings.labels.samples,
-        if settings.world_futures > 0 {
-            format!(
-                "; the sampled ones then replaced by {} of the world's own",
-                settings.world_futures
-            )
-        } else {
-            String::new()
-        }
     ));
     // The generator trains on the logged and first `samples` futures alone
-    // (`training_futures`): kept baseline futures would only cost their lane moves' labels
-    // (and the oracle's scores), so the training split is labelled without them; `settings`
-    // still records them for sample and rank at inference.
-    let mut labelled = labelled_split(
+    // (`training_futures`): kept baseline futures would only cost their lane moves' labels, so
+    // the training split is labelled without them; `settings` still records them for sample
+    // and rank at inference.
+    let labelled = labelled_split(
         &p.plain,
         &p.ckpt,
         &p.plain_device,
@@ -501,25 +394,14 @@ pub fn train_generator(
         settings.seed,
         progress,
     )?;
-    if let Some(truth) = oracle_truth {
-        let (kept, count) = crate::labels::oracle_labelled(labelled, truth, settings.world_futures);
-        progress.note(&format!(
-            "oracle labels: {} roles ({} futures) kept with ψ_true; dropped: {} roles that are not a scene's ground-truth role, {} futures the oracle could not score",
-            count.roles, count.futures, count.dropped_roles, count.dropped_futures
-        ));
-        labelled = kept;
-    }
-    let mut examples = examples_of(&p.plain, &p.plain_device, labelled, condition_on_a);
-    if settings.select_modes && settings.mode_courtesy {
-        scbg_generator::fill_mode_courtesy(
-            &p.plain,
-            &mut examples,
-            settings.labels.reward,
-            &settings.mode_slowdowns,
-            settings.lane_move_steps,
-            &p.plain_device,
-        );
-    }
+    let mut examples = examples_of(&p.plain, &p.plain_device, labelled);
+    scbg_generator::fill_mode_courtesy(
+        &p.plain,
+        &mut examples,
+        settings.labels.reward,
+        &scbg_generator::DEFAULT_MODE_SLOWDOWNS,
+        &p.plain_device,
+    );
     ensure_request!(
         !examples.is_empty(),
         "no interacting pairs in the training split of {}",

@@ -19,11 +19,9 @@ pub use crate::label_table::{LabelRow, read_label_table, write_label_table};
 use crate::{Progress, ensure_request};
 
 mod folder;
-mod oracle;
 mod summary;
 pub use folder::LABEL_OPTIONS_FILE;
 use folder::claim_label_folder;
-pub use oracle::{OracleLabelCount, oracle_labelled, world_futures_in_a};
 pub use summary::{FamilyRho, LabelSummary, PsiAll, Spread, spearman_latent, within_pair_std};
 
 /// The labelled pair roles of one scene of a cache.
@@ -208,7 +206,6 @@ pub fn label_options(
         samples,
         reward,
         marginal,
-        sample_noise: 1.0,
         audience: Default::default(),
         baseline_samples: 0,
         lane_move_steps: 0,

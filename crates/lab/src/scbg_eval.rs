@@ -259,17 +259,6 @@ pub fn evaluate_scbg(
             first.checkpoint.predictor
         );
     }
-    let condition_on_a = first.checkpoint.generator.a_context_width > 0;
-    for (dir, l) in models.iter().zip(&loaded) {
-        ensure_request!(
-            (l.checkpoint.generator.a_context_width > 0) == condition_on_a,
-            "{} {} told who A is, {} {}: variants evaluated together must agree",
-            dir.display(),
-            if condition_on_a { "is not" } else { "is" },
-            models[0].display(),
-            if condition_on_a { "is" } else { "is not" },
-        );
-    }
     let examples = examples_for_split(
         &first.scbg.predictor,
         &first.predictor,
@@ -281,7 +270,6 @@ pub fn evaluate_scbg(
             ..first.checkpoint.labels
         },
         seed,
-        condition_on_a,
         progress,
     )?;
     evaluate_examples(&loaded, &examples, data, figures, truth, progress)
@@ -352,17 +340,17 @@ pub fn evaluate_examples(
     ) {
         record(scbg_generator::ranked::RANKED, v, &measured);
     }
-    // The choices of the first variant that selects among B's modes, scored by J_φ and by the
-    // oracle (the variants share the predictor, so their modes; only copies could differ).
+    // The choices of the first variant, scored by J_φ and by the oracle (the variants share
+    // the predictor, so their modes; only copies could differ).
     let truth_control_candidates = index.as_ref().and_then(|index| {
-        let l = loaded.iter().find(|l| l.scbg.generator.selects_modes())?;
+        let l = loaded.first()?;
         let candidates = scbg_generator::scored_candidates(
             &l.scbg.generator,
             &l.scbg.predictor,
             &refs,
             l.scbg.labels.reward,
             &l.device,
-        )?;
+        );
         crate::fidelity::candidate_control(&refs, &candidates, index)
     });
     let mut written = Vec::new();

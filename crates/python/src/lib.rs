@@ -310,7 +310,6 @@ impl Model {
             ego: ego_mode.parse().map_err(PyValueError::new_err)?,
             others: others.parse().map_err(PyValueError::new_err)?,
             replan_every,
-            ..Default::default()
         };
         let controlled = controlled
             .into_iter()

@@ -7,7 +7,7 @@ use anyhow::Context;
 use burn::module::Module;
 use burn::tensor::Device;
 use scbg_courtesy::label::LabelOptions;
-use scbg_generator::{GeneratorConfig, RangePredictor, Scbg, SelectorLoss, Threshold, Variant};
+use scbg_generator::{GeneratorConfig, RangePredictor, Scbg, Threshold, Variant};
 use scbg_train::Checkpoint;
 use serde::{Deserialize, Serialize};
 
@@ -22,7 +22,7 @@ pub const RANGE_WEIGHTS: &str = "range.bpk";
 /// `kind` of a generator folder's `generator.json`.
 pub const GENERATOR_KIND: &str = "scbg-generator";
 /// The format of `generator.json` this build reads and writes.
-pub const GENERATOR_FORMAT_VERSION: u32 = 2;
+pub const GENERATOR_FORMAT_VERSION: u32 = 3;
 
 /// Weights of the generator and the range predictor, and what they were trained with
 /// (`generator.json`).
@@ -41,24 +41,12 @@ pub struct GeneratorCheckpoint {
     /// Hidden width of the range predictor.
     pub range_hidden: usize,
     /// How the training labels were made (futures sampled per pair role, reward, estimator of
-    /// E[r(Y_A) | x], noise scale of the samples): inference labels the same way.
+    /// E[r(Y_A) | x], audience): inference labels the same way.
     pub labels: LabelOptions,
-    /// Whether the labels were the simulator's ψ_true (the lab's oracle labelling;
-    /// synthetic data, an experiment) instead of the predictor's.
-    #[serde(default)]
-    pub oracle_labels: bool,
-    /// With oracle labels: B's sampled futures replaced by this many futures of the synthetic
-    /// world's own B at spread courtesies (the lab's oracle labelling; 0: none).
-    #[serde(default)]
-    pub world_futures: usize,
     /// Weight α of the sampled futures' trajectory loss.
     pub alpha: f32,
     /// Weight β of the courtesy loss.
     pub beta: f32,
-    /// How the trajectory loss trained the choice among B's candidates (`blend` for every
-    /// generator trained before the option).
-    #[serde(default)]
-    pub selector_loss: SelectorLoss,
     /// The high-courtesy threshold of the 50/50 batches as given (`q0.8` or m/s).
     pub threshold: Threshold,
     /// That threshold in ψ units: |ψ| above it counted as high courtesy in training.
@@ -156,7 +144,7 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
         .with_context(|| format!("predictor of {} (override with --predictor)", dir.display()))?;
     let modes = checkpoint.generator.modes;
     ensure_request!(
-        modes == 0 || modes == ckpt.model_config.num_modes,
+        modes == ckpt.model_config.num_modes,
         "{}: the generator chooses among {modes} modes of B, but the predictor {} predicts {}",
         dir.display(),
         predictor_dir.display(),
@@ -171,7 +159,7 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
         .try_load_file(load(GENERATOR_WEIGHTS))
         .map_err(|e| anyhow::anyhow!("{}: {e:?}", load(GENERATOR_WEIGHTS).display()))?;
     let range = RangePredictor::init(
-        ckpt.model_config.embedding_width() + checkpoint.generator.a_context_width,
+        ckpt.model_config.embedding_width(),
         checkpoint.range_hidden,
         &device,
     )

@@ -4,7 +4,7 @@
 
 pub use scbg_courtesy::label::{LabelOptions, MarginalEstimate};
 pub use scbg_courtesy::{Audience, Reward, Weighting};
-pub use scbg_generator::{Policy, SelectorLoss, Threshold, Variant};
+pub use scbg_generator::{Policy, Threshold, Variant};
 pub use scbg_sim::{EgoMode, OthersMode};
 
 pub use crate::Courtesy;

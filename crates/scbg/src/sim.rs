@@ -26,14 +26,13 @@ mod run;
 pub use export::{ExportFormat, scene_of_rollout, wosac_rollouts, write_scenarios, write_wosac};
 pub use run::{SimOutput, SimRun, run_sim};
 
-pub use scbg_sim::rollout::DEFAULT_LANE_KEEPING_M;
 pub use scbg_sim::{
     AgentRolloutMetrics, AgentSnapshot, Contact, DEFAULT_REPLAN_EVERY, EgoMode, HORIZON_STEPS,
     OthersMode, SimConfig, Simulation, VehicleLimits,
 };
 
 /// Steps between the generator's plans by default (2 s). The generator commits to one of B's
-/// modes at each plan ([`scbg_generator::GeneratorConfig::likeliest_mode`]); re-deciding every
+/// modes at each plan ([`scbg_generator::Generator::forward`]); re-deciding every
 /// second, a B near the middle of its range switches between yielding and going, where a
 /// driver commits. Held-out synthetic scenes, three generator seeds (BENCHMARKS.md, "A
 /// generator that knows which of B's modes helps A"): Spearman(quantile, realised courtesy)
@@ -60,8 +59,9 @@ pub fn default_replan_every(policy: scbg_generator::Policy) -> usize {
 }
 
 /// How a closed-loop simulation runs, as a front end asks for it: who drives the ego and the
-/// others, how often the controlled agents re-plan (by default the policy's own cadence,
-/// [`default_replan_every`]) and the controlled agents' safety settings.
+/// others, and how often the controlled agents re-plan (by default the policy's own cadence,
+/// [`default_replan_every`]); the controlled agents' safety guard, lane keeping and the world's
+/// right of way are the simulator's defaults.
 /// [`LoopOptions::config`] is the one place a front end's request becomes a [`SimConfig`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LoopOptions {
@@ -71,12 +71,6 @@ pub struct LoopOptions {
     pub others: OthersMode,
     /// Steps between a controlled agent's plans (`None`: the policy's default).
     pub replan_every: Option<usize>,
-    /// The controlled agents' safety guard ([`SimConfig::safety_guard`]).
-    pub safety_guard: bool,
-    /// Lane keeping of the plans ([`SimConfig::lane_keeping_m`]).
-    pub lane_keeping_m: Option<f64>,
-    /// The world's B may take the right of way ([`SimConfig::take_right_of_way`]).
-    pub take_right_of_way: bool,
 }
 
 impl Default for LoopOptions {
@@ -86,9 +80,6 @@ impl Default for LoopOptions {
             ego: config.ego,
             others: config.others,
             replan_every: None,
-            safety_guard: config.safety_guard,
-            lane_keeping_m: config.lane_keeping_m,
-            take_right_of_way: config.take_right_of_way,
         }
     }
 }
@@ -102,9 +93,6 @@ impl LoopOptions {
                 .unwrap_or_else(|| default_replan_every(policy)),
             ego: self.ego,
             others: self.others,
-            safety_guard: self.safety_guard,
-            lane_keeping_m: self.lane_keeping_m,
-            take_right_of_way: self.take_right_of_way,
             ..SimConfig::default()
         }
     }

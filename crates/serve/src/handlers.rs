@@ -445,7 +445,6 @@ pub(crate) async fn create_session(
         ego,
         others,
         replan_every: req.replan_every,
-        ..Default::default()
     };
     let ego_id = req.ego;
     let session = state

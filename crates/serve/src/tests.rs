@@ -61,7 +61,6 @@ fn fixture() -> &'static (tempfile::TempDir, Vec<u8>, scbg_lab::synth::GroundTru
             None,
             options,
             0,
-            false,
             &Quiet,
         )
         .unwrap();

@@ -53,10 +53,6 @@ pub struct LabelOptions {
     pub reward: Reward,
     /// How E[r(Y_A) | x] is estimated.
     pub marginal: MarginalEstimate,
-    /// Scale of the Gaussian part of B's sampled futures (1 = samples of the mixture, 0 =
-    /// mode means); see
-    /// [`SampleMixture::sample`](super::SampleMixture::sample).
-    pub sample_noise: f32,
     /// Whose reward counts: A alone (the paper, the default) or B's neighbours.
     #[serde(default)]
     pub audience: Audience,

@@ -87,7 +87,6 @@ fn audience_psi_is_the_weighted_sum_of_each_members_psi() {
             samples: 3,
             reward: Reward::AverageSpeed,
             marginal,
-            sample_noise: 1.0,
             audience,
             baseline_samples: 0,
             lane_move_steps: 0,

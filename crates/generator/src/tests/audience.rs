@@ -21,7 +21,6 @@ fn labelled_toward_neighbours(
             samples: 2,
             reward: Reward::AverageSpeed,
             marginal: MarginalEstimate::ConditionalAverage,
-            sample_noise: 1.0,
             audience,
             baseline_samples: 0,
             lane_move_steps: 0,
@@ -49,7 +48,7 @@ fn measured_courtesy_toward_an_audience_sums_its_members() {
         let sum: f32 = e.terms.iter().map(|t| t.weight * t.e_marg).sum();
         assert!((sum - e.e_marg).abs() < 1e-4 * (1.0 + sum.abs()));
     }
-    let generator = GeneratorConfig::with_a_context(config.embedding_width()).init(&device);
+    let generator = GeneratorConfig::new(config.embedding_width(), config.num_modes).init(&device);
     let psi: Vec<Vec<f32>> = crowded.iter().map(|_| vec![-0.5, 0.8]).collect();
     let m = eval::generate_and_measure(
         &generator,
@@ -155,6 +154,6 @@ fn the_courtesy_loss_toward_an_audience_reaches_the_generator() {
     let refs: Vec<&Example> = examples.iter().filter(|e| !e.others.is_empty()).collect();
     assert!(!refs.is_empty());
     let predictor = burn::module::Module::no_grad(predictor);
-    let generator = GeneratorConfig::with_a_context(config.embedding_width()).init(&device);
+    let generator = GeneratorConfig::new(config.embedding_width(), config.num_modes).init(&device);
     assert_courtesy_loss_reaches_generator(&generator, &predictor, &refs, &device);
 }

@@ -10,20 +10,12 @@ fn slowed_copies_are_scored_against_the_mixtures_own_mean() {
     let (_guard, config, predictor) = seeded_predictor(&device, 13);
     let mut plain = labelled(&predictor, 2, 2, Reward::AverageSpeed, 2, &device);
     let mut slowed = plain.clone();
-    crate::fill_mode_courtesy(
-        &predictor,
-        &mut plain,
-        Reward::AverageSpeed,
-        &[],
-        0,
-        &device,
-    );
+    crate::fill_mode_courtesy(&predictor, &mut plain, Reward::AverageSpeed, &[], &device);
     crate::fill_mode_courtesy(
         &predictor,
         &mut slowed,
         Reward::AverageSpeed,
         &[0.5],
-        0,
         &device,
     );
     let k = config.num_modes;
@@ -55,10 +47,9 @@ fn slowed_copies_are_scored_against_the_mixtures_own_mean() {
     assert!(psi.iter().zip(&stored).all(|(a, b)| (a - b).abs() < 1e-5));
 }
 
-/// A mode-selecting generator's scored candidates are its modes, their slowed copies and lane
-/// moves, in [`crate::Generator::candidates_of`]'s order, each with the courtesy
-/// `fill_mode_courtesy` stores for it (measured alike when none is stored); a plain
-/// regression has none.
+/// The generator's scored candidates are its modes and their slowed copies, in
+/// [`crate::Generator::candidates_of`]'s order, each with the courtesy `fill_mode_courtesy`
+/// stores for it (measured alike when none is stored).
 #[test]
 fn scored_candidates_are_the_modes_and_copies_with_their_courtesy() {
     let device = Device::flex();
@@ -69,19 +60,11 @@ fn scored_candidates_are_the_modes_and_copies_with_their_courtesy() {
         &mut examples,
         Reward::AverageSpeed,
         &[0.5],
-        30,
         &device,
     );
     let refs: Vec<&Example> = examples.iter().collect();
-    let mut gen_config = GeneratorConfig::with_a_context(config.embedding_width());
-    let plain = gen_config.init(&device);
-    assert!(
-        crate::scored_candidates(&plain, &predictor, &refs, Reward::AverageSpeed, &device)
-            .is_none()
-    );
-    gen_config.modes = config.num_modes;
+    let mut gen_config = GeneratorConfig::new(config.embedding_width(), config.num_modes);
     gen_config.mode_slowdowns = vec![0.5];
-    gen_config.lane_move_steps = 30;
     let generator = gen_config.init(&device);
     // Measured here for examples without a stored courtesy of their choices; read back
     // where there is one.
@@ -100,19 +83,16 @@ fn scored_candidates_are_the_modes_and_copies_with_their_courtesy() {
         &bare_refs,
         Reward::AverageSpeed,
         &device,
-    )
-    .expect("a mode-selecting generator");
+    );
     let stored =
-        crate::scored_candidates(&generator, &predictor, &refs, Reward::AverageSpeed, &device)
-            .expect("a mode-selecting generator");
+        crate::scored_candidates(&generator, &predictor, &refs, Reward::AverageSpeed, &device);
     for (a, b) in scored.iter().zip(&stored) {
         for (a, b) in a.iter().zip(b) {
             assert_eq!(a.xy, b.xy);
             assert!((a.psi - b.psi).abs() < 1e-5);
         }
     }
-    let lanes: Vec<_> = refs.iter().map(|e| crate::lane_path_points(&e.b)).collect();
-    let modes = generator.candidates_of(crate::b_modes(&predictor, &refs, &device), &lanes);
+    let modes = generator.candidates_of(crate::b_modes(&predictor, &refs, &device));
     let [n, k, t, _] = modes.xy.dims();
     assert_eq!((scored.len(), k), (refs.len(), gen_config.candidates()));
     let xy = crate::tensors::to_vec(modes.xy);

@@ -2,7 +2,7 @@
 
 use super::*;
 
-/// An untrained model (cpu-small predictor, generator told who A is) for the test scenes,
+/// An untrained model (cpu-small predictor) for the test scenes,
 /// labelling `samples` futures of B; and the ids of A and B of the first scene's first pair.
 fn untrained_scbg(
     scenes: &[PreparedScene],
@@ -18,19 +18,14 @@ fn untrained_scbg(
     );
     let scbg = Scbg {
         predictor: config.init(device),
-        generator: GeneratorConfig::with_a_context(config.embedding_width()).init(device),
-        range: RangePredictor::init(
-            config.embedding_width() + crate::A_CONTEXT_WIDTH,
-            16,
-            device,
-        ),
+        generator: GeneratorConfig::new(config.embedding_width(), config.num_modes).init(device),
+        range: RangePredictor::init(config.embedding_width(), 16, device),
         stats: stats(scenes),
         features: features(),
         labels: LabelOptions {
             samples,
             reward: Reward::AverageSpeed,
             marginal: MarginalEstimate::ConditionalAverage,
-            sample_noise: 1.0,
             audience: Default::default(),
             baseline_samples: 0,
             lane_move_steps: 0,
@@ -103,6 +98,11 @@ fn generate_maps_quantiles_and_reports_bad_requests() {
         .unwrap();
     assert!((by_psi[0].quantile - 0.9).abs() < 1e-4);
     assert_eq!(by_psi[0].world_xy_m, out[2].world_xy_m);
+    // One inference path: the closed-loop plan is the future `generate` measured.
+    let plan = scbg
+        .plan(scene, window, a_id, b_id, Courtesy::Quantile(0.9), &device)
+        .unwrap();
+    assert_eq!(plan, out[2].world_xy_m);
     assert!(matches!(
         scbg.generate(
             scene,

@@ -121,8 +121,6 @@ pub struct LabelSummary {
     pub reward: Reward,
     /// How E[r(Y_A) | x] was estimated.
     pub marginal: scbg_courtesy::label::MarginalEstimate,
-    /// Scale of the Gaussian part of B's sampled futures.
-    pub sample_noise: f32,
     /// Whose reward counts (A alone, or B's neighbours).
     pub audience: scbg_courtesy::Audience,
     /// Mean number of agents whose reward a logged future's ψ counts (1 for the pair).
@@ -176,7 +174,6 @@ impl LabelSummary {
                 .count(),
             reward: options.reward,
             marginal: options.marginal,
-            sample_noise: options.sample_noise,
             audience: options.audience,
             audience_size_mean: rows
                 .iter()

@@ -1,62 +1,29 @@
-//! The generator heads through the library.
+//! The generator folder through the library: what it records, and the artefacts it refuses.
 
-use scbg::choices::{Courtesy, Variant};
-use scbg::{Quiet, generate};
-use scbg_lab::{generator, synth};
+use scbg_lab::generator;
 
-/// The generator heads: the default one chooses among B's predicted modes (the model above);
-/// the regression head is trained, saved, loaded and driven the same way; a generator.json
-/// whose mode count is not the predictor's is refused.
-pub(crate) fn generator_heads(
-    predictors: &generator::Predictors,
-    examples: &[scbg_generator::Example],
-    options: scbg_courtesy::label::LabelOptions,
-    scene: &scbg_scene::Scene,
-    t: &synth::GroundTruth,
-    dir: &std::path::Path,
-) {
+/// The generator chooses among B's predicted modes and their slowed copies; a generator.json
+/// whose mode count is not the predictor's, or one of another format, is refused clearly.
+pub(crate) fn generator_heads(predictors: &generator::Predictors, dir: &std::path::Path) {
     let k = predictors.ckpt.model_config.num_modes;
     let default = generator::load_scbg(&dir.join("gen"), None).unwrap();
     assert_eq!(default.checkpoint.generator.modes, k);
-    assert!(default.scbg.generator.selects_modes());
-    let out = dir.join("gen_regression");
-    generator::train_variant(
-        predictors,
-        examples,
-        &generator::VariantSettings {
-            epochs: 1,
-            batch_size: 8,
-            range_steps: 10,
-            select_modes: false,
-            ..generator::VariantSettings::new(Variant::Full, options)
-        },
-        &out,
-        &Quiet,
-    )
-    .unwrap();
-    let model = generator::load_scbg(&out, None).unwrap();
-    assert_eq!(model.checkpoint.generator.modes, 0);
-    assert!(!model.scbg.generator.selects_modes());
-    let got = generate::generate(
-        &model,
-        scene,
-        t.a_id,
-        t.b_id,
-        &[
-            Courtesy::quantile(0.1).unwrap(),
-            Courtesy::quantile(0.9).unwrap(),
-        ],
-    )
-    .unwrap();
-    // (A regression trained one epoch from its random initialisation can start metres off:
-    // the frames are checked on the default model above.)
-    for traj in &got.trajectories {
-        assert_eq!(traj.world_xy_m.len(), 80);
-        assert!(traj.world_xy_m.iter().flatten().all(|v| v.is_finite()));
+    assert_eq!(
+        default.checkpoint.generator.mode_slowdowns,
+        scbg_generator::DEFAULT_MODE_SLOWDOWNS
+    );
+    let out = dir.join("gen_refused");
+    std::fs::create_dir_all(&out).unwrap();
+    for name in [
+        generator::GENERATOR_JSON,
+        generator::GENERATOR_WEIGHTS,
+        generator::RANGE_WEIGHTS,
+    ] {
+        std::fs::copy(dir.join("gen").join(name), out.join(name)).unwrap();
     }
-    // generator.json claiming another mode count than the predictor's: a clear refusal.
     let json = out.join(generator::GENERATOR_JSON);
     let text = std::fs::read_to_string(&json).unwrap();
+    // generator.json claiming another mode count than the predictor's.
     let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
     v["generator"]["modes"] = serde_json::json!(k + 1);
     std::fs::write(&json, v.to_string()).unwrap();
@@ -65,4 +32,10 @@ pub(crate) fn generator_heads(
         scbg::is_invalid_request(&err) && format!("{err:#}").contains(&format!("{} modes", k + 1)),
         "{err:#}"
     );
+    // A folder of an earlier format: retrain, says the error.
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    v["format_version"] = serde_json::json!(generator::GENERATOR_FORMAT_VERSION - 1);
+    std::fs::write(&json, v.to_string()).unwrap();
+    let err = generator::load_scbg(&out, None).unwrap_err();
+    assert!(format!("{err:#}").contains("retrain"), "{err:#}");
 }

@@ -1,136 +1,8 @@
-//! Labelling through the library: oracle labels, courtesy toward neighbours, ensembles.
+//! Labelling through the library: courtesy toward neighbours, ensembles.
 
 use scbg::choices::{Courtesy, LabelOptions, MarginalEstimate, Reward, Variant};
 use scbg::{Quiet, generate};
 use scbg_lab::{generator, labels, predictor, synth};
-
-/// The oracle-label experiment: the ground truth's role of each scene keeps its futures with
-/// the label table's ψ_true as ψ, every other role is dropped, and a generator trained on them
-/// says so in generator.json.
-pub(crate) fn oracle_labels(
-    predictors: &generator::Predictors,
-    rows: &[labels::LabelRow],
-    truth: &[scbg_lab::synth::GroundTruth],
-    dir: &std::path::Path,
-) {
-    let options = labels::label_options(2, Reward::AverageSpeed, MarginalEstimate::default());
-    let labelled = generator::labelled_split(
-        &predictors.plain,
-        &predictors.ckpt,
-        &predictors.plain_device,
-        &dir.join("cache"),
-        None,
-        options,
-        0,
-        &Quiet,
-    )
-    .unwrap();
-    let (kept, count) = labels::oracle_labelled(labelled.clone(), truth, 0);
-    let scored: Vec<&labels::LabelRow> = rows.iter().filter(|r| r.psi_true.is_some()).collect();
-    assert_eq!(
-        count.roles,
-        kept.iter().map(|s| s.roles.len()).sum::<usize>()
-    );
-    assert_eq!(count.roles + count.dropped_roles, 32);
-    assert_eq!(count.futures, scored.len());
-    assert!(count.roles >= 14, "{count:?}");
-    for scene in &kept {
-        let t = truth
-            .iter()
-            .find(|t| t.scenario_id == scene.scenario_id)
-            .unwrap();
-        let [role] = &scene.roles[..] else {
-            panic!("{} keeps {} roles", scene.scenario_id, scene.roles.len())
-        };
-        assert_eq!((role.a_id, role.b_id), (t.a_id, t.b_id));
-        let expected: Vec<f32> = scored
-            .iter()
-            .filter(|r| r.scenario_id == scene.scenario_id)
-            .map(|r| r.psi_true.unwrap())
-            .collect();
-        assert_eq!(role.labels.psi, expected);
-        assert_eq!(role.labels.futures_in_a.len(), expected.len());
-    }
-    let saved = generator::train_generator(
-        &dir.join("model"),
-        &dir.join("cache"),
-        &dir.join("gen_oracle"),
-        &generator::VariantSettings {
-            epochs: 1,
-            batch_size: 8,
-            range_steps: 10,
-            oracle_labels: true,
-            world_futures: 0,
-            ..generator::VariantSettings::new(Variant::Augmented, options)
-        },
-        false,
-        Some(truth),
-        &Quiet,
-    )
-    .unwrap();
-    assert!(saved.oracle_labels && saved.examples <= count.roles);
-    let read = generator::GeneratorCheckpoint::read(&dir.join("gen_oracle")).unwrap();
-    assert!(read.oracle_labels && read.world_futures == 0);
-    // The world's own futures of B in place of the sampled ones: the logged future and its
-    // ψ_true stay, the world's futures are scored by the oracle like any other.
-    let (world, world_count) = labels::oracle_labelled(labelled, truth, 3);
-    assert_eq!(world_count.roles, count.roles);
-    assert_eq!(world_count.futures, 4 * count.roles, "{world_count:?}");
-    for (w, k) in world.iter().zip(&kept) {
-        let (wr, kr) = (&w.roles[0], &k.roles[0]);
-        assert_eq!(wr.labels.psi[0], kr.labels.psi[0]);
-        assert_eq!(wr.labels.futures_in_a[0], kr.labels.futures_in_a[0]);
-        assert_eq!(wr.labels.futures_in_a.len(), 4);
-        assert!(wr.labels.e_cond[1..].iter().all(|e| e.is_nan()));
-        // The courtesy-0.5 future of 3 is the world's B at c = 0.5, scored by the oracle.
-        let t = truth
-            .iter()
-            .find(|t| t.scenario_id == w.scenario_id)
-            .unwrap();
-        let scenario = scbg_synth::Scenario::of_truth(t).unwrap();
-        let mid = scbg_lab::fidelity::world_future_of_b(&scenario, t.b_id, 0.5).unwrap();
-        let in_a = &wr.labels.futures_in_a[2];
-        let back = scbg_lab::fidelity::world_points(&wr.a.world_from_agent, in_a);
-        assert!(
-            back.iter()
-                .zip(&mid)
-                .all(|(p, q)| (p[0] - q[0]).abs() < 1e-2 && (p[1] - q[1]).abs() < 1e-2)
-        );
-        let psi = scenario.oracle().psi_true(&back).unwrap();
-        assert!((f64::from(wr.labels.psi[2]) - psi).abs() < 1e-4);
-    }
-    // World futures are scored by the oracle: they need its labels.
-    let err = generator::train_generator(
-        &dir.join("model"),
-        &dir.join("cache"),
-        &dir.join("gen_world"),
-        &generator::VariantSettings {
-            world_futures: 2,
-            ..generator::VariantSettings::new(Variant::Augmented, options)
-        },
-        false,
-        None,
-        &Quiet,
-    )
-    .unwrap_err();
-    assert!(scbg::is_invalid_request(&err), "{err:#}");
-    // Without the ground truth there is nothing to take ψ_true from.
-    let err = generator::train_generator(
-        &dir.join("model"),
-        &dir.join("cache"),
-        &dir.join("gen_oracle2"),
-        &generator::VariantSettings {
-            oracle_labels: true,
-            world_futures: 0,
-            ..generator::VariantSettings::new(Variant::Augmented, options)
-        },
-        false,
-        None,
-        &Quiet,
-    )
-    .unwrap_err();
-    assert!(scbg::is_invalid_request(&err), "{err:#}");
-}
 
 /// Labels, a generator and generation with ψ toward B's neighbours.
 pub(crate) fn courtesy_toward_neighbours(
@@ -184,7 +56,6 @@ pub(crate) fn courtesy_toward_neighbours(
         None,
         options,
         0,
-        false,
         &Quiet,
     )
     .unwrap();

@@ -8,7 +8,7 @@ mod labelling;
 
 use closed_loop::{closed_loop_through_the_library, ranked_policy_in_the_loop};
 use heads::generator_heads;
-use labelling::{courtesy_toward_neighbours, ensemble_labels, oracle_labels};
+use labelling::{courtesy_toward_neighbours, ensemble_labels};
 use scbg::choices::{Courtesy, Family, MarginalEstimate, Reward, Variant};
 use scbg::{Quiet, generate};
 use scbg_lab::{generator, labels, predictor, synth};
@@ -102,17 +102,10 @@ fn label_train_and_generate_through_the_library() {
         None,
         options,
         0,
-        // The opt-in generator told who A is: trained, saved, loaded and driven below.
-        true,
         &Quiet,
     )
     .unwrap();
     assert_eq!(examples.len(), 32);
-    assert!(
-        examples
-            .iter()
-            .all(|e| e.a_context.len() == scbg_generator::A_CONTEXT_WIDTH)
-    );
     let first = rows
         .iter()
         .find(|r| r.scenario_id == examples[0].scenario_id && r.sample == 0)
@@ -161,10 +154,6 @@ fn label_train_and_generate_through_the_library() {
     assert_eq!(saved_moves.generator.psi_scale, saved.generator.psi_scale);
 
     let model = generator::load_scbg(&p("gen"), None).unwrap();
-    assert_eq!(
-        model.checkpoint.generator.a_context_width,
-        scbg_generator::A_CONTEXT_WIDTH
-    );
     let file = p("synth").join("synth-00000.tfrecord");
     let t = &truth[0];
     let (_, scene) = generate::find_scene(&file, Some(&t.scenario_id), t.a_id, t.b_id).unwrap();
@@ -215,11 +204,10 @@ fn label_train_and_generate_through_the_library() {
     let bad = anyhow::Error::new(Courtesy::quantile(1.5).unwrap_err());
     assert!(scbg::is_invalid_request(&bad) && format!("{bad:#}").contains("1.5"));
 
-    generator_heads(&predictors, &examples, options, &scene, t, dir.path());
+    generator_heads(&predictors, dir.path());
     closed_loop_through_the_library(&model, &scene, t, dir.path());
     ranked_policy_in_the_loop(model, &scene, t);
     courtesy_toward_neighbours(&predictors, &scene, t, dir.path());
-    oracle_labels(&predictors, &rows, &truth, dir.path());
 
     // A predictor folder is not a generator folder; an old generator.json is refused clearly.
     let err = generator::load_scbg(&p("model"), None).unwrap_err();
