@@ -60,3 +60,28 @@ pub fn inspect_json(files: &[&Path]) -> Vec<Value> {
 pub fn real_dir() -> Option<PathBuf> {
     scbg_womd::fixtures::real_data_dir()
 }
+
+/// A PNG at `path` that decodes to `size` (width, height) with something drawn on it: a
+/// share of its pixels (1–95 %) differs from the background (its corner's colour), in at
+/// least three colours.
+pub fn assert_drawn_png(path: &Path, size: (u32, u32)) {
+    let img = image::open(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+        .to_rgba8();
+    assert_eq!(img.dimensions(), size, "{}", path.display());
+    let background = *img.get_pixel(0, 0);
+    let drawn: Vec<&image::Rgba<u8>> = img.pixels().filter(|p| **p != background).collect();
+    let share = drawn.len() as f64 / f64::from(size.0 * size.1);
+    assert!(
+        (0.01..=0.95).contains(&share),
+        "{}: {:.1} % of the pixels drawn",
+        path.display(),
+        100.0 * share
+    );
+    let colours: std::collections::BTreeSet<[u8; 4]> = drawn.iter().map(|p| p.0).collect();
+    assert!(
+        colours.len() >= 3,
+        "{}: colours {colours:?}",
+        path.display()
+    );
+}

@@ -71,64 +71,44 @@ fn synth_files_read_back_with_labelled_vehicle_pairs() {
     }
 }
 
-#[test]
-fn prepare_is_deterministic_resumable_and_mines_pairs() {
-    let Some(real) = real_dir() else { return };
-    let dir = tempfile::tempdir().unwrap();
-    let synth = dir.path().join("synth");
-    scbg_ok(&[
-        "synth",
-        "--scenarios",
-        "40",
-        "--seed",
-        "1",
+/// `scbg data prepare` of `inputs` into `out` (4 files per shard); returns the manifest.
+fn prepare(inputs: &[String], out: &std::path::Path) -> serde_json::Value {
+    let mut args = vec![
+        "data",
+        "prepare",
         "--out",
-        synth.to_str().unwrap(),
-    ]);
-    let inputs = [
-        synth.display().to_string(),
-        real.join("womd-reencoded").display().to_string(),
-        real.join("nuscenes-reencoded").display().to_string(),
+        out.to_str().unwrap(),
+        "--files-per-shard",
+        "4",
+        "--input",
     ];
-    let prepare = |out: &std::path::Path| {
-        let mut args = vec![
-            "data",
-            "prepare",
-            "--out",
-            out.to_str().unwrap(),
-            "--files-per-shard",
-            "4",
-            "--input",
-        ];
-        args.extend(inputs.iter().map(String::as_str));
-        scbg_ok(&args);
-        serde_json::from_str::<serde_json::Value>(
-            &std::fs::read_to_string(out.join("manifest.json")).unwrap(),
-        )
-        .unwrap()
-    };
-    let a = dir.path().join("a");
-    let m1 = prepare(&a);
-    assert_eq!(m1["total"]["scenarios"], 40 + 12 + 10);
-    // 20 s WOMD scenarios and nuScenes scenes yield several windows each, and mined pairs.
-    assert!(m1["total"]["windows"].as_u64().unwrap() > 62 + 50);
-    assert!(m1["total"]["pairs"].as_u64().unwrap() >= 40 + 2 + 10);
-    let ratio = m1["total"]["bytes"].as_f64().unwrap() / m1["total"]["raw_bytes"].as_f64().unwrap();
-    assert!(ratio < 0.3, "cache is {ratio:.3} of raw bytes");
-    // Re-running resumes (same manifest, shard files untouched).
+    args.extend(inputs.iter().map(String::as_str));
+    scbg_ok(&args);
+    serde_json::from_str(&std::fs::read_to_string(out.join("manifest.json")).unwrap()).unwrap()
+}
+
+/// A second run into `a` resumes (same manifest, shard files untouched), and a fresh run into
+/// `b` writes identical shards.
+fn assert_resumes_and_is_deterministic(
+    inputs: &[String],
+    a: &std::path::Path,
+    b: &std::path::Path,
+) {
+    let m1: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(a.join("manifest.json")).unwrap()).unwrap();
     let shard = a.join("shard-00000.bin");
     let mtime = std::fs::metadata(&shard).unwrap().modified().unwrap();
-    assert_eq!(prepare(&a), m1);
+    assert_eq!(prepare(inputs, a), m1);
     assert_eq!(
         std::fs::metadata(&shard).unwrap().modified().unwrap(),
         mtime
     );
-    // Deterministic: a fresh run writes identical shards.
-    let b = dir.path().join("b");
-    prepare(&b);
-    for entry in std::fs::read_dir(&a).unwrap() {
+    prepare(inputs, b);
+    let mut shards = 0;
+    for entry in std::fs::read_dir(a).unwrap() {
         let name = entry.unwrap().file_name();
         if name.to_string_lossy().ends_with(".bin") {
+            shards += 1;
             assert_eq!(
                 std::fs::read(a.join(&name)).unwrap(),
                 std::fs::read(b.join(&name)).unwrap(),
@@ -136,9 +116,14 @@ fn prepare_is_deterministic_resumable_and_mines_pairs() {
             );
         }
     }
-    // Every scene decodes from the cache, and samples can be built for its targets.
-    let ds = scbg_features::cache::PreparedDataset::open(&a).unwrap();
-    assert_eq!(ds.len(), 62);
+    assert!(shards > 0);
+}
+
+/// Every scene of the cache at `dir` decodes, and samples are built for its targets and pairs;
+/// returns how many marginal samples were built.
+fn decode_every_scene(dir: &std::path::Path, scenes: usize) -> usize {
+    let ds = scbg_features::cache::PreparedDataset::open(dir).unwrap();
+    assert_eq!(ds.len(), scenes);
     let mut samples = 0;
     for i in 0..ds.len() {
         let scene = ds.scene(i).unwrap();
@@ -170,7 +155,63 @@ fn prepare_is_deterministic_resumable_and_mines_pairs() {
             }
         }
     }
-    assert!(samples > 100);
+    samples
+}
+
+#[test]
+fn prepare_of_synthetic_data_is_deterministic_and_resumable() {
+    let dir = tempfile::tempdir().unwrap();
+    let synth = dir.path().join("synth");
+    scbg_ok(&[
+        "synth",
+        "--scenarios",
+        "40",
+        "--seed",
+        "1",
+        "--out",
+        synth.to_str().unwrap(),
+        "--scenarios-per-file",
+        "5",
+    ]);
+    let inputs = [synth.display().to_string()];
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let m = prepare(&inputs, &a);
+    assert_eq!(m["total"]["scenarios"], 40);
+    // One labelled pair per synthetic scene (its ground truth's), in its current window.
+    assert!(m["total"]["pairs"].as_u64().unwrap() >= 40, "{m}");
+    assert_resumes_and_is_deterministic(&inputs, &a, &b);
+    assert!(decode_every_scene(&a, 40) >= 40);
+}
+
+#[test]
+fn prepare_of_real_data_mines_pairs() {
+    let Some(real) = real_dir() else { return };
+    let dir = tempfile::tempdir().unwrap();
+    let synth = dir.path().join("synth");
+    scbg_ok(&[
+        "synth",
+        "--scenarios",
+        "40",
+        "--seed",
+        "1",
+        "--out",
+        synth.to_str().unwrap(),
+    ]);
+    let inputs = [
+        synth.display().to_string(),
+        real.join("womd-reencoded").display().to_string(),
+        real.join("nuscenes-reencoded").display().to_string(),
+    ];
+    let a = dir.path().join("a");
+    let m1 = prepare(&inputs, &a);
+    assert_eq!(m1["total"]["scenarios"], 40 + 12 + 10);
+    // 20 s WOMD scenarios and nuScenes scenes yield several windows each, and mined pairs.
+    assert!(m1["total"]["windows"].as_u64().unwrap() > 62 + 50);
+    assert!(m1["total"]["pairs"].as_u64().unwrap() >= 40 + 2 + 10);
+    let ratio = m1["total"]["bytes"].as_f64().unwrap() / m1["total"]["raw_bytes"].as_f64().unwrap();
+    assert!(ratio < 0.3, "cache is {ratio:.3} of raw bytes");
+    assert_resumes_and_is_deterministic(&inputs, &a, &dir.path().join("b"));
+    assert!(decode_every_scene(&a, 62) > 100);
 }
 
 #[test]
@@ -196,6 +237,5 @@ fn render_writes_a_png() {
         "--size-px",
         "400",
     ]);
-    let bytes = std::fs::read(&png).unwrap();
-    assert_eq!(&bytes[1..4], b"PNG");
+    crate::assert_drawn_png(&png, (400, 400));
 }
