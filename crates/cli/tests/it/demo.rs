@@ -16,6 +16,7 @@ fn demo_writes_a_report() {
          batch_size = 64\nlearning_rate = 0.002\n\
          [generator]\nepochs = 1\nseeds = 2\n",
     );
+    let started = std::time::Instant::now();
     scbg_ok(&[
         "demo",
         "--out",
@@ -23,6 +24,7 @@ fn demo_writes_a_report() {
         "--config",
         config.to_str().unwrap(),
     ]);
+    let wall_seconds = started.elapsed().as_secs_f64();
     let config = std::fs::read_to_string(out.join("predictor.toml")).unwrap();
     assert!(
         config.contains("batch_size = 64") && config.contains("learning_rate = 0.002"),
@@ -61,13 +63,10 @@ fn demo_writes_a_report() {
     }
     let families = report["spearman_latent"].as_object().unwrap();
     assert_eq!(families.len(), 3, "{report}");
-    assert!(report["checks"]["range_below_arbitrary"].is_boolean());
     // The closed-loop stage ran on the held-out scenes.
     let cl = &report["closed_loop"];
     assert_eq!(cl["per_quantile"].as_array().unwrap().len(), 9);
     assert!(cl["baselines"]["constant_velocity"]["wosac"]["metametric"].is_number());
-    assert!(report["checks"]["closed_loop_b_collision_2pct"].is_boolean());
-    assert!(report["checks"]["closed_loop_wosac_prior_above_baselines"].is_boolean());
     assert!(cl["wosac_scbg_prior"]["metametric"].is_number());
     assert!(cl["wosac_prior_minus_idm"]["std_error"].is_number());
     // The knob within a scene: a mean of Spearman values, over responsive scenes only.
@@ -102,7 +101,6 @@ fn demo_writes_a_report() {
     assert_eq!(rk["per_quantile"].as_array().unwrap().len(), 9);
     assert!(rk["wosac_scbg"]["metametric"].is_number(), "{rk}");
     assert!(rk["wosac_scbg_prior"].is_null());
-    assert!(report["checks"]["closed_loop_ranked_b_collision_2pct"].is_boolean());
     assert!(
         report["checks"]
             .get("closed_loop_ranked_wosac_prior_above_baselines")
@@ -137,10 +135,16 @@ fn demo_writes_a_report() {
     .unwrap();
     assert_eq!(ckpt["state"]["epoch"], 2, "{ckpt}");
     assert_eq!(ckpt["train_config"]["reaction_from_epoch"], 1, "{ckpt}");
-    // Where the time went, stage by stage.
+    // Where the time went, stage by stage: every stage took some, and together no more than
+    // the run did.
     let stages = report["stage_seconds"].as_object().unwrap();
     assert_eq!(stages.len(), 9, "{report}");
-    assert!(stages.values().all(|v| v.as_f64().unwrap() >= 0.0));
+    let seconds: Vec<f64> = stages.values().map(|v| v.as_f64().unwrap()).collect();
+    assert!(seconds.iter().all(|&s| s > 0.0), "{stages:?}");
+    assert!(
+        seconds.iter().sum::<f64>() <= wall_seconds,
+        "{stages:?} in {wall_seconds:.1} s"
+    );
     let tuned: Value = serde_json::from_str(
         &std::fs::read_to_string(out.join("cache_reaction/manifest.json")).unwrap(),
     )
@@ -157,19 +161,51 @@ fn demo_writes_a_report() {
         "{report}"
     );
     assert_eq!(world["per_quantile"].as_array().unwrap().len(), 9);
+    // Every acceptance check is reported; those a 40-scene demo of two predictor epochs meets
+    // hold. (Label fidelity, control in truth, the closed loop's Spearman and rising curve,
+    // WOSAC above the baselines and the full variant's TrajADE need the default demo's data
+    // and training: BENCHMARKS.md.)
+    let checks = report["checks"].as_object().unwrap();
+    let mut keys: Vec<&str> = checks.keys().map(String::as_str).collect();
+    keys.sort_unstable();
+    assert_eq!(
+        keys,
+        [
+            "closed_loop_b_collision_2pct",
+            "closed_loop_curve_rises",
+            "closed_loop_ranked_b_collision_2pct",
+            "closed_loop_ranked_curve_rises",
+            "closed_loop_ranked_spearman_0_6",
+            "closed_loop_ranked_wosac_above_baselines",
+            "closed_loop_spearman_0_6",
+            "closed_loop_wosac_above_baselines",
+            "closed_loop_wosac_prior_above_baselines",
+            "corr_quantile_at_least_0_6",
+            "corr_quantile_high_at_least_0_8",
+            "fidelity_logged_spearman_0_7",
+            "fidelity_sampled_spearman_0_7",
+            "fidelity_spread_ratio",
+            "full_courtesy_mse_data_no_worse",
+            "full_traj_ade_no_worse",
+            "label_latent_spearman_0_5",
+            "oracle_consistency_95",
+            "range_below_arbitrary",
+            "truth_control_spearman",
+        ]
+    );
+    assert!(
+        checks.values().all(serde_json::Value::is_boolean),
+        "{checks:?}"
+    );
     for key in [
         "oracle_consistency_95",
-        "fidelity_logged_spearman_0_7",
-        "fidelity_sampled_spearman_0_7",
-        "fidelity_spread_ratio",
-        "label_latent_spearman_0_5",
-        "truth_control_spearman",
-        "corr_quantile_at_least_0_6",
-        "corr_quantile_high_at_least_0_8",
+        "range_below_arbitrary",
+        "full_courtesy_mse_data_no_worse",
+        "closed_loop_b_collision_2pct",
+        "closed_loop_ranked_b_collision_2pct",
     ] {
-        assert!(report["checks"][key].is_boolean(), "{key}: {report}");
+        assert_eq!(checks[key], true, "{key}: {report}");
     }
-    assert!(report["checks"]["oracle_consistency_95"].as_bool().unwrap());
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("| Conditional (interacting agents) |"), "{md}");
     assert!(md.contains("| ①+②+③ courtesy loss |"), "{md}");
