@@ -8,6 +8,7 @@ use serde_json::Value;
 
 mod corrupt;
 mod demo;
+mod direction;
 mod generator;
 mod pipeline;
 mod predictor;
