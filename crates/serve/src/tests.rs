@@ -2,7 +2,6 @@
 //! a 4xx JSON error, the token, the data folder's fence, sessions, a real TCP server that shuts
 //! down gracefully.
 
-use std::path::Path;
 use std::sync::{Arc, OnceLock};
 
 use axum::body::Body;

@@ -91,9 +91,11 @@ async fn tcp_server_finishes_in_flight_requests_on_shutdown() {
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let (taken_tx, taken_rx) = tokio::sync::oneshot::channel::<()>();
     let held = st.clone();
     let server = tokio::spawn(serve(st, listener, async move {
         let _ = stop_rx.await;
+        let _ = taken_tx.send(());
     }));
     let client: Client<_, Full<Bytes>> = Client::builder(TokioExecutor::new()).build_http();
     let post = |path: &str, ct: &'static str, body: Vec<u8>| {
@@ -131,8 +133,20 @@ async fn tcp_server_finishes_in_flight_requests_on_shutdown() {
     {
         tokio::time::sleep(std::time::Duration::from_millis(1)).await;
     }
+    // Shutdown begins while all five still wait for a worker: the server has taken the
+    // signal (its shutdown future resolved) and closed its listener; only then are the
+    // workers freed.
     stop_tx.send(()).unwrap();
-    tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    taken_rx.await.unwrap();
+    while tokio::net::TcpStream::connect(addr).await.is_ok() {
+        tokio::task::yield_now().await;
+    }
+    assert_eq!(
+        held.metrics
+            .in_flight
+            .load(std::sync::atomic::Ordering::Relaxed),
+        5
+    );
     drop(permits);
     for p in pending {
         let r = p.await.unwrap().unwrap();
@@ -145,14 +159,29 @@ async fn tcp_server_finishes_in_flight_requests_on_shutdown() {
     );
 }
 
-#[test]
-fn scenario_paths_are_checked_before_reading() {
-    // The fence does not depend on the file existing: `..` is refused outright.
-    let rel = Path::new("a/../../b");
-    assert!(
-        rel.components()
-            .any(|c| !matches!(c, std::path::Component::Normal(_)))
-    );
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scenario_paths_are_checked_before_reading() {
+    // The fence does not depend on the file existing: a path with `..` (or `.`) is refused
+    // outright (403), even where it names no file or leads back into the data folder; only a
+    // plain relative name that is missing is a 404.
+    let app = router(state(None, 16 << 20));
+    for file in [
+        "a/../../b",
+        "nothing/../synth-00000.tfrecord",
+        "./synth-00000.tfrecord",
+    ] {
+        let (status, v) =
+            json_call(&app, "POST", "/v1/scenarios/open", json!({"file": file})).await;
+        assert_error(status, &v, StatusCode::FORBIDDEN, "without `..`");
+    }
+    let (status, v) = json_call(
+        &app,
+        "POST",
+        "/v1/scenarios/open",
+        json!({"file": "a/b.tfrecord"}),
+    )
+    .await;
+    assert_error(status, &v, StatusCode::NOT_FOUND, "not in the data folder");
 }
 
 /// The browser to drive (`SCBG_CHROMIUM`, else chromium on the PATH); `None` prints why. Under
@@ -180,8 +209,8 @@ fn chromium() -> Option<std::path::PathBuf> {
 }
 
 /// The web viewer in a real headless browser: the page loads a scenario from the data folder,
-/// the slider moves from 0.1 to 0.9 and the drawn trajectory changes, and a closed-loop
-/// session plays three steps.
+/// the slider moves from 0.1 to 0.9, the drawn trajectory changes and the A speed it shows
+/// (E[r(Y_A) | x, ŷ_B]) rises, and a closed-loop session plays three steps.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn viewer_in_a_headless_browser() {
     let Some(browser) = chromium() else {
@@ -233,5 +262,21 @@ async fn viewer_in_a_headless_browser() {
     assert!(
         dom.contains("data-steps=\"13\""),
         "the closed loop did not step"
+    );
+    // The speeds shown, as the page printed them (two decimals).
+    let shown = |name: &str| -> f64 {
+        let key = format!("data-{name}-speed=\"");
+        let start = dom
+            .find(&key)
+            .unwrap_or_else(|| panic!("no {key} in the page"))
+            + key.len();
+        let len = dom[start..].find('"').unwrap();
+        dom[start..start + len].parse().unwrap()
+    };
+    let (low, high) = (shown("low"), shown("high"));
+    eprintln!("the viewer's A speed: {low} m/s at quantile 0.1, {high} m/s at 0.9");
+    assert!(
+        high > low,
+        "A's expected speed shown at quantile 0.9 ({high}) is not above 0.1's ({low})"
     );
 }
