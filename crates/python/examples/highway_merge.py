@@ -55,7 +55,7 @@ def state_row(v):
 
 
 def episode(model, quantile, seed, replan_every=10):
-    """One episode: returns (mean speed of highway-env's cars, mean speed of A, B's plan)."""
+    """One episode: returns (mean speed of highway-env's cars but B, mean speed of A)."""
     import gymnasium
     import highway_env  # noqa: F401  (registers the environments)
     from highway_env.vehicle.behavior import IDMVehicle

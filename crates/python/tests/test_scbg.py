@@ -18,11 +18,16 @@ def test_generate_and_courtesy(trained):
     a, b = _pair(scene)
     low = model.generate(scene, a, b, quantile=0.1)
     high = model.generate(scene, a, b, quantile=0.9)
-    assert high["world_xy_m"].shape == (80, 2) and np.isfinite(high["world_xy_m"]).all()
-    assert low["psi"] <= high["psi"]
-    # The courtesy of a generated future is what generate's J_φ measured.
-    c = model.courtesy(scene, a, b, high["world_xy_m"])
-    assert abs(c["psi"] - high["achieved_psi"]) < 1e-3
+    for out, q in ((low, 0.1), (high, 0.9)):
+        assert out["world_xy_m"].shape == (80, 2) and np.isfinite(out["world_xy_m"]).all()
+        assert abs(out["quantile"] - q) < 1e-6
+        # A range the range predictor did not collapse.
+        assert out["psi_low"] < out["psi_high"], out
+        # The courtesy of a generated future is what generate's J_φ measured.
+        c = model.courtesy(scene, a, b, out["world_xy_m"])
+        assert abs(c["psi"] - out["achieved_psi"]) < 1e-3
+    # The two ends of the knob move B.
+    assert np.abs(low["world_xy_m"] - high["world_xy_m"]).max() > 0.1
     # An explicit ψ at the 0.9 quantile's value gives the same future.
     again = model.generate(scene, a, b, psi=high["psi"])
     np.testing.assert_allclose(again["world_xy_m"], high["world_xy_m"])
@@ -38,9 +43,13 @@ def test_the_ranked_policy_picks_labelled_samples(trained_dirs):
     # lane moves of them: quantile 0 takes the lowest-ψ one, quantile 1 the highest.
     low = model.generate(scene, a, b, quantile=0.0)
     high = model.generate(scene, a, b, quantile=1.0)
-    assert low["psi"] <= high["psi"]
-    for out in (low, high):
+    # J_φ of the two picks, measured again from their world-frame futures, is their label,
+    # and the pick at quantile 1 is the more courteous one.
+    measured = [model.courtesy(scene, a, b, out["world_xy_m"])["psi"] for out in (low, high)]
+    for out, m in zip((low, high), measured):
         assert abs(out["achieved_psi"] - out["psi"]) < 1e-3
+        assert abs(m - out["psi"]) < 1e-3
+    assert measured[0] < measured[1], measured
     with pytest.raises(ValueError, match="unknown policy"):
         scbg.Model(gen, policy="oracle")
 
