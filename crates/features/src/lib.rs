@@ -44,4 +44,4 @@ pub use sample::{
     SampleError, marginal_targets,
 };
 pub use stats::FeatureStats;
-pub use window::{Window, WindowConfig, windows};
+pub use window::{Window, WindowConfig, window_scene, windows};

@@ -86,6 +86,60 @@ pub fn windows(scene: &Scene, config: &WindowConfig) -> Vec<Window> {
         .collect()
 }
 
+/// The steps of `window` as a scene of its own, in the layout of a WOMD 9.1 s scenario: the
+/// window's history and future steps of every track, timestamp and signal, with the window's
+/// current step as the scene's (`history_steps − 1`). Ids, the SDC, the objects of interest
+/// and the map are the scene's; prediction targets are kept where they are valid at the
+/// window's current step. `None` when the window does not lie inside the scene (every window
+/// of [`windows`] does).
+pub fn window_scene(scene: &Scene, window: &Window, config: &WindowConfig) -> Option<Scene> {
+    let first = window.history_step(0, config.history_steps)?;
+    let end = window.future_step(config.future_steps);
+    if end > scene.num_steps() || config.history_steps == 0 {
+        return None;
+    }
+    let now = window.current_step;
+    let tracks: Vec<scbg_scene::Track> = scene
+        .tracks
+        .iter()
+        .map(|t| {
+            Some(scbg_scene::Track {
+                id: t.id,
+                object_type: t.object_type,
+                states: t.states.get(first..end)?.to_vec(),
+            })
+        })
+        .collect::<Option<_>>()?;
+    let signals_per_step = if scene.signals_per_step.is_empty() {
+        Vec::new()
+    } else {
+        scene.signals_per_step.get(first..end)?.to_vec()
+    };
+    let tracks_to_predict = scene
+        .tracks_to_predict
+        .iter()
+        .filter(|t| {
+            scene
+                .tracks
+                .get(t.track_index)
+                .and_then(|tr| tr.states.get(now))
+                .is_some_and(|s| s.valid)
+        })
+        .cloned()
+        .collect();
+    Some(Scene {
+        scenario_id: scene.scenario_id.clone(),
+        timestamps_secs: scene.timestamps_secs[first..end].to_vec(),
+        current_step: now - first,
+        sdc_track_index: scene.sdc_track_index,
+        tracks,
+        objects_of_interest: scene.objects_of_interest.clone(),
+        tracks_to_predict,
+        map: scene.map.clone(),
+        signals_per_step,
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -133,5 +187,39 @@ mod tests {
         assert_eq!(early.history_step(0, 11), None);
         assert_eq!(early.history_step(7, 11), Some(0));
         assert_eq!(w.future_step(0), 11);
+    }
+
+    #[test]
+    fn window_scene_is_the_window_in_womd_layout() {
+        let mut scene = scene_with_steps(198, 10);
+        scene.tracks = vec![scbg_scene::Track {
+            id: 7,
+            object_type: scbg_scene::ObjectType::Vehicle,
+            states: (0..198)
+                .map(|i| scbg_scene::AgentState {
+                    x_m: i as f64,
+                    valid: i >= 40,
+                    ..Default::default()
+                })
+                .collect(),
+        }];
+        scene.tracks_to_predict = vec![scbg_scene::PredictionTarget {
+            track_index: 0,
+            difficulty: Default::default(),
+        }];
+        let config = WindowConfig::default();
+        let w = windows(&scene, &config);
+        let cut = window_scene(&scene, &w[4], &config).unwrap();
+        assert_eq!((cut.num_steps(), cut.current_step), (91, 10));
+        assert_eq!(cut.tracks[0].states[0].x_m, 40.0);
+        assert_eq!(cut.tracks_to_predict.len(), 1);
+        assert!((cut.timestamps_secs[10] - 5.0).abs() < 1e-9);
+        cut.validate().unwrap();
+        // Not valid at the window's current step: no longer a prediction target.
+        let early = window_scene(&scene, &w[0], &config).unwrap();
+        assert!(early.tracks_to_predict.is_empty());
+        // A window reaching past the scene has no scene.
+        assert!(window_scene(&scene, &Window { current_step: 190 }, &config).is_none());
+        assert!(window_scene(&scene, &Window { current_step: 3 }, &config).is_none());
     }
 }

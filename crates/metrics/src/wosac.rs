@@ -130,6 +130,20 @@ fn check_layout(scene: &Scene) -> Result<(), WosacError> {
     Ok(())
 }
 
+/// Whether `scene` can be scored at all, before any rollout is made: the checks of
+/// [`scenario_metrics`] that do not depend on the rollouts (the WOSAC layout of 91 steps with
+/// current step 10, an evaluated object, every evaluated object a sim agent, a road edge).
+pub fn check_scene(scene: &Scene) -> Result<(), WosacError> {
+    check_layout(scene)?;
+    Objects::new(scene)?;
+    if RoadEdges::new(&scene.map).is_none() {
+        return Err(WosacError::NoRoadEdges {
+            scenario_id: scene.scenario_id.clone(),
+        });
+    }
+    Ok(())
+}
+
 /// `n` copies of the logged future of every sim agent, copied as stored (invalid states
 /// included, so their placeholder values are simulated as if valid): the log-replay baseline.
 pub fn log_replay_rollouts(scene: &Scene, n: usize) -> Result<Rollouts, WosacError> {

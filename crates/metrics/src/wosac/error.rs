@@ -75,3 +75,24 @@ pub enum WosacError {
     #[error("object {object_id} appears more than once in the rollouts")]
     DuplicateObject { object_id: i64 },
 }
+
+impl WosacError {
+    /// A short, stable description of the kind of problem, without ids or counts, for skip
+    /// counters in summaries.
+    pub fn reason(&self) -> &'static str {
+        match self {
+            Self::SceneLayout { .. } => "not 91 steps with current step 10",
+            Self::NoEvaluatedObjects { .. } => "no evaluated object (no SDC, no track to predict)",
+            Self::EvaluatedNotSimulated { .. } => {
+                "an evaluated object (SDC or track to predict) is not valid at the current step"
+            }
+            Self::NoRoadEdges { .. } => "no road edge in the map",
+            Self::RolloutCount { .. } => "not 32 rollouts",
+            Self::TrajectoryCount { .. } | Self::StepCount { .. } => "rollouts of the wrong shape",
+            Self::NonFinite { .. } => "a simulated value is not finite",
+            Self::UnknownObject { .. }
+            | Self::MissingObject { .. }
+            | Self::DuplicateObject { .. } => "rollouts that do not list every sim agent once",
+        }
+    }
+}
