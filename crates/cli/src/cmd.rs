@@ -323,33 +323,61 @@ fn sim(a: &crate::cli::SimArgs, progress: &dyn Progress) -> anyhow::Result<()> {
 }
 
 fn print_sim_eval(e: &scbg_lab::sim_eval::SimEval) {
+    let na = |x: Option<f64>, decimals: usize| {
+        x.map_or("n/a".to_string(), |x| format!("{x:.decimals$}"))
+    };
     println!(
         "closed loop, {} scenes, re-plan every {} steps ({:.0} ms per rollout, {:.0} s)",
         e.curve.scenes, e.replan_every, e.rollout_ms, e.seconds
     );
+    if let Some(s) = &e.sources {
+        println!(
+            "scenes: {} windows of {} logged scenes ({} cut from longer scenes); pairs {}",
+            e.curve.scenes,
+            s.scenarios,
+            s.windows,
+            s.pairs
+                .iter()
+                .map(|(k, n)| format!("{k} {n}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
+    println!("{}", e.skipped_line());
+    const LISTED: usize = 20;
+    for s in e.skipped_scenes.iter().take(LISTED) {
+        println!("  {}: {}", s.scenario_id, s.reason);
+    }
+    if e.skipped_scenes.len() > LISTED {
+        println!(
+            "  … and {} more (eval_sim.json lists each)",
+            e.skipped_scenes.len() - LISTED
+        );
+    }
     println!("quantile  A speed m/s  realised courtesy  B collision  B off-road  WOSAC meta");
     for r in &e.curve.per_quantile {
         println!(
-            "{:8.1}  {:11.2}  {:17.3}  {:11.3}  {:10.3}  {}",
+            "{:8.1}  {:11.2}  {:17.3}  {:11.3}  {:>10}  {}",
             r.quantile,
             r.a_avg_speed_mps,
             r.realised_courtesy_mps,
             r.b_collision_rate,
-            r.b_offroad_rate,
+            na(r.b_offroad_rate, 3),
             r.wosac
                 .as_ref()
-                .map_or("-".into(), |w| format!("{:.4}", w.metametric))
+                .map_or("n/a".into(), |w| format!("{:.4}", w.metametric))
         );
     }
     println!("{}", e.curve.collision_line());
     for (name, b) in &e.baselines {
         println!(
-            "{name:>18}: A speed {:.2} m/s, B collision {:.3}, WOSAC meta {}",
-            b.a_avg_speed_mps,
-            b.b_collision_rate,
+            "{name:>18}: A speed {} m/s, B collision {}, B off-road {}, WOSAC meta {}",
+            na(b.a_avg_speed_mps, 2),
+            na(b.b_collision_rate, 3),
+            na(b.b_offroad_rate, 3),
             b.wosac
                 .as_ref()
-                .map_or("-".into(), |w| format!("{:.4}", w.metametric))
+                .map_or("n/a".into(), |w| format!("{:.4}", w.metametric))
         );
     }
     let fmt = |m: &scbg_lab::sim_eval::PerFamily| {

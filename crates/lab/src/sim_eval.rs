@@ -10,11 +10,17 @@
 mod curve;
 mod figures;
 mod realism;
+mod scenes;
 
+pub(crate) use curve::fmt_or_na;
 pub use curve::{BCollision, KnobCurve, RESPONSIVE_SPEED_MPS};
 use curve::{kept_counting_skips, world_scene};
 pub use figures::write_figures;
 pub use realism::{BaselineSim, PairedDifference, WosacSummary};
+use scenes::Skips;
+pub use scenes::{
+    NO_PAIR, PairOrigin, SceneSources, SimScene, SkippedScene, TOO_SHORT, load_scenes,
+};
 
 use std::collections::BTreeMap;
 use std::path::Path;
@@ -23,7 +29,6 @@ use rayon::prelude::*;
 use scbg_metrics::wosac::WosacConfig;
 use scbg_scene::Scene;
 use scbg_sim::SimConfig;
-use scbg_synth::GroundTruth;
 use serde::Serialize;
 
 use crate::generator::LoadedScbg;
@@ -109,10 +114,12 @@ pub struct QuantileSim {
     /// Fraction of scenes in which B collides.
     pub b_collision_rate: f64,
     /// The same over the scenes in which B's box overlaps no other at the current step (a
-    /// contact in the log's start state is none of the rollout's doing).
-    pub b_collision_rate_clear_start: f64,
-    /// Fraction of scenes in which B goes off-road.
-    pub b_offroad_rate: f64,
+    /// contact in the log's start state is none of the rollout's doing); `None` when B starts
+    /// in contact in every scene.
+    pub b_collision_rate_clear_start: Option<f64>,
+    /// Fraction of scenes in which B goes off-road, over the scenes whose map has road edges
+    /// (`None` when none has).
+    pub b_offroad_rate: Option<f64>,
     /// B's mean |jerk|, m/s³.
     pub b_mean_abs_jerk_mps3: f64,
     /// B's distance travelled, m.
@@ -133,8 +140,17 @@ pub struct SimEval {
     /// appear at the top level of the JSON).
     #[serde(flatten)]
     pub curve: KnobCurve,
-    /// Scenes skipped, with why.
+    /// Scenes skipped, counted by why; the scenes whose WOSAC realism is not applicable (or
+    /// failed) under `WOSAC realism …` keys.
     pub skipped: BTreeMap<String, usize>,
+    /// Each scene counted in `skipped`, with its reason (left out when there is none).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub skipped_scenes: Vec<SkippedScene>,
+    /// Where the scenes came from, when some were cut from longer scenes or had their pair
+    /// chosen by `data prepare`'s rule (left out when every scene is its own window with the
+    /// pair its log names, as on synthetic data).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sources: Option<SceneSources>,
     /// Steps between plans.
     pub replan_every: usize,
     /// The same curve with B driven by the synthetic world's own rule at courtesy `c = q`
@@ -164,50 +180,6 @@ pub struct SimEval {
     pub seconds: f64,
 }
 
-/// One scene to evaluate: the scene, its ego and controlled agent, its family.
-#[derive(Debug, Clone)]
-pub struct SimScene {
-    /// The scene (WOSAC layout for the realism part: 91 steps, current step 10).
-    pub scene: Scene,
-    /// A.
-    pub ego: i64,
-    /// B.
-    pub controlled: i64,
-    /// The synthetic ground truth (the reactive rule, and the family).
-    pub truth: Option<GroundTruth>,
-}
-
-impl SimScene {
-    /// A (the SDC) and B (the first other object of interest valid at the current step) of a
-    /// scene; `None` when it has no such pair.
-    pub fn of(scene: Scene, truth: Option<GroundTruth>) -> Option<Self> {
-        let sdc = scene.sdc_track_index?;
-        let ego = scene.tracks[sdc].id;
-        let valid = |id: i64| {
-            scene
-                .track_index(id)
-                .is_some_and(|i| scene.tracks[i].states[scene.current_step].valid)
-        };
-        let controlled = scene
-            .objects_of_interest
-            .iter()
-            .copied()
-            .find(|&id| id != ego && valid(id))?;
-        Some(Self {
-            scene,
-            ego,
-            controlled,
-            truth,
-        })
-    }
-
-    fn family(&self) -> String {
-        self.truth
-            .as_ref()
-            .map_or_else(|| "womd".into(), |t| t.family.name().to_string())
-    }
-}
-
 struct SceneResult {
     scenario_id: String,
     family: String,
@@ -232,22 +204,20 @@ impl SceneResult {
     }
 }
 
-fn mean_std(v: &[f64]) -> (f64, f64) {
+/// Mean and standard deviation; `None` for no value (never NaN).
+fn mean_std(v: &[f64]) -> Option<(f64, f64)> {
     if v.is_empty() {
-        return (f64::NAN, f64::NAN);
+        return None;
     }
     let m = v.iter().sum::<f64>() / v.len() as f64;
     let var = v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len() as f64;
-    (m, var.sqrt())
+    Some((m, var.sqrt())).filter(|(m, s)| m.is_finite() && s.is_finite())
 }
 
-fn rate(v: impl Iterator<Item = bool>) -> f64 {
+/// The share of `true`; `None` for no value (never NaN).
+fn rate(v: impl Iterator<Item = bool>) -> Option<f64> {
     let (n, k) = v.fold((0usize, 0usize), |(n, k), b| (n + 1, k + usize::from(b)));
-    if n == 0 {
-        f64::NAN
-    } else {
-        k as f64 / n as f64
-    }
+    (n > 0).then(|| k as f64 / n as f64)
 }
 
 /// One rollout of scene `s` with B asked for quantile `q` (A and the others as `config`).
@@ -309,9 +279,9 @@ pub fn evaluate_sim(
         .iter()
         .position(|&q| (q - 0.5).abs() < 1e-6)
         .expect("0.5 is there");
-    let scenes = &scenes[..scenes.len().min(options.scenes)];
+    let scenes = scenes::first_logged(scenes, options.scenes);
     let curve_started = std::time::Instant::now();
-    let results: Vec<anyhow::Result<SceneResult>> = scenes
+    let results: Vec<(&SimScene, anyhow::Result<SceneResult>)> = scenes
         .par_iter()
         .map(|s| {
             // The quantiles' rollouts share their first plan (`FirstPlans`).
@@ -319,25 +289,54 @@ pub fn evaluate_sim(
             let curve = quantiles
                 .iter()
                 .map(|&q| one_rollout(model, s, q, options.config, &first_plans))
-                .collect::<anyhow::Result<Vec<_>>>()?;
-            Ok(SceneResult::new(s, curve, base))
+                .collect::<anyhow::Result<Vec<_>>>();
+            (s, curve.map(|curve| SceneResult::new(s, curve, base)))
         })
         .collect();
     let curve_seconds = curve_started.elapsed().as_secs_f64();
-    let mut skipped = BTreeMap::new();
-    let done = kept_counting_skips(results, "", &mut skipped);
-    anyhow::ensure!(
-        !done.is_empty(),
-        "no scene could be simulated (skipped: {skipped:?})"
-    );
-    let mut curve = KnobCurve::of(&done, &quantiles);
-    // WOSAC realism on the first scenes.
-    let wosac_scenes = &scenes[..scenes.len().min(options.wosac_scenes)];
-    let scored: Vec<realism::Scored> = wosac_scenes
-        .par_iter()
-        .filter_map(|s| realism::wosac_scene(model, s, options).ok())
+    let ran: Vec<&SimScene> = results
+        .iter()
+        .filter(|(_, r)| r.is_ok())
+        .map(|(s, _)| *s)
         .collect();
-    let realism = realism::Realism::of(&scored, options.wosac);
+    let sources = SceneSources::of(&ran);
+    let mut skips = Skips::default();
+    let done = kept_counting_skips(results, "", &mut skips);
+    let mut curve = KnobCurve::of(&done, &quantiles);
+    // WOSAC realism on the first scenes where it applies (the WOSAC layout, an evaluated
+    // object, road edges), each logged scene's first window first; the others are counted as
+    // not applicable.
+    let applicable: Vec<Result<(), scbg_metrics::wosac::WosacError>> = scenes
+        .par_iter()
+        .map(|s| scbg_metrics::wosac::check_scene(&s.scene))
+        .collect();
+    for (s, check) in scenes.iter().zip(&applicable) {
+        if let Err(e) = check {
+            skips.add(
+                &s.scene.scenario_id,
+                format!("{REALISM_NA}{}", e.reason()),
+                Some(e.to_string()),
+            );
+        }
+    }
+    let wosac_scenes: Vec<&SimScene> = scenes::spread_over_logged(scenes)
+        .into_iter()
+        .filter(|&i| applicable[i].is_ok())
+        .take(options.wosac_scenes)
+        .map(|i| &scenes[i])
+        .collect();
+    let scored: Vec<(&SimScene, anyhow::Result<realism::Scored>)> = wosac_scenes
+        .par_iter()
+        .map(|s| (*s, realism::wosac_scene(model, s, options)))
+        .collect();
+    let mut realism_scored = Vec::new();
+    for (s, r) in scored {
+        match r {
+            Ok(r) => realism_scored.push(r),
+            Err(e) => skips.error(REALISM_FAILED, &s.scene.scenario_id, &e),
+        }
+    }
+    let realism = realism::Realism::of(&realism_scored, options.wosac);
     for row in &mut curve.per_quantile {
         row.wosac = realism.at_quantile(row.quantile);
     }
@@ -345,17 +344,19 @@ pub fn evaluate_sim(
     let world = kept_counting_skips(
         scenes
             .par_iter()
-            .filter_map(|s| world_scene(s, &quantiles, base))
+            .filter_map(|s| Some((s, world_scene(s, &quantiles, base)?)))
             .collect(),
         "world knob: ",
-        &mut skipped,
+        &mut skips,
     );
     let world_knob = (!world.is_empty()).then(|| KnobCurve::of(&world, &quantiles));
     let rollouts_done = done.len() * quantiles.len();
     Ok(SimEval {
         policy: model.scbg.policy.name(),
         curve,
-        skipped,
+        skipped: skips.counts,
+        skipped_scenes: skips.scenes,
+        sources,
         replan_every: options.config.replan_every,
         world_knob,
         wosac_scbg: realism.wosac_scbg,
@@ -370,43 +371,33 @@ pub fn evaluate_sim(
     })
 }
 
-/// The scenes of WOMD files for `eval sim`: each scene with its A (SDC) and B (first other
-/// object of interest), its synthetic ground truth when `truth` has it, on the split asked
-/// (by scenario id, with the predictor's validation fraction). Returns the scenes and the
-/// count of scenes without such a pair.
-pub fn load_scenes(
-    inputs: &[String],
-    truth: Option<&[GroundTruth]>,
-    split: crate::predictor::SplitSelection,
-    validation_fraction: f64,
-    max: usize,
-) -> anyhow::Result<(Vec<SimScene>, usize)> {
-    let index = truth.map(crate::fidelity::TruthIndex::new);
-    let mut scenes = Vec::new();
-    let mut no_pair = 0;
-    'files: for file in crate::inputs::expand(inputs)? {
-        for scene in scbg_womd::WomdFile::open(&file)?.scenes() {
-            let scene = scene?;
-            if split == crate::predictor::SplitSelection::Validation
-                && scbg_train::data::split_of(&scene.scenario_id, validation_fraction)
-                    != scbg_train::data::Split::Validation
-            {
-                continue;
-            }
-            let t = index
-                .as_ref()
-                .and_then(|i| i.get(&scene.scenario_id))
-                .cloned();
-            match SimScene::of(scene, t) {
-                Some(s) => scenes.push(s),
-                None => no_pair += 1,
-            }
-            if scenes.len() >= max {
-                break 'files;
-            }
+/// The prefix of the reasons a scene's WOSAC realism is not applicable.
+pub const REALISM_NA: &str = "WOSAC realism n/a: ";
+/// The prefix of the reasons a scene's WOSAC realism failed.
+pub const REALISM_FAILED: &str = "WOSAC realism failed: ";
+
+impl SimEval {
+    /// Counts and lists `skipped` (scenes left out before the evaluation, as
+    /// [`load_scenes`] returns them) beside the evaluation's own.
+    pub fn add_skipped(&mut self, skipped: Vec<SkippedScene>) {
+        for s in &skipped {
+            *self.skipped.entry(s.reason.clone()).or_insert(0) += 1;
         }
+        self.skipped_scenes.splice(0..0, skipped);
     }
-    Ok((scenes, no_pair))
+
+    /// One line on what was left out, by reason (`nothing` when nothing was).
+    pub fn skipped_line(&self) -> String {
+        if self.skipped.is_empty() {
+            return "skipped: nothing".into();
+        }
+        let by_reason: Vec<String> = self
+            .skipped
+            .iter()
+            .map(|(reason, n)| format!("{n} × {reason}"))
+            .collect();
+        format!("skipped: {}", by_reason.join("; "))
+    }
 }
 
 /// `scbg eval sim`: loads the model and the scenes, evaluates, writes `eval_sim.json` and the
@@ -427,7 +418,7 @@ pub fn eval_sim_files(
     let truth = ground_truth
         .map(crate::synth::read_ground_truth)
         .transpose()?;
-    let (scenes, no_pair) = load_scenes(
+    let (scenes, skipped) = load_scenes(
         inputs,
         truth.as_deref(),
         split,
@@ -435,16 +426,19 @@ pub fn eval_sim_files(
         options.scenes,
     )?;
     progress.note(&format!(
-        "closed loop on {} scenes ({} without an SDC and another object of interest)",
+        "closed loop on {} scenes ({} left out before simulating)",
         scenes.len(),
-        no_pair
+        skipped.len()
     ));
     let mut eval = evaluate_sim(&model, &scenes, options)?;
-    if no_pair > 0 {
-        eval.skipped.insert("no A–B pair".into(), no_pair);
-    }
+    eval.add_skipped(skipped);
     std::fs::create_dir_all(out)?;
     crate::write_json(out.join("eval_sim.json"), &eval)?;
+    anyhow::ensure!(
+        eval.curve.scenes > 0,
+        "no scene could be simulated ({}; eval_sim.json lists each scene)",
+        eval.skipped_line()
+    );
     write_figures(&eval, out)?;
     Ok(eval)
 }

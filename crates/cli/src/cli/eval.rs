@@ -17,6 +17,8 @@ pub enum EvalCommand {
     Scbg(EvalScbgArgs),
     /// The courtesy knob in closed loop: realised courtesy, A's speed, B's collisions and
     /// off-road, WOSAC realism per quantile, beside log replay, constant velocity and IDM.
+    /// A and B: the SDC and an object of interest when the log names them, else the pair
+    /// `data prepare` mines; every scene left out is listed with why.
     Sim(EvalSimArgs),
 }
 
@@ -33,10 +35,13 @@ pub struct EvalSimArgs {
     /// Scenes on the validation split (by scenario id, as in training) or all.
     #[arg(long, value_enum, default_value_t = SplitSelection::Validation)]
     pub split: SplitSelection,
-    /// Scenes of the courtesy curve.
+    /// Scenes of the courtesy curve: the first ones with an interacting pair, each with every
+    /// 91-step window that has one (as `data prepare` cuts scenes longer than 9.1 s).
     #[arg(long, default_value_t = 40)]
     pub scenes: usize,
-    /// Scenes scored with WOSAC realism (32 rollouts per quantile and baseline).
+    /// Windows scored with WOSAC realism (32 rollouts per quantile and baseline): the first
+    /// where it applies (91 steps, current step 10, an evaluated object, road edges), each
+    /// scene's first window before any scene's second.
     #[arg(long, default_value_t = 8)]
     pub wosac_scenes: usize,
     /// Output folder (eval_sim.json, sim_courtesy.png, sim_realism.png).

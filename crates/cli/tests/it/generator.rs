@@ -524,6 +524,7 @@ fn train_generator_saves_generator_and_range_predictor() {
     for f in ["eval_sim.json", "sim_courtesy.png", "sim_realism.png"] {
         assert!(dir.path().join("evalsim").join(f).is_file(), "{f}");
     }
+    crate::real_data::eval_sim_on_real_files(&gen_dir, dir.path());
 
     // A malformed threshold is a clear error naming the setting.
     let qx = crate::settings(dir.path(), "[generator]\nthreshold = \"qx\"\n");

@@ -280,3 +280,73 @@ fn bench_wosac_scores_the_reference_scenario() {
     assert!(text.contains("meta-metric 0.82663"), "{text}");
     assert!(text.contains("meta-metric 0.21769"), "{text}");
 }
+
+/// `scbg eval sim` of the generator in `gen_dir` on real files of three kinds — a nuScenes
+/// scene (20 s, no road edge), a 20 s WOMD scene without an SDC or objects of interest, the
+/// genuine 9.1 s WOMD scenario — and a file that is not WOMD: the long scenes are simulated
+/// window by window with mined pairs, realism is scored where it applies and `n/a` elsewhere,
+/// B's off-road is reported where the map has road edges, the bad file is left out by name and
+/// reason, and no NaN is printed or written.
+pub(crate) fn eval_sim_on_real_files(gen_dir: &str, dir: &std::path::Path) {
+    let Some(real) = real_dir() else { return };
+    let garbage = dir.join("not_womd.tfrecord");
+    std::fs::write(&garbage, b"this is not a TFRecord file").unwrap();
+    let files = [
+        real.join("nuscenes-reencoded/scene-0061.tfrecord"),
+        real.join("womd-reencoded/61fa872f2d274223.tfrecord"),
+        real.join("womd/motion_data_one_scenario.tfrecord"),
+        garbage.clone(),
+    ];
+    let out = dir.join("evalsim_real");
+    let config = crate::settings(dir, "[closed_loop]\nwosac_quantiles = [0.5]\n");
+    let mut args: Vec<String> = ["eval", "sim", "--model", gen_dir, "--split", "all"]
+        .map(String::from)
+        .to_vec();
+    args.extend(["--scenes", "1000", "--wosac-scenes", "1"].map(String::from));
+    args.push("--config".into());
+    args.push(config.display().to_string());
+    args.push("--out".into());
+    args.push(out.display().to_string());
+    args.push("--data".into());
+    args.extend(files.iter().map(|f| f.display().to_string()));
+    let text = crate::scbg_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+    assert!(!text.contains("NaN"), "{text}");
+    assert!(text.contains("n/a"), "{text}");
+    let eval: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("eval_sim.json")).unwrap()).unwrap();
+    // Windows of both long scenes and the genuine scenario itself.
+    let sources = &eval["sources"];
+    assert_eq!(sources["scenarios"], 3, "{eval}");
+    assert!(sources["windows"].as_u64().unwrap() >= 2, "{eval}");
+    assert!(sources["pairs"]["mined"].as_u64().unwrap() >= 2, "{eval}");
+    let scenes = eval["scenes"].as_u64().unwrap();
+    assert_eq!(scenes, sources["windows"].as_u64().unwrap() + 1, "{eval}");
+    // Every quantile has B's off-road rate (the WOMD scenes have road edges).
+    for row in eval["per_quantile"].as_array().unwrap() {
+        assert!(row["b_offroad_rate"].is_number(), "{row}");
+    }
+    // Realism on the genuine scenario; not applicable to the others, each counted by reason.
+    assert_eq!(eval["wosac_scbg"]["scenes"], 1, "{eval}");
+    let skipped = eval["skipped"].as_object().unwrap();
+    let count = |needle: &str| -> u64 {
+        skipped
+            .iter()
+            .filter(|(k, _)| k.contains(needle))
+            .map(|(_, v)| v.as_u64().unwrap())
+            .sum()
+    };
+    assert_eq!(count("unreadable"), 1, "{eval}");
+    assert!(count("WOSAC realism n/a") >= scenes - 1, "{eval}");
+    let listed = eval["skipped_scenes"].as_array().unwrap();
+    assert_eq!(
+        listed.len() as u64,
+        skipped.values().map(|v| v.as_u64().unwrap()).sum::<u64>()
+    );
+    assert!(
+        listed
+            .iter()
+            .any(|s| s["scenario_id"].as_str().unwrap().contains("not_womd")),
+        "{eval}"
+    );
+    assert!(text.contains("unreadable"), "{text}");
+}

@@ -266,13 +266,14 @@ fn closed_loop_checks(c: &crate::sim_eval::SimEval, keys: &ClosedLoopKeys, out: 
     let pooled_value = |m: &crate::sim_eval::PerFamily| m.get("all").copied().flatten();
     let pooled_of =
         |m: &crate::sim_eval::PerFamily| pooled_value(m).map_or("-".into(), |r| format!("{r:.3}"));
-    let pooled = pooled_value(&c.curve.spearman_quantile_a_speed).unwrap_or(f64::NAN);
+    let pooled = pooled_value(&c.curve.spearman_quantile_a_speed);
     out.push(Check {
         key: keys.spearman,
-        passed: pooled >= 0.6,
+        passed: pooled.is_some_and(|r| r >= 0.6),
         text: format!(
-            "closed loop{}: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({pooled:.3}; with each scene's level removed {}; within a scene {}; each scene's speeds ordered to rise with the quantile {}){}",
+            "closed loop{}: Spearman(quantile, A's realised average speed) ≥ 0.6 pooled ({}; with each scene's level removed {}; within a scene {}; each scene's speeds ordered to rise with the quantile {}){}",
             keys.label,
+            crate::sim_eval::fmt_or_na(pooled, 3),
             pooled_of(&c.curve.spearman_quantile_realised_courtesy),
             pooled_of(&c.curve.spearman_within_scene_a_speed),
             pooled_of(&c.curve.spearman_quantile_a_speed_ordered),
@@ -287,7 +288,7 @@ fn closed_loop_checks(c: &crate::sim_eval::SimEval, keys: &ClosedLoopKeys, out: 
     });
     out.push(Check {
         key: keys.curve_rises,
-        passed: c.curve.a_speed_curve_rises,
+        passed: c.curve.a_speed_curve_rises == Some(true),
         text: format!(
             "closed loop{}: A's mean realised speed rises with the quantile ({})",
             keys.label,
@@ -301,10 +302,12 @@ fn closed_loop_checks(c: &crate::sim_eval::SimEval, keys: &ClosedLoopKeys, out: 
     });
     out.push(Check {
         key: keys.collision,
-        passed: c.curve.max_b_collision_rate <= 0.02,
+        passed: c.curve.max_b_collision_rate.is_some_and(|r| r <= 0.02),
         text: format!(
-            "closed loop{}: B's collision rate ≤ 2 % at every quantile (max {:.3}; {:.3} in the scenes where B starts clear of every other agent)",
-            keys.label, c.curve.max_b_collision_rate, c.curve.max_b_collision_rate_clear_start
+            "closed loop{}: B's collision rate ≤ 2 % at every quantile (max {}; {} in the scenes where B starts clear of every other agent)",
+            keys.label,
+            crate::sim_eval::fmt_or_na(c.curve.max_b_collision_rate, 3),
+            crate::sim_eval::fmt_or_na(c.curve.max_b_collision_rate_clear_start, 3)
         ),
     });
     let meta = |w: Option<&crate::sim_eval::WosacSummary>| {

@@ -23,21 +23,21 @@ pub(super) fn closed_loop_stage(
     // The full variant of the first seed and the held-out scenes, once for both policies.
     let loaded = (|| -> anyhow::Result<_> {
         let model = load_scbg(&out.join(generator_dir_name(Variant::Full, 0)), None)?;
-        let (scenes, _) = crate::sim_eval::load_scenes(
+        let (scenes, skipped) = crate::sim_eval::load_scenes(
             inputs,
             truth,
             crate::predictor::SplitSelection::Validation,
             validation_fraction,
             options.config.closed_loop.scenes,
         )?;
-        Ok((model, scenes))
+        Ok((model, scenes, skipped))
     })();
     match loaded {
         Err(err) => {
             progress.note(&format!("the closed-loop stage failed: {err:#}"));
             (None, None)
         }
-        Ok((mut model, scenes)) => {
+        Ok((mut model, scenes, skipped)) => {
             let mut run = |policy: crate::choices::Policy| {
                 model.scbg.policy = policy;
                 let eval_options = crate::sim_eval::SimEvalOptions {
@@ -54,14 +54,15 @@ pub(super) fn closed_loop_stage(
                     crate::choices::Policy::Ranked => out.join("figures/closed_loop_ranked"),
                 };
                 let result = crate::sim_eval::evaluate_sim(&model, &scenes, &eval_options)
-                    .and_then(|eval| {
+                    .and_then(|mut eval| {
+                        eval.add_skipped(skipped.clone());
                         crate::sim_eval::write_figures(&eval, &figures)?;
                         Ok(eval)
                     });
                 match result {
                     Ok(eval) => {
                         progress.note(&format!(
-                            "closed loop ({}): {} scenes in {:.0} s; Spearman(quantile, realised courtesy) {}",
+                            "closed loop ({}): {} scenes in {:.0} s; Spearman(quantile, realised courtesy) {}{}",
                             eval.policy,
                             eval.curve.scenes,
                             eval.seconds,
@@ -70,7 +71,12 @@ pub(super) fn closed_loop_stage(
                                 .get("all")
                                 .copied()
                                 .flatten()
-                                .map_or("-".into(), |r| format!("{r:.3}"))
+                                .map_or("-".into(), |r| format!("{r:.3}")),
+                            if eval.skipped.is_empty() {
+                                String::new()
+                            } else {
+                                format!("; {}", eval.skipped_line())
+                            }
                         ));
                         Some(eval)
                     }

@@ -214,16 +214,23 @@ impl DemoReport {
 
 /// The closed-loop section of report.md (`figures`: where its two figures are, relative to it).
 fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
+    use crate::sim_eval::fmt_or_na;
     let meta = |w: Option<&crate::sim_eval::WosacSummary>| {
-        w.map_or("-".into(), |w| {
+        w.map_or("n/a".into(), |w| {
             format!(
                 "{:.4} | {:.3} | {:.3} | {:.3} | {:.3}",
                 w.metametric, w.kinematic, w.interactive, w.map_based, w.collision_rate
             )
         })
     };
+    if c.curve.scenes == 0 {
+        return format!(
+            "No held-out scene could be simulated; {}.\n",
+            c.skipped_line()
+        );
+    }
     let mut out = format!(
-        "{} drives B (re-planning every {} steps from the simulated history, kinematic bicycle with a safety guard) among reactive agents (the synthetic world's rule) on {} held-out scenes.\n\n\
+        "{} drives B (re-planning every {} steps from the simulated history, kinematic bicycle with a safety guard) among reactive agents ({}) on {} held-out scenes.\n\n\
          | quantile | A's realised speed (m/s) | realised courtesy (m/s) | B collision | B off-road | WOSAC meta | kinematic | interactive | map | collision rate |\n|---|---|---|---|---|---|---|---|---|---|\n",
         if c.policy == crate::choices::Policy::Ranked.name() {
             "Sample and rank (the full variant's predictor and labels: B's sampled future of the quantile's rank)"
@@ -231,29 +238,34 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
             "The full generator"
         },
         c.replan_every,
+        if c.world_knob.is_some() {
+            "the synthetic world's rule"
+        } else {
+            "IDM along their logged paths"
+        },
         c.curve.scenes
     );
     for r in &c.curve.per_quantile {
         out += &format!(
-            "| {:.1} | {:.2} ± {:.2} | {:.3} ± {:.3} | {:.3} | {:.3} | {} |\n",
+            "| {:.1} | {:.2} ± {:.2} | {:.3} ± {:.3} | {:.3} | {} | {} |\n",
             r.quantile,
             r.a_avg_speed_mps,
             r.a_avg_speed_std_mps,
             r.realised_courtesy_mps,
             r.realised_courtesy_std_mps,
             r.b_collision_rate,
-            r.b_offroad_rate,
+            fmt_or_na(r.b_offroad_rate, 3),
             r.wosac
                 .as_ref()
-                .map_or("- | - | - | - | -".into(), |w| meta(Some(w)))
+                .map_or("n/a | n/a | n/a | n/a | n/a".into(), |w| meta(Some(w)))
         );
     }
     for (name, b) in &c.baselines {
         out += &format!(
-            "| {name} | {:.2} | – | {:.3} | {:.3} | {} |\n",
-            b.a_avg_speed_mps,
-            b.b_collision_rate,
-            b.b_offroad_rate,
+            "| {name} | {} | – | {} | {} | {} |\n",
+            fmt_or_na(b.a_avg_speed_mps, 2),
+            fmt_or_na(b.b_collision_rate, 3),
+            fmt_or_na(b.b_offroad_rate, 3),
             meta(b.wosac.as_ref())
         );
     }
@@ -275,9 +287,26 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
     );
     out += &format!("\n{}.\n", c.realism_line());
     out += &format!("\n{}.\n", c.curve.collision_line());
+    if !c.skipped.is_empty() {
+        out += &format!("\n{}.\n", c.skipped_line());
+    }
+    if let Some(sources) = &c.sources {
+        out += &format!(
+            "\nThe scenes: {} windows of {} logged scenes ({} cut from longer scenes); pairs {}.\n",
+            c.curve.scenes,
+            sources.scenarios,
+            sources.windows,
+            sources
+                .pairs
+                .iter()
+                .map(|(k, n)| format!("{k} {n}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        );
+    }
     if let Some(w) = &c.world_knob {
         out += &format!(
-            "\nThe ceiling: the same {} scenes with B driven by the synthetic world's own rule at courtesy c = q (a B faithful to its courtesy). A's realised speed per quantile: {}. Spearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene: {}; responsive scenes: {}. Ordered within each scene: {}. B collision rate at most {:.3}.\n",
+            "\nThe ceiling: the same {} scenes with B driven by the synthetic world's own rule at courtesy c = q (a B faithful to its courtesy). A's realised speed per quantile: {}. Spearman(quantile, A's realised speed): {}. Spearman(quantile, realised courtesy): {}. Within a scene: {}; responsive scenes: {}. Ordered within each scene: {}. B collision rate at most {}.\n",
             w.scenes,
             w.per_quantile
                 .iter()
@@ -289,7 +318,7 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
             fmt(&w.spearman_within_scene_a_speed),
             fmt(&w.responsive_fraction),
             fmt(&w.spearman_quantile_a_speed_ordered),
-            w.max_b_collision_rate
+            fmt_or_na(w.max_b_collision_rate, 3)
         );
     }
     out

@@ -5,6 +5,7 @@ use std::collections::BTreeMap;
 use scbg_synth::GroundTruth;
 use serde::Serialize;
 
+use super::scenes::Skips;
 use super::{PerFamily, QuantileSim, SceneResult, SimScene, mean_std, rate};
 use scbg::sim::{AgentRolloutMetrics, Contact, report};
 
@@ -32,13 +33,15 @@ pub struct KnobCurve {
     /// Share of scenes in which A's realised speed changes by at least
     /// [`RESPONSIVE_SPEED_MPS`] over the quantiles, per family and pooled.
     pub responsive_fraction: PerFamily,
-    /// Whether the mean of A's realised speed never falls from one quantile to the next.
-    pub a_speed_curve_rises: bool,
-    /// The largest B collision rate over the quantiles.
-    pub max_b_collision_rate: f64,
+    /// Whether the mean of A's realised speed never falls from one quantile to the next
+    /// (`None` without a scene).
+    pub a_speed_curve_rises: Option<bool>,
+    /// The largest B collision rate over the quantiles (`None` without a scene).
+    pub max_b_collision_rate: Option<f64>,
     /// The largest over the quantiles of B's collision rate in the scenes where B starts clear
-    /// of every other agent ([`QuantileSim::b_collision_rate_clear_start`]).
-    pub max_b_collision_rate_clear_start: f64,
+    /// of every other agent ([`QuantileSim::b_collision_rate_clear_start`]; `None` without
+    /// such a scene).
+    pub max_b_collision_rate_clear_start: Option<f64>,
     /// Every rollout in which B collides: the scene, the quantile and B's first contact
     /// (with whom, at which step, both speeds, the geometry) — what a diagnosis needs.
     pub b_collisions: Vec<BCollision>,
@@ -67,15 +70,17 @@ impl KnobCurve {
         let scenes: std::collections::BTreeSet<&str> =
             at_start.map(|b| b.scenario_id.as_str()).collect();
         format!(
-            "B's collision rate at most {:.3} over the quantiles; {:.3} in the scenes where B starts clear of every other agent ({} scene(s) start with B's box overlapping another in the log)",
-            self.max_b_collision_rate,
-            self.max_b_collision_rate_clear_start,
+            "B's collision rate at most {} over the quantiles; {} in the scenes where B starts clear of every other agent ({} scene(s) start with B's box overlapping another in the log)",
+            fmt_or_na(self.max_b_collision_rate, 3),
+            fmt_or_na(self.max_b_collision_rate_clear_start, 3),
             scenes.len()
         )
     }
 
-    /// The curve of `done` scenes, each with one (A, B) result per quantile of `quantiles`.
+    /// The curve of `done` scenes, each with one (A, B) result per quantile of `quantiles`
+    /// (no row without a scene).
     pub(super) fn of(done: &[SceneResult], quantiles: &[f32]) -> Self {
+        let quantiles = if done.is_empty() { &[][..] } else { quantiles };
         let mut speed_points = Vec::new();
         let mut courtesy_points = Vec::new();
         let mut per_quantile = Vec::new();
@@ -89,8 +94,9 @@ impl KnobCurve {
                 speed_points.push((r.family.clone(), f64::from(q), v));
                 courtesy_points.push((r.family.clone(), f64::from(q), c));
             }
-            let (a_avg_speed_mps, a_avg_speed_std_mps) = mean_std(&speeds);
-            let (realised_courtesy_mps, realised_courtesy_std_mps) = mean_std(&realised);
+            let (a_avg_speed_mps, a_avg_speed_std_mps) = mean_std(&speeds).unwrap_or_default();
+            let (realised_courtesy_mps, realised_courtesy_std_mps) =
+                mean_std(&realised).unwrap_or_default();
             let b = || done.iter().map(|r| &r.curve[k].1);
             per_quantile.push(QuantileSim {
                 quantile: q,
@@ -98,16 +104,19 @@ impl KnobCurve {
                 a_avg_speed_std_mps,
                 realised_courtesy_mps,
                 realised_courtesy_std_mps,
-                b_collision_rate: rate(b().map(|m| m.collision)),
+                b_collision_rate: rate(b().map(|m| m.collision)).unwrap_or_default(),
                 b_collision_rate_clear_start: rate(
                     b().filter(|m| !m.starts_in_contact).map(|m| m.collision),
                 ),
-                b_offroad_rate: rate(b().map(|m| m.offroad.unwrap_or(false))),
+                b_offroad_rate: rate(b().filter_map(|m| m.offroad)),
                 b_mean_abs_jerk_mps3: mean_std(
                     &b().map(|m| m.mean_abs_jerk_mps3).collect::<Vec<_>>(),
                 )
+                .unwrap_or_default()
                 .0,
-                b_progress_m: mean_std(&b().map(|m| m.progress_m).collect::<Vec<_>>()).0,
+                b_progress_m: mean_std(&b().map(|m| m.progress_m).collect::<Vec<_>>())
+                    .unwrap_or_default()
+                    .0,
                 wosac: None,
             });
         }
@@ -134,23 +143,30 @@ impl KnobCurve {
             spearman_within_scene_a_speed,
             responsive_fraction,
             b_collisions,
-            a_speed_curve_rises: per_quantile
-                .windows(2)
-                .all(|w| w[1].a_avg_speed_mps >= w[0].a_avg_speed_mps),
+            a_speed_curve_rises: (!per_quantile.is_empty()).then(|| {
+                per_quantile
+                    .windows(2)
+                    .all(|w| w[1].a_avg_speed_mps >= w[0].a_avg_speed_mps)
+            }),
             max_b_collision_rate: per_quantile
                 .iter()
                 .map(|r| r.b_collision_rate)
-                .fold(0.0, f64::max),
+                .reduce(f64::max),
             max_b_collision_rate_clear_start: per_quantile
                 .iter()
-                .map(|r| r.b_collision_rate_clear_start)
-                .fold(0.0, f64::max),
+                .filter_map(|r| r.b_collision_rate_clear_start)
+                .reduce(f64::max),
             per_quantile,
             spearman_quantile_a_speed: spearman_per_family(&speed_points),
             spearman_quantile_realised_courtesy: spearman_per_family(&courtesy_points),
             spearman_quantile_a_speed_ordered,
         }
     }
+}
+
+/// `x` with `decimals` decimals, or `n/a`.
+pub(crate) fn fmt_or_na(x: Option<f64>, decimals: usize) -> String {
+    x.map_or("n/a".into(), |x| format!("{x:.decimals$}"))
 }
 
 /// The synthetic world's own knob on a scene: B driven by the world's rule with courtesy
@@ -193,22 +209,18 @@ fn world_curve(
         .collect()
 }
 
-/// The scenes that ran; each one that failed is counted in `skipped` under `prefix` and the
-/// first part of its error.
+/// The scenes that ran; each one that failed is counted in `skips` under `prefix` and its
+/// reason.
 pub(super) fn kept_counting_skips(
-    results: Vec<anyhow::Result<SceneResult>>,
+    results: Vec<(&SimScene, anyhow::Result<SceneResult>)>,
     prefix: &str,
-    skipped: &mut BTreeMap<String, usize>,
+    skips: &mut Skips,
 ) -> Vec<SceneResult> {
     let mut kept = Vec::new();
-    for r in results {
+    for (s, r) in results {
         match r {
             Ok(r) => kept.push(r),
-            Err(e) => {
-                let why = format!("{e:#}");
-                let key = why.split(':').next().unwrap_or("error");
-                *skipped.entry(format!("{prefix}{key}")).or_insert(0) += 1;
-            }
+            Err(e) => skips.error(prefix, &s.scene.scenario_id, &e),
         }
     }
     kept

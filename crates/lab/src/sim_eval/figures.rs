@@ -6,10 +6,13 @@ use super::{QuantileSim, SimEval};
 
 /// The figures: A's realised speed and realised courtesy against the quantile
 /// (`sim_courtesy.png`), WOSAC meta-metric against the quantile with the baselines
-/// (`sim_realism.png`).
+/// (`sim_realism.png`); none without a simulated scene.
 pub fn write_figures(eval: &SimEval, dir: &Path) -> anyhow::Result<()> {
     use scbg_plot::Series;
     std::fs::create_dir_all(dir)?;
+    if eval.curve.per_quantile.is_empty() {
+        return Ok(());
+    }
     let q = |f: &dyn Fn(&QuantileSim) -> f64| -> Vec<(f64, f64)> {
         eval.curve
             .per_quantile

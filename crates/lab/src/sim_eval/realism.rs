@@ -53,15 +53,16 @@ impl WosacSummary {
     }
 }
 
-/// A baseline on the WOSAC scenes.
+/// A baseline on the WOSAC scenes (`None` where no scene was scored).
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct BaselineSim {
     /// A's realised average speed, m/s.
-    pub a_avg_speed_mps: f64,
+    pub a_avg_speed_mps: Option<f64>,
     /// Fraction of scenes in which B collides.
-    pub b_collision_rate: f64,
-    /// Fraction of scenes in which B goes off-road.
-    pub b_offroad_rate: f64,
+    pub b_collision_rate: Option<f64>,
+    /// Fraction of scenes in which B goes off-road (over the scenes whose map has road
+    /// edges).
+    pub b_offroad_rate: Option<f64>,
     /// WOSAC realism.
     pub wosac: Option<WosacSummary>,
 }
@@ -102,7 +103,7 @@ impl SimEval {
     /// drawn from its prior, each with its per-scene difference to IDM-only, and the baselines.
     pub fn realism_line(&self) -> String {
         let meta =
-            |w: Option<&WosacSummary>| w.map_or("-".into(), |w| format!("{:.4}", w.metametric));
+            |w: Option<&WosacSummary>| w.map_or("n/a".into(), |w| format!("{:.4}", w.metametric));
         let diff = |d: &Option<PairedDifference>| {
             d.as_ref().map_or(String::new(), |d| {
                 format!(
@@ -206,11 +207,27 @@ pub(super) fn wosac_scene(
         ("idm_only", idm),
     ] {
         metrics.insert(name.to_string(), score(&r)?);
-        let scene = scene_of_rollout(&s.scene, &r, 0);
+        let mut scene = scene_of_rollout(&s.scene, &r, 0);
+        if name == "log_replay" {
+            // The replay copies the log's placeholders of invalid steps; they are no motion.
+            keep_log_validity(&mut scene, &s.scene);
+        }
         let rep = report(&scene, s.ego, &[s.controlled])?;
         rollout_metrics.insert(name.to_string(), (rep.ego, rep.controlled[0]));
     }
     Ok((rollout_metrics, metrics))
+}
+
+/// Marks invalid every future state of `scene` whose state in `log` is invalid (or missing).
+fn keep_log_validity(scene: &mut Scene, log: &Scene) {
+    let start = log.current_step;
+    for (tr, logged) in scene.tracks.iter_mut().zip(&log.tracks) {
+        for (t, state) in tr.states.iter_mut().enumerate().skip(start + 1) {
+            if !logged.states.get(t).is_some_and(|s| s.valid) {
+                state.valid = false;
+            }
+        }
+    }
 }
 
 /// The WOSAC method name of scbg around quantile `q`.
@@ -275,9 +292,9 @@ impl Realism {
                     a_avg_speed_mps: mean_std(
                         &rm.iter().map(|m| m.0.avg_speed_mps).collect::<Vec<_>>(),
                     )
-                    .0,
+                    .map(|(mean, _)| mean),
                     b_collision_rate: rate(rm.iter().map(|m| m.1.collision)),
-                    b_offroad_rate: rate(rm.iter().map(|m| m.1.offroad.unwrap_or(false))),
+                    b_offroad_rate: rate(rm.iter().filter_map(|m| m.1.offroad)),
                     wosac: by_method.get(name).cloned(),
                 };
                 (name.to_string(), baseline)

@@ -5,10 +5,12 @@
 mod closed_loop;
 mod heads;
 mod labelling;
+mod real_scenes;
 
 use closed_loop::{closed_loop_through_the_library, ranked_policy_in_the_loop};
 use heads::generator_heads;
 use labelling::{courtesy_toward_neighbours, ensemble_labels};
+use real_scenes::closed_loop_on_every_real_file;
 use scbg::choices::{Courtesy, Family, MarginalEstimate, Reward, Variant};
 use scbg::{Quiet, generate};
 use scbg_lab::{generator, labels, predictor, synth};
@@ -206,6 +208,7 @@ fn label_train_and_generate_through_the_library() {
 
     generator_heads(&predictors, dir.path());
     closed_loop_through_the_library(&model, &scene, t, dir.path());
+    closed_loop_on_every_real_file(&model);
     ranked_policy_in_the_loop(model, &scene, t);
     courtesy_toward_neighbours(&predictors, &scene, t, dir.path());
 
