@@ -349,4 +349,27 @@ pub(crate) fn eval_sim_on_real_files(gen_dir: &str, dir: &std::path::Path) {
         "{eval}"
     );
     assert!(text.contains("unreadable"), "{text}");
+    // Nothing to simulate: the reasons, eval_sim.json still written, exit code 2.
+    let only_bad: Vec<&str> = args[..args.len() - files.len()]
+        .iter()
+        .map(String::as_str)
+        .chain([garbage.to_str().unwrap()])
+        .collect();
+    std::fs::remove_file(out.join("eval_sim.json")).unwrap();
+    let failed = crate::scbg(&only_bad);
+    let err = String::from_utf8_lossy(&failed.stderr);
+    assert_eq!(failed.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("no scene could be simulated") && err.contains("unreadable"),
+        "{err}"
+    );
+    assert!(!err.contains("NaN"), "{err}");
+    let eval: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("eval_sim.json")).unwrap()).unwrap();
+    assert_eq!(eval["scenes"], 0, "{eval}");
+    assert!(
+        eval["per_quantile"].as_array().unwrap().is_empty(),
+        "{eval}"
+    );
+    assert!(eval["baselines"]["idm_only"]["a_avg_speed_mps"].is_null());
 }

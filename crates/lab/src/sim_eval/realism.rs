@@ -218,13 +218,19 @@ pub(super) fn wosac_scene(
     Ok((rollout_metrics, metrics))
 }
 
-/// Marks invalid every future state of `scene` whose state in `log` is invalid (or missing).
+/// Marks invalid every future state of `scene` whose state in `log` is invalid (or missing),
+/// and gives the first valid state after an invalid one the log's velocity (the finite
+/// difference from a placeholder is no speed).
 fn keep_log_validity(scene: &mut Scene, log: &Scene) {
     let start = log.current_step;
     for (tr, logged) in scene.tracks.iter_mut().zip(&log.tracks) {
+        let valid = |t: usize| logged.states.get(t).is_some_and(|s| s.valid);
         for (t, state) in tr.states.iter_mut().enumerate().skip(start + 1) {
-            if !logged.states.get(t).is_some_and(|s| s.valid) {
+            if !valid(t) {
                 state.valid = false;
+            } else if !valid(t - 1) {
+                state.velocity_x_mps = logged.states[t].velocity_x_mps;
+                state.velocity_y_mps = logged.states[t].velocity_y_mps;
             }
         }
     }

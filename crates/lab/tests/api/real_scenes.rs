@@ -123,4 +123,32 @@ pub(crate) fn closed_loop_on_every_real_file(model: &generator::LoadedScbg) {
     );
     assert!(!text.contains("NaN"), "{text}");
     assert!(eval.rollout_ms.is_finite() && eval.seconds.is_finite());
+
+    // No scene at all: an evaluation of nothing, every number absent, the reasons kept.
+    let mut none = sim_eval::evaluate_sim(model, &[], &options).unwrap();
+    assert_eq!(none.curve.scenes, 0);
+    assert!(none.curve.per_quantile.is_empty());
+    assert_eq!(none.curve.max_b_collision_rate, None);
+    assert_eq!(none.curve.a_speed_curve_rises, None);
+    assert!(
+        none.baselines
+            .values()
+            .all(|b| b.a_avg_speed_mps.is_none() && b.b_offroad_rate.is_none())
+    );
+    none.add_skipped(vec![sim_eval::SkippedScene {
+        scenario_id: "short".into(),
+        reason: sim_eval::TOO_SHORT.into(),
+        detail: None,
+    }]);
+    let text = format!(
+        "{}\n{}\n{}",
+        none.realism_line(),
+        none.curve.collision_line(),
+        none.skipped_line()
+    );
+    assert!(
+        text.contains(sim_eval::TOO_SHORT) && text.contains("n/a"),
+        "{text}"
+    );
+    assert!(!text.contains("NaN"), "{text}");
 }
