@@ -115,25 +115,34 @@ def merge_sim(reports: list[dict]) -> dict:
     scenes = sum(r["scenes"] for r in reports)
     if scenes == 0:
         raise SystemExit("sim: no shard evaluated a scene")
-    quantiles = [q["quantile"] for q in reports[0]["per_quantile"]]
+    # Shards that simulated nothing have no rows; a value a shard could not measure is null
+    # (e.g. off-road without road edges) and leaves that shard out of its mean.
+    measured = [r for r in reports if r["scenes"] > 0]
+    quantiles = [q["quantile"] for q in measured[0]["per_quantile"]]
     per_quantile = []
     for k, q in enumerate(quantiles):
         row = {"quantile": q}
         for key in ["a_avg_speed_mps", "realised_courtesy_mps", "b_collision_rate", "b_offroad_rate", "b_mean_abs_jerk_mps3", "b_progress_m"]:
-            row[key] = sum(r["per_quantile"][k][key] * r["scenes"] for r in reports) / scenes
+            known = [(r["per_quantile"][k][key], r["scenes"]) for r in measured if r["per_quantile"][k][key] is not None]
+            weight = sum(n for _, n in known)
+            row[key] = sum(v * n for v, n in known) / weight if weight else None
         per_quantile.append(row)
     speeds = [row["a_avg_speed_mps"] for row in per_quantile]
     skipped: dict[str, int] = {}
+    skipped_scenes: list[dict] = []
     for r in reports:
         for why, n in r.get("skipped", {}).items():
             skipped[why] = skipped.get(why, 0) + n
+        skipped_scenes.extend(r.get("skipped_scenes", []))
+    collision = [r["max_b_collision_rate"] for r in measured if r["max_b_collision_rate"] is not None]
     return {
         "scenes": scenes,
         "skipped": skipped,
+        "skipped_scenes": skipped_scenes,
         "shards": len(reports),
         "per_quantile": per_quantile,
         "a_speed_curve_rises": all(b >= a for a, b in zip(speeds, speeds[1:])),
-        "max_b_collision_rate": max(r["max_b_collision_rate"] for r in reports),
+        "max_b_collision_rate": max(collision) if collision else None,
     }
 
 
