@@ -405,7 +405,37 @@ pub fn load_scenes(
 
 #[cfg(test)]
 mod tests {
-    use super::reason_of;
+    use super::{PairOrigin, SimScene, first_logged, reason_of, spread_over_logged};
+
+    fn sim_scene(id: &str, window: Option<usize>) -> SimScene {
+        SimScene {
+            scene: scbg_scene::Scene {
+                scenario_id: window.map_or(id.to_string(), |w| format!("{id}@{w}")),
+                ..Default::default()
+            },
+            ego: 1,
+            controlled: 2,
+            pair: PairOrigin::Mined,
+            window,
+            truth: None,
+        }
+    }
+
+    #[test]
+    fn logged_scenes_count_whole_and_realism_takes_first_windows_first() {
+        let scenes = [
+            sim_scene("a", Some(10)),
+            sim_scene("a", Some(20)),
+            sim_scene("b", None),
+            sim_scene("c", Some(10)),
+            sim_scene("c", Some(30)),
+        ];
+        assert_eq!(scenes[1].source_id(), "a");
+        assert_eq!(first_logged(&scenes, 2).len(), 3);
+        assert_eq!(first_logged(&scenes, 0).len(), 0);
+        assert_eq!(first_logged(&scenes, 9).len(), 5);
+        assert_eq!(spread_over_logged(&scenes), [0, 2, 3, 1, 4]);
+    }
 
     #[test]
     fn reasons_leave_out_ids_and_numbers() {
