@@ -54,7 +54,7 @@ fn polylines(lines: Vec<PyReadonlyArray2<'_, f64>>, what: &str) -> PyResult<Vec<
 impl Scene {
     /// A scene from arrays (see the stubs).
     #[staticmethod]
-    #[pyo3(signature = (scenario_id, ids, states, valid, object_types=None, current_step=10, sdc_id=None, objects_of_interest=Vec::new(), lanes=Vec::new(), road_edges=Vec::new(), road_lines=Vec::new()))]
+    #[pyo3(signature = (scenario_id, ids, states, valid, object_types=None, current_step=10, sdc_id=None, objects_of_interest=Vec::new(), lanes=Vec::new(), road_edges=Vec::new(), road_lines=Vec::new(), lane_types=None))]
     #[allow(clippy::too_many_arguments)]
     fn from_arrays(
         scenario_id: String,
@@ -68,6 +68,7 @@ impl Scene {
         lanes: Vec<PyReadonlyArray2<'_, f64>>,
         road_edges: Vec<PyReadonlyArray2<'_, f64>>,
         road_lines: Vec<PyReadonlyArray2<'_, f64>>,
+        lane_types: Option<Vec<String>>,
     ) -> PyResult<Self> {
         let (ids, states, valid) = (ids.as_array(), states.as_array(), valid.as_array());
         let [n, t, f] = [states.shape()[0], states.shape()[1], states.shape()[2]];
@@ -102,6 +103,7 @@ impl Scene {
             sdc_id,
             objects_of_interest,
             lanes: polylines(lanes, "lanes")?,
+            lane_types,
             road_edges: polylines(road_edges, "road_edges")?,
             road_lines: polylines(road_lines, "road_lines")?,
         }

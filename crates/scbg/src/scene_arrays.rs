@@ -2,8 +2,8 @@
 //! `Scene.from_arrays`, a client's own converter).
 
 use scbg_scene::{
-    AgentState, Lane, Map, MapPoint, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType,
-    Scene, Track,
+    AgentState, Lane, LaneType, Map, MapPoint, ObjectType, RoadEdge, RoadEdgeType, RoadLine,
+    RoadLineType, Scene, Track,
 };
 
 use crate::InvalidRequest;
@@ -14,8 +14,9 @@ pub type StateRow = [f64; 7];
 
 /// Agents' histories and a map as arrays: what [`SceneArrays::build`] turns into a [`Scene`].
 ///
-/// Steps are 0.1 s apart. Lanes become car lanes of unknown type, road edges road boundaries,
-/// road lines broken single white lines, with ids counted from 1.
+/// Steps are 0.1 s apart. Lanes become car lanes of the given types (unknown when none are
+/// given), road edges road boundaries, road lines broken single white lines, with ids counted
+/// from 1.
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct SceneArrays {
     /// The scenario's id.
@@ -37,6 +38,10 @@ pub struct SceneArrays {
     pub objects_of_interest: Vec<i64>,
     /// Lane centre lines, world metres.
     pub lanes: Vec<Vec<[f64; 2]>>,
+    /// Type name per lane (`freeway`, `surface_street`, `bike_lane`, `undefined`); `None`: all
+    /// undefined. The learned models read a lane's type: a road of the kind they were trained
+    /// on should say so.
+    pub lane_types: Option<Vec<String>>,
     /// Road edges, world metres.
     pub road_edges: Vec<Vec<[f64; 2]>>,
     /// Road lines, world metres.
@@ -53,6 +58,20 @@ fn object_type(name: &str) -> Result<ObjectType, InvalidRequest> {
         other => {
             return Err(InvalidRequest(format!(
                 "object type {other:?}: expected vehicle, pedestrian, cyclist, other or unset"
+            )));
+        }
+    })
+}
+
+fn lane_type(name: &str) -> Result<LaneType, InvalidRequest> {
+    Ok(match name {
+        "freeway" => LaneType::Freeway,
+        "surface_street" => LaneType::SurfaceStreet,
+        "bike_lane" => LaneType::BikeLane,
+        "undefined" => LaneType::Undefined,
+        other => {
+            return Err(InvalidRequest(format!(
+                "lane type {other:?}: expected freeway, surface_street, bike_lane or undefined"
             )));
         }
     })
@@ -133,6 +152,20 @@ impl SceneArrays {
                     .ok_or_else(|| InvalidRequest(format!("sdc_id {id} is not one of the ids")))?,
             ),
         };
+        let lane_types = match &self.lane_types {
+            Some(v) if v.len() != self.lanes.len() => {
+                return Err(InvalidRequest(format!(
+                    "lane_types has {} names for {} lanes",
+                    v.len(),
+                    self.lanes.len()
+                )));
+            }
+            Some(v) => v
+                .iter()
+                .map(|s| lane_type(s))
+                .collect::<Result<Vec<_>, _>>()?,
+            None => vec![LaneType::Undefined; self.lanes.len()],
+        };
         let mut id = 0i64;
         let mut next = || {
             id += 1;
@@ -142,8 +175,10 @@ impl SceneArrays {
             lanes: self
                 .lanes
                 .iter()
-                .map(|l| Lane {
+                .zip(&lane_types)
+                .map(|(l, &lane_type)| Lane {
                     id: next(),
+                    lane_type,
                     polyline: points(l),
                     ..Default::default()
                 })
@@ -215,6 +250,10 @@ mod tests {
         assert_eq!(scene.sdc_track_index, Some(1));
         assert_eq!(scene.tracks[1].states[3].x_m, 23.0);
         assert_eq!(scene.map.lanes[0].polyline.len(), 2);
+        assert_eq!(scene.map.lanes[0].lane_type, LaneType::Undefined);
+        let mut a = two_agents();
+        a.lane_types = Some(vec!["freeway".into()]);
+        assert_eq!(a.build().unwrap().map.lanes[0].lane_type, LaneType::Freeway);
     }
 
     #[test]
@@ -228,5 +267,11 @@ mod tests {
         let mut a = two_agents();
         a.sdc_id = Some(3);
         assert!(a.build().unwrap_err().0.contains("sdc_id 3"));
+        let mut a = two_agents();
+        a.lane_types = Some(vec!["motorway".into()]);
+        assert!(a.build().unwrap_err().0.contains("motorway"));
+        let mut a = two_agents();
+        a.lane_types = Some(vec![]);
+        assert!(a.build().unwrap_err().0.contains("0 names for 1 lanes"));
     }
 }

@@ -34,10 +34,12 @@ class Scene:
         lanes: Sequence[npt.NDArray[np.float64]] = (),
         road_edges: Sequence[npt.NDArray[np.float64]] = (),
         road_lines: Sequence[npt.NDArray[np.float64]] = (),
+        lane_types: Optional[Sequence[str]] = None,
     ) -> "Scene":
         """A scene from arrays: ``states [agents, steps, 7]`` = x, y, heading, vx, vy,
         length, width (metres, radians, m/s, world frame); ``valid [agents, steps]``;
-        polylines ``[n, 2]``."""
+        polylines ``[n, 2]``; ``lane_types`` one of ``freeway``, ``surface_street``,
+        ``bike_lane``, ``undefined`` per lane (default: all undefined)."""
     @property
     def scenario_id(self) -> str: ...
     @property
