@@ -24,7 +24,10 @@ fn run(cmd: &mut Command, what: &str) {
 
 fn imports_scbg(python: &Path) -> bool {
     Command::new(python)
-        .args(["-c", "import scbg, numpy, pytest, highway_env"])
+        .args([
+            "-c",
+            "import scbg, numpy, pytest, highway_env, libsumo, sumolib",
+        ])
         .output()
         .is_ok_and(|o| o.status.success())
 }
@@ -51,8 +54,11 @@ fn build_venv(root: &Path, venv: &Path) {
             "numpy",
             "pytest",
             "highway-env",
+            "eclipse-sumo",
+            "libsumo",
+            "sumolib",
         ]),
-        "pip install maturin numpy pytest highway-env",
+        "pip install maturin numpy pytest highway-env eclipse-sumo libsumo sumolib",
     );
     let wheels = root.join("target/wheels");
     run(

@@ -1,0 +1,1 @@
+"""Foreign simulators driven by scbg: harnesses that put one scbg-driven car among a simulator's own."""

@@ -1,0 +1,133 @@
+"""The SUMO harness (scbg.sims.sumo): frame conversions, B on the road, determinism, the
+yardstick's direction and bad requests. Needs eclipse-sumo, libsumo and sumolib."""
+
+import math
+
+import numpy as np
+import pytest
+
+from scbg.sims import sumo
+
+
+def _run_until(traci, ids, steps):
+    history = []
+    for _ in range(steps):
+        traci.simulationStep()
+        if all(v in traci.vehicle.getIDList() for v in ids):
+            history.append({v: sumo.vehicle_state(traci, v) for v in traci.vehicle.getIDList()})
+    return history[-sumo.HISTORY_STEPS:]
+
+
+def test_heading_convention():
+    # SUMO: degrees clockwise from north; scbg: radians counter-clockwise from +x.
+    for angle, heading in ((0.0, math.pi / 2), (90.0, 0.0), (180.0, -math.pi / 2), (45.0, math.pi / 4)):
+        assert sumo.heading_from_sumo_angle(angle) == pytest.approx(heading, abs=1e-12)
+        assert sumo.sumo_angle_from_heading(heading) == pytest.approx(angle % 360.0, abs=1e-9)
+    assert abs(sumo.heading_from_sumo_angle(270.0)) == pytest.approx(math.pi)
+
+
+def test_scene_positions_are_sumo_centres():
+    """A car driving east and one driving north, converted into a scene: centres (SUMO gives
+    the front bumper), headings and velocities as the lanes' geometry says."""
+    road = sumo.road_map("sumo-4way")
+    traci = sumo.start_sumo("sumo-4way", 0)
+    try:
+        traci.vehicle.add("A", "eastbound", typeID="car", depart="0", departSpeed="10")
+        traci.vehicle.add("B", "northbound", typeID="car", depart="0", departSpeed="8")
+        history = _run_until(traci, ("A", "B"), 30)
+        pos = {v: traci.vehicle.getLanePosition(v) for v in ("A", "B")}
+        speed = {v: traci.vehicle.getSpeed(v) for v in ("A", "B")}
+        length = traci.vehicle.getLength("A")
+        scene, a, b = sumo.scene_from_history("sumo-4way", history, "A", "B", road)
+    finally:
+        traci.close()
+    states, valid = scene.states()
+    ids = list(scene.ids)
+    now = scene.current_step
+    assert valid[:, : now + 1].all() and not valid[:, now + 1 :].any()
+    # w_in's lane runs from x = -250 along y = -1.75; s_in's from y = -250 along x = 1.75.
+    sa, sb = states[ids.index(a), now], states[ids.index(b), now]
+    assert sa[:2] == pytest.approx([-250.0 + pos["A"] - length / 2, -1.75], abs=1e-6)
+    assert sb[:2] == pytest.approx([1.75, -250.0 + pos["B"] - length / 2], abs=1e-6)
+    assert sa[2] == pytest.approx(0.0, abs=1e-6) and sb[2] == pytest.approx(math.pi / 2, abs=1e-6)
+    assert sa[3:5] == pytest.approx([speed["A"], 0.0], abs=1e-5)
+    assert sb[3:5] == pytest.approx([0.0, speed["B"]], abs=1e-5)
+    assert sa[5:7] == pytest.approx([4.8, 1.9], abs=1e-6)
+
+
+def test_b_is_put_where_its_plan_says():
+    """Following a plan point: SUMO's B (converted back to a centre) is at the point, with the
+    plan's speed; a point beside the lane is mapped onto it."""
+    traci = sumo.start_sumo("sumo-4way", 0)
+    try:
+        traci.vehicle.add("B", "northbound", typeID="car", depart="0", departSpeed="10")
+        history = _run_until(traci, ("B",), 5)
+        traci.vehicle.setSpeedMode("B", 0)
+        start = np.array(history[-1]["B"][:2])
+        plan = start + np.outer(np.arange(1, 81), [0.0, 1.2])  # 12 m/s north along the lane
+        plan[1:, 0] += 0.6  # beside the lane centre from the second point on
+        for j in range(3):
+            sumo._follow(traci, plan, j, start, history[-1]["B"])
+            traci.simulationStep()
+            history.append({"B": sumo.vehicle_state(traci, "B")})
+            x, y, h, vx, vy = history[-1]["B"][:5]
+            assert (x, y) == pytest.approx((start[0], plan[j, 1]), abs=1e-6)
+            assert h == pytest.approx(math.pi / 2, abs=1e-6)
+            assert math.hypot(vx, vy) == pytest.approx(float(np.hypot(*(plan[j] - (plan[j - 1] if j else start)))) / 0.1, rel=1e-6)
+    finally:
+        traci.close()
+
+
+def test_scbg_b_stays_on_the_road_and_episodes_repeat(trained):
+    model, _ = trained
+    # Plan points within the 8 s: each plan's points up to the end of the 8 s.
+    points = sum(sumo.FUTURE_STEPS - k for k in range(0, sumo.FUTURE_STEPS, sumo.REPLAN_EVERY))
+    for scenario in sumo.SCENARIOS:
+        steps = on_road = 0
+        for seed in (0, 1):
+            for q in (0.1, 0.9):
+                r = sumo.episode(model, scenario, seed, {"kind": "scbg", "quantile": q})
+                assert r["b_steps"] == 80 and r["b_plan_points"] == points, r
+                assert 0 <= r["b_plan_points_on_road"] <= r["b_plan_points"]
+                assert r["a_id"] == "A" and r["b_id"] == "B" and r["t0_s"] > 1.1
+                assert math.isfinite(r["a_speed_mps"]) and r["a_speed_mps"] > 0
+                steps += r["b_steps"]
+                on_road += r["b_steps_on_road"]
+        assert on_road >= 0.98 * steps, (scenario, on_road, steps)
+        again = [sumo.episode(model, scenario, 1, {"kind": "scbg", "quantile": 0.9}) for _ in range(2)]
+        assert again[0] == again[1]
+        assert again[0] == sumo.episode(model, scenario, 1, {"kind": "scbg", "quantile": 0.9})
+        # The takeover is the seed's, whoever drives B after it.
+        assert sumo.episode(None, scenario, 1, {"kind": "default"})["t0_s"] == again[0]["t0_s"]
+
+
+def test_yardstick_high_courtesy_lets_a_drive_faster():
+    """SUMO's own B at its high courtesy setting never slows A more than at its low one, and
+    over these seeds A is faster on the paired mean (at the junction seeds 1 and 6 respond, on
+    the on-ramp six of the eight)."""
+    for scenario in sumo.SCENARIOS:
+        effects = []
+        for seed in range(8):
+            low = sumo.episode(None, scenario, seed, {"kind": "yardstick", "level": "low"})
+            high = sumo.episode(None, scenario, seed, {"kind": "yardstick", "level": "high"})
+            assert low["b_plan_points"] == high["b_plan_points"] == 0
+            effects.append(high["a_speed_mps"] - low["a_speed_mps"])
+        assert min(effects) > -1e-9, (scenario, effects)
+        assert np.mean(effects) > 0.02, (scenario, effects)
+
+
+def test_bad_requests_raise_value_error(trained):
+    model, _ = trained
+    with pytest.raises(ValueError, match="unknown SUMO scenario 'sumo-roundabout'"):
+        sumo.episode(model, "sumo-roundabout", 0, {"kind": "default"})
+    for q in (1.5, -0.1, float("nan"), "0.5", None):
+        with pytest.raises(ValueError, match=r"quantile must be a number in \[0, 1\]"):
+            sumo.episode(model, "sumo-4way", 0, {"kind": "scbg", "quantile": q})
+    with pytest.raises(ValueError, match="level must be 'low' or 'high'"):
+        sumo.episode(model, "sumo-onramp", 0, {"kind": "yardstick", "level": "medium"})
+    with pytest.raises(ValueError, match="kind 'scbg', 'yardstick' or 'default'"):
+        sumo.episode(model, "sumo-onramp", 0, {"kind": "idm"})
+    with pytest.raises(ValueError, match="needs a model"):
+        sumo.episode(None, "sumo-onramp", 0, {"kind": "scbg", "quantile": 0.5})
+    with pytest.raises(ValueError, match=r"replan_every must be an integer in \[1, 80\]"):
+        sumo.episode(model, "sumo-onramp", 0, {"kind": "scbg", "quantile": 0.5}, replan_every=0)
