@@ -144,6 +144,26 @@ impl Scene {
         self.inner.objects_of_interest.clone()
     }
 
+    /// `points [n, 2]` (world metres) kept in lane as scbg's closed loop keeps a plan.
+    #[pyo3(signature = (points, max_offset_m=scbg::sim::DEFAULT_LANE_KEEPING_M))]
+    fn keep_in_lane<'py>(
+        &self,
+        py: Python<'py>,
+        points: PyReadonlyArray2<'_, f64>,
+        max_offset_m: f64,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let mut plan = polylines(vec![points], "points")?.remove(0);
+        let scene = Arc::clone(&self.inner);
+        py.detach(|| scbg::sim::keep_in_lane(&scene, &mut plan, max_offset_m))
+            .map_err(py_err)?;
+        let mut out = Array2::<f64>::zeros((plan.len(), 2));
+        for (k, p) in plan.iter().enumerate() {
+            out[[k, 0]] = p[0];
+            out[[k, 1]] = p[1];
+        }
+        Ok(out.into_pyarray(py))
+    }
+
     /// `([agents, steps, 7], [agents, steps])`.
     fn states<'py>(
         &self,

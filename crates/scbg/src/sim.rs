@@ -27,9 +27,31 @@ pub use export::{ExportFormat, scene_of_rollout, wosac_rollouts, write_scenarios
 pub use run::{SimOutput, SimRun, run_sim};
 
 pub use scbg_sim::{
-    AgentRolloutMetrics, AgentSnapshot, Contact, DEFAULT_REPLAN_EVERY, EgoMode, HORIZON_STEPS,
-    OthersMode, SimConfig, Simulation, VehicleLimits,
+    AgentRolloutMetrics, AgentSnapshot, Contact, DEFAULT_LANE_KEEPING_M, DEFAULT_REPLAN_EVERY,
+    EgoMode, HORIZON_STEPS, OthersMode, SimConfig, Simulation, VehicleLimits,
 };
+
+/// Keeps a plan in lane as the closed loop keeps a controlled agent's plans before following
+/// them ([`scbg_sim::lanes`]): every point (world frame, metres) is pulled to within
+/// `max_offset_m` of the nearest car-lane centre line of `scene`'s map that heads the plan's
+/// way; returns how many points moved. A simulator that drives B from [`crate::Model::generate`]'s
+/// futures should follow the kept plan (with [`DEFAULT_LANE_KEEPING_M`]): B then drives as in
+/// scbg's own closed loop. A negative or non-finite offset is an [`InvalidRequest`].
+pub fn keep_in_lane(
+    scene: &Scene,
+    plan_world_m: &mut [[f64; 2]],
+    max_offset_m: f64,
+) -> anyhow::Result<usize> {
+    ensure_request!(
+        max_offset_m.is_finite() && max_offset_m >= 0.0,
+        "max_offset_m {max_offset_m} is not a finite number ≥ 0"
+    );
+    ensure_request!(
+        plan_world_m.iter().flatten().all(|v| v.is_finite()),
+        "the plan has a non-finite coordinate"
+    );
+    Ok(scbg_sim::lanes::LaneSegments::new(&scene.map).keep_near(plan_world_m, max_offset_m))
+}
 
 /// Steps between the generator's plans by default (2 s). The generator commits to one of B's
 /// modes at each plan ([`scbg_generator::Generator::forward`]); re-deciding every
@@ -409,5 +431,46 @@ mod tests {
         assert_eq!(cadence(Policy::Generator, Some(1)), 1);
         // The simulator's own default differs: the options always say which they mean.
         assert_ne!(SimConfig::default().replan_every, GENERATOR_REPLAN_EVERY);
+    }
+
+    #[test]
+    fn a_plan_beside_the_lane_is_kept_in_it() {
+        use scbg_scene::{Lane, LaneType, Map, MapPoint};
+        let point = |x_m: f64| MapPoint {
+            x_m,
+            y_m: 0.0,
+            z_m: 0.0,
+        };
+        let scene = Scene {
+            map: Map {
+                lanes: vec![Lane {
+                    id: 1,
+                    lane_type: LaneType::Freeway,
+                    polyline: (0..=10).map(|k| point(10.0 * f64::from(k))).collect(),
+                    ..Default::default()
+                }],
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        // Drifting 3 m off the lane (within reach): pulled to 0.25 m of it; the timing along
+        // the lane is kept.
+        let mut plan: Vec<[f64; 2]> = (0..5).map(|k| [10.0 * f64::from(k), 3.0]).collect();
+        assert_eq!(
+            keep_in_lane(&scene, &mut plan, DEFAULT_LANE_KEEPING_M).unwrap(),
+            5
+        );
+        for (k, p) in plan.iter().enumerate() {
+            assert!(
+                (p[0] - 10.0 * k as f64).abs() < 1e-9 && (p[1] - 0.25).abs() < 1e-9,
+                "{p:?}"
+            );
+        }
+        let err = keep_in_lane(&scene, &mut plan, -1.0).unwrap_err();
+        assert!(crate::is_invalid_request(&err) && err.to_string().contains("-1"));
+        plan[2][0] = f64::NAN;
+        assert!(crate::is_invalid_request(
+            &keep_in_lane(&scene, &mut plan, 0.25).unwrap_err()
+        ));
     }
 }

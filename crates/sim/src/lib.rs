@@ -27,8 +27,8 @@ pub mod rollout;
 pub use kinematics::{Bicycle, VehicleLimits};
 pub use metrics::{AgentRolloutMetrics, Contact, agent_metrics};
 pub use rollout::{
-    AgentSnapshot, DEFAULT_REPLAN_EVERY, EgoMode, HISTORY_STEPS, HORIZON_STEPS, OthersMode,
-    PlanError, Planner, SimConfig, SimError, Simulation,
+    AgentSnapshot, DEFAULT_LANE_KEEPING_M, DEFAULT_REPLAN_EVERY, EgoMode, HISTORY_STEPS,
+    HORIZON_STEPS, OthersMode, PlanError, Planner, SimConfig, SimError, Simulation,
 };
 
 #[cfg(test)]

@@ -52,6 +52,13 @@ class Scene:
     def ids(self) -> npt.NDArray[np.int64]: ...
     @property
     def objects_of_interest(self) -> list[int]: ...
+    def keep_in_lane(
+        self, points: npt.NDArray[np.float64], max_offset_m: float = 0.25
+    ) -> npt.NDArray[np.float64]:
+        """``points [n, 2]`` (world metres, e.g. ``generate(...)["world_xy_m"]``) kept in lane
+        as scbg's closed loop keeps a plan before following it: every point pulled to within
+        ``max_offset_m`` of the nearest car-lane centre line heading the plan's way. A
+        simulator driving B from generated plans should follow the kept plan."""
     def states(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
         """``([agents, steps, 7], [agents, steps])`` as in :meth:`from_arrays`."""
 
