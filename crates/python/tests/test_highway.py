@@ -1,32 +1,122 @@
-"""The real-simulator example: an scbg-driven merging car inside highway-env (from PyPI)."""
+"""scbg inside highway-env (from PyPI): the conversion, the episodes and the measurement's numbers."""
 
+import math
 import os
-import sys
 
+import numpy as np
 import pytest
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "examples"))
-
-SEEDS = 6
+from scbg.sims import measure
 
 
-def test_a_courteous_b_lets_highway_env_a_drive_faster(trained):
+def _highway():
     try:
         import highway_env  # noqa: F401
     except ImportError:
         if os.environ.get("CI"):
             raise
         pytest.skip("highway-env is not installed (pip install highway-env)")
-    import highway_merge
+    from scbg.sims import highway
 
+    return highway
+
+
+def test_the_road_converts_to_scbg_frame_with_the_acceleration_lane_merging():
+    highway = _highway()
+    ep = highway._Episode("merge-v0", 0)
+    try:
+        road = ep.road
+        assert len(ep.lanes) == len(road.network.lanes_list()) == len(ep.lane_types)
+        assert set(ep.lane_types) == {"freeway"}
+        # Every centre line point, flipped back, lies on a lane of highway-env's road.
+        for line in ep.lanes:
+            for p in line[:: max(1, len(line) // 8)]:
+                assert highway.on_road(road, [p[0], -p[1]]), p
+        # The acceleration lane (b, c, 2) ends on the right highway lane (b, c, 1): y = 4 m in
+        # highway-env's frame, -4 m in scbg's; the straight highway lanes are untouched.
+        accel = [line for line in ep.lanes if abs(line[0][1] + 8.0) < 1e-6 and line[0][0] == 230.0]
+        assert len(accel) == 1 and np.allclose(accel[0][-1], [310.0, -4.0]), accel
+        assert any(np.allclose(line[-1], [310.0, -8.0 + 4.0]) for line in ep.lanes)
+        assert ep.edges and ep.lines
+        # A car's state row is in scbg's frame: y and heading negated.
+        v = ep.cars[0]
+        row = highway._state_row(v)
+        assert row[0] == v.position[0] and row[1] == -v.position[1]
+        assert math.isclose(row[2], -v.heading)
+        assert math.isclose(math.hypot(row[3], row[4]), v.speed, rel_tol=1e-9)
+    finally:
+        ep.close()
+
+
+def test_an_episode_is_paired_and_deterministic(trained):
+    highway = _highway()
     model, _ = trained
-    # B, driven by scbg ahead of highway-env's A, at a high courtesy quantile toward A against
-    # a low one, in the same episodes (only the quantile changes): A's mean speed is higher,
-    # on the paired mean over the seeds.
-    effects = []
-    for seed in range(SEEDS):
-        low = highway_merge.episode(model, 0.1, seed)
-        high = highway_merge.episode(model, 0.9, seed)
-        assert all(v > 0 for v in low + high)
-        effects.append(high[1] - low[1])
-    assert sum(effects) / len(effects) > 0, effects
+    low = highway.episode(model, "intersection-v0", 3, {"kind": "scbg", "quantile": 0.1})
+    high = highway.episode(model, "intersection-v0", 3, {"kind": "scbg", "quantile": 0.9})
+    own = highway.episode(None, "intersection-v0", 3, {"kind": "yardstick", "level": "high"})
+    # The arms of one seed share the takeover step, A and B.
+    assert low["t0_s"] == high["t0_s"] == own["t0_s"] and low["t0_s"] > 0
+    assert low["a_id"] == high["a_id"] == own["a_id"] != low["b_id"] == high["b_id"]
+    assert low["b_plan_points"] == 80 * 4 and own["b_plan_points"] == 0
+    assert 0 <= low["b_plan_points_on_road"] <= low["b_plan_points"]
+    assert 0 <= low["b_steps_on_road"] <= low["b_steps"] == 80
+    assert highway.episode(model, "intersection-v0", 3, {"kind": "scbg", "quantile": 0.1}) == low
+
+
+def test_highway_envs_own_courtesy_moves_a_at_the_intersection():
+    """The yardstick is a yardstick: B always yielding to A lets A drive faster than B never
+    yielding, on the paired mean over seeds."""
+    highway = _highway()
+    deltas = []
+    for seed in range(6):
+        never = highway.episode(None, "intersection-v0", seed, {"kind": "yardstick", "level": "low"})
+        always = highway.episode(None, "intersection-v0", seed, {"kind": "yardstick", "level": "high"})
+        deltas.append(always["a_speed_mps"] - never["a_speed_mps"])
+    assert np.mean(deltas) > 0.3, deltas
+
+
+def test_bad_requests_are_named():
+    highway = _highway()
+    with pytest.raises(ValueError, match="unknown highway-env scenario 'merge-v9'"):
+        highway.episode(None, "merge-v9", 0, {"kind": "default"})
+    with pytest.raises(ValueError, match="quantile must be a number in"):
+        highway.episode(None, "merge-v0", 0, {"kind": "scbg", "quantile": 1.5})
+    with pytest.raises(ValueError, match="needs a model"):
+        highway.episode(None, "merge-v0", 0, {"kind": "scbg", "quantile": 0.5})
+    with pytest.raises(ValueError, match="level must be"):
+        highway.episode(None, "merge-v0", 0, {"kind": "yardstick", "level": "medium"})
+    with pytest.raises(ValueError, match="unknown scenario 'nope'"):
+        measure._module("nope")
+
+
+def test_spearman_handles_ties_and_constants():
+    assert measure.spearman([1, 2, 3], [10, 20, 30]) == pytest.approx(1.0)
+    assert measure.spearman([1, 2, 3], [3, 2, 1]) == pytest.approx(-1.0)
+    assert measure.spearman([1, 2, 3, 4], [1, 1, 2, 2]) == pytest.approx(0.894427, abs=1e-6)
+    assert math.isnan(measure.spearman([1, 2, 3], [5, 5, 5]))
+
+
+def _record(speed, collided=False):
+    return {"a_speed_mps": speed, "b_collided": collided, "b_plan_points": 80,
+            "b_plan_points_on_road": 40, "b_steps": 80, "b_steps_on_road": 80}
+
+
+def test_the_summary_is_paired_within_episodes():
+    # Two episodes at very different speeds; within each, A rises with the quantile in the
+    # first and does not respond in the second.
+    seeds = []
+    for base, slope in ((30.0, 1.0), (5.0, 0.0)):
+        arms = {f"q{q:.1f}": _record(base + slope * q) for q in measure.QUANTILES}
+        arms.update(yardstick_low=_record(base), yardstick_high=_record(base + 0.5, True),
+                    default=_record(base))
+        seeds.append({"scenario": "s", "seed": len(seeds), "arms": arms})
+    seeds.append({"scenario": "s", "seed": 2, "skipped": "never met"})
+    s = measure.summarise(seeds)
+    assert s["episodes"] == 2 and s["skipped"] == [{"seed": 2, "reason": "never met"}]
+    assert s["effect_mps"] == pytest.approx(0.4)
+    assert s["yardstick_effect_mps"] == pytest.approx(0.5)
+    assert s["responsive_share"] == 0.5 and s["yardstick_responsive_share"] == 1.0
+    assert s["spearman_responsive"] == pytest.approx(1.0)
+    assert s["b_collision_rate"] == 0.0 and s["yardstick_b_collision_rate"] == 0.5
+    assert s["b_plan_on_road_share"] == 0.5 and s["b_on_road_share"] == 1.0
+    assert "| s | 2 |" in measure.table({"s": s}, {})

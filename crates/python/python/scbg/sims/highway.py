@@ -1,0 +1,492 @@
+"""scbg drives one car (B) inside highway-env, among highway-env's own IDM + MOBIL cars.
+
+highway-env (https://github.com/Farama-Foundation/HighwayEnv, ``pip install highway-env``)
+simulates highways, merges, intersections and roundabouts. Each episode here:
+
+1. builds one of highway-env's environments with a seed, and replaces its action-driven ego by
+   one of the simulator's own IDM cars, so that every car but B is highway-env's;
+2. lets highway-env drive everyone until the *takeover step* ``t0``: the first step at which the
+   scenario's B is close to the place where it meets A (the same step in every arm of a seed);
+3. from ``t0`` on, drives B by the arm: scbg at a courtesy quantile (B re-planned every 2 s, as
+   scbg's own closed loop re-plans it, from the last 1.1 s of every car and highway-env's road
+   network, converted to an scbg scene with :func:`scbg.Scene.from_arrays`; B follows the plan
+   point by point, kept in lane with :meth:`scbg.Scene.keep_in_lane` as scbg's own closed loop
+   keeps it), or
+   highway-env's own model at a low or high setting of its own courtesy parameter (the
+   yardstick), or highway-env's default;
+4. measures A's mean speed over the 8 s after ``t0``, B's collisions and whether B and its plans
+   stay on the road.
+
+Frames: highway-env's y axis points to the right of travel; scbg's to the left. Positions are
+converted by flipping y, headings by negating them.
+
+Scenarios (``SCENARIOS``): ``merge-v0`` (B the ramp car, A the highway car it meets),
+``highway-v0`` (B the car ahead of A in A's lane), ``highway-v0-cutin`` (B a car beside A that
+changes into A's lane ahead of it), ``intersection-v0`` (B a car whose path crosses A's) and
+``roundabout-v0`` (B the car circulating towards A's entry).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+import scbg
+
+STEP_SECS = 0.1
+HISTORY_STEPS = 11  # 1.1 s, the current step included
+MEASURE_STEPS = 80  # 8 s after the takeover
+REPLAN_STEPS = 20  # B re-planned every 2 s, as scbg's own closed loop re-plans the generator's B
+LANE_KEEPING_M = 0.25  # B follows its plan kept in lane, as scbg's own closed loop does
+LENGTH_M, WIDTH_M = 5.0, 2.0  # highway-env's vehicle box
+MAX_WARMUP_STEPS = 400
+
+SCENARIOS = {
+    "merge-v0": "highway-env's on-ramp: B the ramp car merging, A the right-lane highway car it meets",
+    "highway-v0": "highway-env's 4-lane highway: B the car ahead of A in A's lane",
+    "highway-v0-cutin": "highway-env's 4-lane highway: B a car beside A changing into A's lane ahead of it",
+    "intersection-v0": "highway-env's unsignalised 4-way junction: B a car whose path crosses A's",
+    "roundabout-v0": "highway-env's roundabout: B the circulating car, A the car entering ahead of it",
+}
+
+# highway-env's own idea of B's courtesy toward A, per scenario: the parameter set on B from the
+# takeover on, at a low and a high courtesy.
+YARDSTICKS = {
+    "merge-v0": {"parameter": "LANE_CHANGE_MAX_BRAKING_IMPOSED", "low": 8.0, "high": 0.5,
+                 "note": "MOBIL's limit on the braking B's lane change may impose on its new follower (m/s²)"},
+    "highway-v0": {"parameter": "POLITENESS", "low": 0.0, "high": 1.0,
+                   "note": "MOBIL's politeness: the weight B gives its followers' gain when it changes lanes"},
+    "highway-v0-cutin": {"parameter": "LANE_CHANGE_MAX_BRAKING_IMPOSED", "low": 8.0, "high": 0.5,
+                         "note": "MOBIL's limit on the braking B's lane change may impose on its new follower (m/s²)"},
+    "intersection-v0": {"parameter": "yields", "low": "never", "high": "always",
+                        "note": "highway-env's priority rule, per car: B never yields / B always yields to A"},
+    "roundabout-v0": {"parameter": "yields", "low": "never", "high": "always",
+                      "note": "B never waits / B waits at the conflict until A has passed it"},
+}
+
+_LANE_TYPES = {
+    "merge-v0": "freeway",
+    "highway-v0": "freeway",
+    "highway-v0-cutin": "freeway",
+    "intersection-v0": "surface_street",
+    "roundabout-v0": "surface_street",
+}
+
+_ENV_CONFIG = {
+    "merge-v0": ("merge-v0", {}),
+    "highway-v0": ("highway-v0", {"vehicles_count": 20, "lanes_count": 3, "vehicles_density": 2.0}),
+    "highway-v0-cutin": ("highway-v0", {"vehicles_count": 20, "lanes_count": 3, "vehicles_density": 2.0}),
+    "intersection-v0": ("intersection-v0", {"initial_vehicle_count": 6, "spawn_probability": 0.0}),
+    "roundabout-v0": ("roundabout-v0", {}),
+}
+
+
+def _imports():
+    try:
+        import gymnasium
+        import highway_env  # noqa: F401  (registers the environments)
+    except ImportError as e:  # pragma: no cover - depends on the user's environment
+        raise ImportError("scbg.sims.highway needs highway-env: pip install highway-env") from e
+    gymnasium.logger.min_level = 40  # highway-env's environments warn that v0 has a v1 on every make
+    return gymnasium
+
+
+def _idm_class_defaults():
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    names = [n for n in vars(IDMVehicle) if n.isupper()]
+    return {n: getattr(IDMVehicle, n) for n in names}
+
+
+_IDM_DEFAULTS = None
+
+
+def _restore_idm_defaults():
+    """intersection-v0 changes IDMVehicle's class attributes for the whole process; every
+    episode starts from highway-env's own defaults."""
+    global _IDM_DEFAULTS
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    if _IDM_DEFAULTS is None:
+        _IDM_DEFAULTS = _idm_class_defaults()
+    for k, v in _IDM_DEFAULTS.items():
+        setattr(IDMVehicle, k, v)
+
+
+def _flip(p):
+    return np.array([p[0], -p[1]])
+
+
+TAPER_M = 40.0  # a lane ending beside a neighbour merges into it over its last 40 m
+
+
+def _ends_beside(network, index):
+    """The neighbour lane a lane merges into: the lane ends (nothing continues it at its index
+    while its neighbour's road does continue) and has a neighbour to one side; else None."""
+    _from, _to, _id = index
+    nxt = network.graph.get(_to, {})
+    if any(len(lanes) > _id for lanes in nxt.values()):
+        return None
+    for side in (_id - 1, _id + 1):
+        if 0 <= side < len(network.graph[_from][_to]) and any(len(lanes) > side for lanes in nxt.values()):
+            return network.get_lane((_from, _to, side))
+    return None
+
+
+def road_map(road, lane_type):
+    """highway-env's road network as scbg's map (scbg's frame): lane centre lines every 2 m,
+    road edges where a lane side has a continuous line, road lines (broken white) where it is
+    striped, and the scenario's lane type.
+
+    A lane that ends beside a neighbouring lane (merge-v0's acceleration lane, ending at a wall)
+    is drawn merging into that neighbour over its last ``TAPER_M``: that is how an on-ramp's
+    lane runs in WOMD's maps and in scbg's synthetic world, and the only way a lane-following
+    model can read that the lane's cars must merge."""
+    from highway_env.road.lane import LineType
+
+    network = road.network
+    lanes, edges, lines = [], [], []
+    for _from, to_dict in network.graph.items():
+        for _to, ids in to_dict.items():
+            for _id, lane in enumerate(ids):
+                s = np.linspace(0.0, lane.length, max(2, int(np.ceil(lane.length / 2.0)) + 1))
+                into = _ends_beside(network, (_from, _to, _id))
+                if into is None:
+                    centre = [lane.position(t, 0.0) for t in s]
+                else:
+                    start = lane.length - TAPER_M
+
+                    def point(t):
+                        if t <= start:
+                            return lane.position(t, 0.0)
+                        w = min((t - start) / TAPER_M, 1.0)
+                        w = 0.5 - 0.5 * np.cos(np.pi * w)
+                        target = into.position(*into.local_coordinates(lane.position(t, 0.0))[:1], 0.0)
+                        return (1.0 - w) * lane.position(t, 0.0) + w * target
+
+                    centre = [point(t) for t in s]
+                lanes.append(np.array([_flip(p) for p in centre]))
+                for side, lat in ((0, -0.5), (1, 0.5)):
+                    kind = lane.line_types[side]
+                    if kind in (LineType.CONTINUOUS_LINE, LineType.STRIPED):
+                        line = np.array([_flip(lane.position(t, lat * lane.width_at(t))) for t in s])
+                        (edges if kind == LineType.CONTINUOUS_LINE else lines).append(line)
+    return lanes, edges, lines, [lane_type] * len(lanes)
+
+
+def _state_row(v):
+    x, y = _flip(v.position)
+    h = -float(v.heading)
+    return [x, y, h, v.speed * np.cos(h), v.speed * np.sin(h), LENGTH_M, WIDTH_M]
+
+
+def on_road(road, xy_highway):
+    """Whether a point (highway-env's frame) lies on some lane of the road."""
+    index = road.network.get_closest_lane_index(np.asarray(xy_highway, float))
+    lane = road.network.get_lane(index)
+    return bool(lane.on_lane(np.asarray(xy_highway, float)))
+
+
+def _check_arm(arm):
+    kind = arm.get("kind")
+    if kind == "scbg":
+        q = arm.get("quantile")
+        if not isinstance(q, (int, float)) or not 0.0 <= q <= 1.0:
+            raise ValueError(f"arm {arm!r}: quantile must be a number in [0, 1]")
+    elif kind == "yardstick":
+        if arm.get("level") not in ("low", "high"):
+            raise ValueError(f"arm {arm!r}: level must be 'low' or 'high'")
+    elif kind != "default":
+        raise ValueError(f"arm {arm!r}: kind must be 'scbg', 'yardstick' or 'default'")
+
+
+class _Episode:
+    """One episode's simulator, cars, history and the chosen A and B."""
+
+    def __init__(self, scenario, seed):
+        gymnasium = _imports()
+        from highway_env.vehicle.behavior import IDMVehicle
+
+        _restore_idm_defaults()
+        env_id, config = _ENV_CONFIG[scenario]
+        config = dict(config, simulation_frequency=10, policy_frequency=10)
+        self.env = gymnasium.make(env_id, config=config)
+        self.env.reset(seed=seed)
+        self.scenario = scenario
+        self.road = self.env.unwrapped.road
+        self.rng = np.random.default_rng(seed)
+        # The ego follows actions; make it one of highway-env's own IDM cars on the same route.
+        ego = self.env.unwrapped.vehicle
+        k = self.road.vehicles.index(ego)
+        idm = IDMVehicle.create_from(ego)
+        idm.route = list(getattr(ego, "route", None) or []) or None
+        if hasattr(ego, "target_lane_index"):
+            idm.target_lane_index = ego.target_lane_index
+        idm.target_speed = max(ego.speed, getattr(ego, "target_speed", ego.speed))
+        self.road.vehicles[k] = idm
+        self.ego = idm
+        self._jitter()
+        self.lanes, self.edges, self.lines, self.lane_types = road_map(self.road, _LANE_TYPES[scenario])
+        self.history = []  # [step][car] state rows, in the order of self.cars
+        self.cars = list(self.road.vehicles)
+        self.a = self.b = None
+        self._record()
+
+    def _jitter(self):
+        """highway-env's own start varies little with the seed (merge-v0: a few metres); every
+        car but the ego is moved along its lane by up to ±12 m and its speed changed by up to
+        ±2 m/s, drawn from the seed, so that seeds are different situations."""
+        for v in self.road.vehicles:
+            if v is self.ego:
+                continue
+            lane = self.road.network.get_lane(v.lane_index)
+            s_m, _ = lane.local_coordinates(v.position)
+            s_m = float(np.clip(s_m + self.rng.uniform(-12.0, 12.0), 0.0, lane.length))
+            v.position = lane.position(s_m, 0.0)
+            v.heading = lane.heading_at(s_m)
+            v.speed = max(0.0, v.speed + self.rng.uniform(-2.0, 2.0))
+            v.on_state_update()
+
+    def _record(self):
+        # Cars that appear later (spawned) are not followed: the scene is the cars at reset.
+        self.history.append([_state_row(v) for v in self.cars])
+
+    def step(self):
+        self.road.act()
+        self.road.step(STEP_SECS)
+        self._record()
+
+    def close(self):
+        self.env.close()
+
+    # ---- the scene scbg sees ----
+
+    def scene(self, steps_done):
+        recent = np.array(self.history[-HISTORY_STEPS:])  # [steps, cars, 7]
+        n = recent.shape[1]
+        states = np.zeros((n, HISTORY_STEPS + MEASURE_STEPS, 7))
+        states[:, :HISTORY_STEPS] = recent.transpose(1, 0, 2)
+        valid = np.zeros(states.shape[:2], bool)
+        valid[:, :HISTORY_STEPS] = True
+        # A car off the map (left the road network's ends) is not an input.
+        ids = np.arange(1, n + 1, dtype=np.int64)
+        a, b = self.cars.index(self.a) + 1, self.cars.index(self.b) + 1
+        return scbg.Scene.from_arrays(
+            f"highway-env-{self.scenario}-{steps_done}", ids, states, valid,
+            current_step=HISTORY_STEPS - 1, sdc_id=a, objects_of_interest=[a, b],
+            lanes=self.lanes, road_edges=self.edges, road_lines=self.lines,
+            lane_types=self.lane_types), a, b
+
+
+# ---- scenario set-ups: when to take over, and which cars are A and B ----
+
+
+def _lane_x(v):
+    return float(v.position[0])
+
+
+# merge-v0's acceleration lane runs from x = 230 m (the ramp's end) to 310 m (a wall).
+MERGE_TAKEOVER_X_M = 240.0
+
+
+def _merge_pair(ep):
+    """merge-v0: B = the ramp car once it is on the acceleration lane; A = the right-lane
+    highway car nearest behind it (the one whose gap B merges into)."""
+    ramp = [v for v in ep.cars if v.lane_index[0] in ("j", "k") or v.lane_index[2] == 2]
+    if not ramp:
+        return None
+    b = ramp[0]
+    if not (b.lane_index[:2] == ("b", "c") and _lane_x(b) >= MERGE_TAKEOVER_X_M):
+        return None
+    right = [v for v in ep.cars if v is not b and v.lane_index[2] == 1 and v.lane_index[0] != "j"
+             and _lane_x(b) - 60.0 < _lane_x(v) < _lane_x(b) + 10.0]
+    if not right:
+        return None
+    a = min(right, key=lambda v: abs(_lane_x(v) - _lane_x(b) + 10.0))
+    return a, b
+
+
+def _highway_pair(ep, cut_in):
+    """highway-v0: A = the ego; B = the car ahead of it in its lane (follow), or the nearest car
+    in a neighbouring lane a little ahead of it, which then changes into A's lane (cut-in)."""
+    a = ep.ego
+    lane = a.lane_index
+    if cut_in:
+        side = [v for v in ep.cars if v is not a and abs(v.lane_index[2] - lane[2]) == 1
+                and 5.0 < _lane_x(v) - _lane_x(a) < 30.0]
+        if not side:
+            return None
+        return a, min(side, key=lambda v: _lane_x(v) - _lane_x(a))
+    ahead = [v for v in ep.cars if v is not a and v.lane_index[2] == lane[2]
+             and 0.0 < _lane_x(v) - _lane_x(a) < 60.0]
+    if not ahead:
+        return None
+    return a, min(ahead, key=lambda v: _lane_x(v) - _lane_x(a))
+
+
+def _time_to(v, point):
+    d = np.linalg.norm(np.asarray(point) - v.position)
+    return d / max(v.speed, 1.0)
+
+
+def _conflict_pair(ep, centre, radius_m):
+    """intersection-v0 / roundabout-v0: A = the ego; B = the car that would reach the
+    conflict area (a disc around ``centre``) closest in time to A, from a different road."""
+    a = ep.ego
+    if np.linalg.norm(a.position - centre) > radius_m + 30.0:
+        return None
+    ta = _time_to(a, centre)
+    cands = [v for v in ep.cars if v is not a and v.lane_index[0] != a.lane_index[0]
+             and np.linalg.norm(v.position - centre) < radius_m + 45.0
+             and np.dot(centre - v.position, [np.cos(v.heading), np.sin(v.heading)]) > 0.0]
+    if not cands:
+        return None
+    b = min(cands, key=lambda v: abs(_time_to(v, centre) - ta))
+    if abs(_time_to(b, centre) - ta) > 3.0:
+        return None
+    return a, b
+
+
+def _pair(ep):
+    if ep.scenario == "merge-v0":
+        return _merge_pair(ep)
+    if ep.scenario == "highway-v0":
+        return _highway_pair(ep, cut_in=False)
+    if ep.scenario == "highway-v0-cutin":
+        return _highway_pair(ep, cut_in=True)
+    if ep.scenario == "intersection-v0":
+        return _conflict_pair(ep, np.zeros(2), 10.0)
+    return _conflict_pair(ep, np.zeros(2), 25.0)
+
+
+# ---- the arms ----
+
+
+def _apply_yardstick(ep, level):
+    ys = YARDSTICKS[ep.scenario]
+    value = ys[level]
+    b, a = ep.b, ep.a
+    if ys["parameter"] == "yields":
+        road = ep.road
+        if hasattr(road, "respect_priorities"):
+            rule = road.respect_priorities
+
+            def respect(v1, v2):
+                if {v1, v2} == {a, b}:
+                    return b if value == "always" else a
+                return rule(v1, v2)
+
+            road.respect_priorities = respect
+        if ep.scenario == "roundabout-v0" and value == "always":
+            _make_b_wait_for_a(ep)
+        return
+    setattr(b, ys["parameter"], value)
+
+
+def _make_b_wait_for_a(ep):
+    """The roundabout's courteous arm: B treats A as a car ahead of it until A has passed B."""
+    a, b = ep.a, ep.b
+    act = b.act
+
+    def act_waiting(action=None):
+        act(action)
+        ahead = np.dot(a.position - b.position, [np.cos(b.heading), np.sin(b.heading)])
+        if ahead > -LENGTH_M and np.linalg.norm(a.position - b.position) < 40.0:
+            gap = max(np.linalg.norm(a.position - b.position) - LENGTH_M, 0.1)
+            acc = b.acceleration(ego_vehicle=b, front_vehicle=a) if gap > 0 else -b.COMFORT_ACC_MAX
+            b.action["acceleration"] = min(b.action["acceleration"], acc)
+
+    b.act = act_waiting
+
+
+def _follow_plan(ep, model, quantile, stats):
+    """B follows scbg's plan: each step it moves to the plan's next point (inside highway-env's
+    own step, so collisions are checked where B really is)."""
+    b = ep.b
+    state = {"plan": None, "k": 0, "since": 0}
+
+    def replan():
+        scene, a_id, b_id = ep.scene(len(ep.history))
+        raw = np.asarray(model.generate(scene, a_id, b_id, quantile=quantile)["world_xy_m"], float)
+        kept = scene.keep_in_lane(raw, LANE_KEEPING_M)
+        flip = np.array([1.0, -1.0])  # back to highway-env's frame
+        state["plan"], state["k"] = kept * flip, 0
+        stats["b_plan_points"] += len(kept)
+        stats["b_plan_points_on_road"] += sum(on_road(ep.road, p) for p in kept * flip)
+        stats["b_raw_plan_points_on_road"] += sum(on_road(ep.road, p) for p in raw * flip)
+
+    def act(action=None):
+        if state["plan"] is None or state["since"] >= REPLAN_STEPS:
+            replan()
+            state["since"] = 0
+
+    def step(dt):
+        plan = state["plan"]
+        p = plan[min(state["k"], len(plan) - 1)]
+        d = p - b.position
+        dist = float(np.hypot(*d))
+        b.speed = dist / dt
+        if dist > 1e-3:
+            b.heading = float(np.arctan2(d[1], d[0]))
+        b.position = p.copy()
+        b.on_state_update()
+        state["k"] += 1
+        state["since"] += 1
+
+    b.act, b.step = act, step
+
+
+def episode(model, scenario: str, seed: int, arm: dict) -> dict:
+    """One episode of ``scenario`` with ``seed``, B driven by ``arm``:
+    ``{"kind": "scbg", "quantile": q}``, ``{"kind": "yardstick", "level": "low" | "high"}`` or
+    ``{"kind": "default"}``; ``model`` (a :class:`scbg.Model`) is needed for scbg arms only.
+
+    Returns A's mean speed over the 8 s after the takeover, B's collision, and how many of B's
+    planned points (as followed, and as generated before lane keeping) and realised positions
+    lie on highway-env's road. Raises ``ValueError`` for an unknown
+    scenario or arm, and ``RuntimeError`` when the seed never brings A and B together."""
+    if scenario not in SCENARIOS:
+        raise ValueError(f"unknown highway-env scenario {scenario!r}: expected one of {sorted(SCENARIOS)}")
+    _check_arm(arm)
+    if arm["kind"] == "scbg" and model is None:
+        raise ValueError("an scbg arm needs a model")
+    ep = _Episode(scenario, seed)
+    try:
+        warm = 0
+        while True:
+            pair = _pair(ep) if warm >= HISTORY_STEPS - 1 else None
+            if pair is not None:
+                break
+            if warm >= MAX_WARMUP_STEPS:
+                raise RuntimeError(f"{scenario} seed {seed}: A and B never met in {MAX_WARMUP_STEPS} steps")
+            ep.step()
+            warm += 1
+        ep.a, ep.b = pair
+        stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0}
+        if arm["kind"] == "scbg":
+            _follow_plan(ep, model, float(arm["quantile"]), stats)
+        elif arm["kind"] == "yardstick":
+            _apply_yardstick(ep, arm["level"])
+        a_speeds, b_on_road, b_crashed = [], 0, False
+        for _ in range(MEASURE_STEPS):
+            ep.step()
+            a_speeds.append(float(ep.a.speed))
+            b_on_road += on_road(ep.road, ep.b.position)
+            b_crashed |= bool(ep.b.crashed)
+        result = {
+            "a_speed_mps": float(np.mean(a_speeds)),
+            "b_collided": b_crashed,
+            "b_steps": MEASURE_STEPS,
+            "b_steps_on_road": int(b_on_road),
+            "a_id": str(ep.cars.index(ep.a) + 1),
+            "b_id": str(ep.cars.index(ep.b) + 1),
+            "t0_s": round(warm * STEP_SECS, 3),
+            **stats,
+        }
+        if scenario == "merge-v0":
+            # The ramp car reached the main road: its lane is a highway lane at the end.
+            lane = ep.b.lane_index
+            result["b_reached_goal"] = bool(lane[:2] in (("b", "c"), ("c", "d")) and lane[2] in (0, 1)
+                                            and ep.road.network.get_lane(lane).on_lane(ep.b.position))
+        return result
+    finally:
+        ep.close()

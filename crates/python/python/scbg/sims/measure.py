@@ -1,0 +1,258 @@
+"""Does the courtesy knob do what it says inside a foreign simulator? The paired measurement.
+
+For every scenario and seed, the same episode (same start, same takeover step, same A and B) is
+run once per arm: B driven by scbg at courtesy quantiles 0.1 … 0.9, and B driven by the
+simulator's own model at a low and a high setting of its own courtesy parameter (the
+yardstick) and at its default. The knob is judged *within* each episode (only the quantile
+changes), against what the simulator's own idea of courtesy does to A in the same episodes.
+
+    python -m scbg.sims.measure MODEL [--scenarios merge-v0 sumo-onramp ...] [--episodes 30]
+                                      [--jobs N] [--out DIR]
+
+writes ``DIR/results.json`` (every episode of every arm), ``DIR/table.md`` and
+``DIR/figure.png`` (A's paired mean speed against the quantile, one panel per scenario, the
+yardstick's low and high beside it; needs matplotlib), and prints the table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import sys
+import time
+from concurrent.futures import ProcessPoolExecutor
+
+import numpy as np
+
+QUANTILES = (0.1, 0.3, 0.5, 0.7, 0.9)
+RESPONSE_MPS = 0.05  # A "responds" when its speeds differ by more than this across the arms
+
+
+def _module(scenario):
+    from . import highway, sumo
+
+    for mod in (highway, sumo):
+        if scenario in mod.SCENARIOS:
+            return mod
+    known = sorted(list(highway.SCENARIOS) + list(sumo.SCENARIOS))
+    raise ValueError(f"unknown scenario {scenario!r}: expected one of {known}")
+
+
+def all_scenarios():
+    from . import highway, sumo
+
+    return list(highway.SCENARIOS) + list(sumo.SCENARIOS)
+
+
+def arms():
+    """Every arm of one episode, in order."""
+    out = [{"kind": "scbg", "quantile": q} for q in QUANTILES]
+    out += [{"kind": "yardstick", "level": "low"}, {"kind": "yardstick", "level": "high"},
+            {"kind": "default"}]
+    return out
+
+
+def arm_name(arm):
+    if arm["kind"] == "scbg":
+        return f"q{arm['quantile']:.1f}"
+    if arm["kind"] == "yardstick":
+        return f"yardstick_{arm['level']}"
+    return "default"
+
+
+_MODEL = None
+
+
+def _load(model_dir):
+    global _MODEL
+    import scbg
+
+    _MODEL = scbg.Model(model_dir) if model_dir else None
+
+
+def run_seed(scenario, seed):
+    """Every arm of one seed: ``{"seed", "scenario", "arms": {name: record}}``, or the reason
+    the seed was skipped."""
+    import warnings
+
+    warnings.filterwarnings("ignore")
+    mod = _module(scenario)
+    out = {"scenario": scenario, "seed": seed, "arms": {}}
+    try:
+        for arm in arms():
+            out["arms"][arm_name(arm)] = mod.episode(_MODEL, scenario, seed, arm)
+    except RuntimeError as e:  # the seed never brought A and B together: a counted skip
+        out = {"scenario": scenario, "seed": seed, "skipped": str(e)}
+    return out
+
+
+def spearman(x, y):
+    """Spearman's rank correlation with average ranks for ties; NaN when either is constant."""
+
+    def ranks(v):
+        v = np.asarray(v, float)
+        order = np.argsort(v, kind="mergesort")
+        r = np.empty(len(v))
+        i = 0
+        while i < len(v):
+            j = i
+            while j + 1 < len(v) and v[order[j + 1]] == v[order[i]]:
+                j += 1
+            r[order[i:j + 1]] = (i + j) / 2.0
+            i = j + 1
+        return r
+
+    rx, ry = ranks(x), ranks(y)
+    if rx.std() == 0 or ry.std() == 0:
+        return float("nan")
+    return float(np.corrcoef(rx, ry)[0, 1])
+
+
+def _mean_ci(v):
+    v = np.asarray(v, float)
+    if len(v) == 0:
+        return float("nan"), float("nan")
+    half = 1.96 * v.std(ddof=1) / math.sqrt(len(v)) if len(v) > 1 else float("nan")
+    return float(v.mean()), float(half)
+
+
+def summarise(seeds):
+    """One scenario's numbers from its seeds' records (pure: the table and the tests use it)."""
+    done = [s for s in seeds if "arms" in s]
+    qs = [arm_name({"kind": "scbg", "quantile": q}) for q in QUANTILES]
+    speed = {name: np.array([s["arms"][name]["a_speed_mps"] for s in done])
+             for name in qs + ["yardstick_low", "yardstick_high", "default"]}
+    per_episode = np.array([[s["arms"][n]["a_speed_mps"] for n in qs] for s in done]).reshape(len(done), len(qs))
+    responsive = (per_episode.max(axis=1) - per_episode.min(axis=1) > RESPONSE_MPS) if len(done) else np.zeros(0, bool)
+    rhos = [spearman(QUANTILES, row) for row, r in zip(per_episode, responsive) if r]
+    ys_delta = speed["yardstick_high"] - speed["yardstick_low"]
+    effect, effect_ci = _mean_ci(speed[qs[-1]] - speed[qs[0]])
+    ys_effect, ys_ci = _mean_ci(ys_delta)
+
+    def rate(names, key):
+        vals = [bool(s["arms"][n][key]) for s in done for n in names]
+        return float(np.mean(vals)) if vals else float("nan")
+
+    plan_pts = sum(s["arms"][n]["b_plan_points"] for s in done for n in qs)
+    plan_on = sum(s["arms"][n]["b_plan_points_on_road"] for s in done for n in qs)
+    steps = sum(s["arms"][n]["b_steps"] for s in done for n in qs)
+    steps_on = sum(s["arms"][n]["b_steps_on_road"] for s in done for n in qs)
+    reached = [s["arms"][n].get("b_reached_goal") for s in done for n in qs]
+    reached = [r for r in reached if r is not None]
+    return {
+        "episodes": len(done),
+        "skipped": [{"seed": s["seed"], "reason": s["skipped"]} for s in seeds if "skipped" in s],
+        "a_speed_mps": {n: float(v.mean()) if len(v) else float("nan") for n, v in speed.items()},
+        "effect_mps": effect,
+        "effect_ci95_mps": effect_ci,
+        "yardstick_effect_mps": ys_effect,
+        "yardstick_effect_ci95_mps": ys_ci,
+        "responsive_share": float(responsive.mean()) if len(done) else float("nan"),
+        "yardstick_responsive_share": float(np.mean(np.abs(ys_delta) > RESPONSE_MPS)) if len(done) else float("nan"),
+        "spearman_responsive": float(np.nanmean(rhos)) if rhos and not all(map(math.isnan, rhos)) else float("nan"),
+        "b_collision_rate": rate(qs, "b_collided"),
+        "yardstick_b_collision_rate": rate(["yardstick_low", "yardstick_high"], "b_collided"),
+        "b_plan_on_road_share": plan_on / plan_pts if plan_pts else float("nan"),
+        "b_on_road_share": steps_on / steps if steps else float("nan"),
+        "b_reached_goal_share": float(np.mean(reached)) if reached else None,
+    }
+
+
+def _f(x, fmt="{:.2f}"):
+    return "n/a" if x is None or (isinstance(x, float) and math.isnan(x)) else fmt.format(x)
+
+
+def table(summaries, yardsticks):
+    head = ("| scenario | episodes | A at q 0.1 / 0.5 / 0.9 (m/s) | effect q0.9−q0.1 (m/s) | "
+            "yardstick | yardstick effect high−low (m/s) | responsive (scbg / yardstick) | "
+            "Spearman (responsive) | B collisions (scbg / yardstick) | B plan on road | B on road |")
+    rows = [head, "|" + "---|" * 11]
+    for name, s in summaries.items():
+        a = s["a_speed_mps"]
+        ys = yardsticks.get(name, {})
+        rows.append(
+            f"| {name} | {s['episodes']} | {_f(a['q0.1'])} / {_f(a['q0.5'])} / {_f(a['q0.9'])} | "
+            f"{_f(s['effect_mps'], '{:+.2f}')} ± {_f(s['effect_ci95_mps'])} | "
+            f"{ys.get('parameter', '?')} {ys.get('low', '')} → {ys.get('high', '')} | "
+            f"{_f(s['yardstick_effect_mps'], '{:+.2f}')} ± {_f(s['yardstick_effect_ci95_mps'])} | "
+            f"{_f(s['responsive_share'], '{:.0%}')} / {_f(s['yardstick_responsive_share'], '{:.0%}')} | "
+            f"{_f(s['spearman_responsive'])} | "
+            f"{_f(s['b_collision_rate'], '{:.1%}')} / {_f(s['yardstick_b_collision_rate'], '{:.1%}')} | "
+            f"{_f(s['b_plan_on_road_share'], '{:.1%}')} | {_f(s['b_on_road_share'], '{:.1%}')} |")
+    return "\n".join(rows)
+
+
+def figure(summaries, path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n = len(summaries)
+    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.0), squeeze=False)
+    for ax, (name, s) in zip(axes[0], summaries.items()):
+        a = s["a_speed_mps"]
+        ax.plot(QUANTILES, [a[arm_name({"kind": "scbg", "quantile": q})] for q in QUANTILES],
+                "o-", label="scbg B at quantile q")
+        ax.axhline(a["yardstick_low"], color="tab:red", ls="--", label="own model, low courtesy")
+        ax.axhline(a["yardstick_high"], color="tab:green", ls="--", label="own model, high courtesy")
+        ax.set_title(f"{name} ({s['episodes']} ep.)", fontsize=9)
+        ax.set_xlabel("B's courtesy quantile")
+    axes[0][0].set_ylabel("A's paired mean speed, 8 s (m/s)")
+    axes[0][0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+
+
+def yardsticks_of(names):
+    from . import highway, sumo
+
+    out = {}
+    for n in names:
+        for mod in (highway, sumo):
+            if n in mod.YARDSTICKS:
+                out[n] = mod.YARDSTICKS[n]
+    return out
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("model", help="an scbg generator folder (e.g. out/demo/generator_full)")
+    ap.add_argument("--scenarios", nargs="+", help="default: every scenario of every simulator")
+    ap.add_argument("--episodes", type=int, default=30, help="seeds per scenario")
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--out", default="out/sims")
+    args = ap.parse_args(argv)
+    scenarios = args.scenarios or all_scenarios()
+    for s in scenarios:
+        _module(s)  # unknown names fail before anything runs
+    os.makedirs(args.out, exist_ok=True)
+    started = time.time()
+    tasks = [(s, seed) for s in scenarios for seed in range(args.episodes)]
+    import multiprocessing
+
+    ctx = multiprocessing.get_context("spawn")  # a fresh interpreter per worker: highway-env
+    with ProcessPoolExecutor(args.jobs, mp_context=ctx, initializer=_load, initargs=(args.model,)) as pool:
+        results = list(pool.map(run_seed, *zip(*tasks)))
+    by_scenario = {s: [r for r in results if r["scenario"] == s] for s in scenarios}
+    summaries = {s: summarise(v) for s, v in by_scenario.items()}
+    ys = yardsticks_of(scenarios)
+    text = table(summaries, ys)
+    seconds = time.time() - started
+    with open(os.path.join(args.out, "results.json"), "w") as f:
+        json.dump({"model": args.model, "quantiles": QUANTILES, "seconds": seconds,
+                   "yardsticks": ys, "summaries": summaries, "episodes": results}, f, indent=1)
+    with open(os.path.join(args.out, "table.md"), "w") as f:
+        f.write(text + "\n")
+    try:
+        figure(summaries, os.path.join(args.out, "figure.png"))
+    except ImportError:
+        print("matplotlib is not installed: no figure", file=sys.stderr)
+    print(text)
+    print(f"{len(tasks)} seeds × {len(arms())} arms in {seconds:.0f} s; {args.out}/results.json")
+
+
+if __name__ == "__main__":
+    main()
