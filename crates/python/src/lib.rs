@@ -145,7 +145,7 @@ impl Scene {
     }
 
     /// `points [n, 2]` (world metres) kept in lane as scbg's closed loop keeps a plan.
-    #[pyo3(signature = (points, max_offset_m=scbg::sim::DEFAULT_LANE_KEEPING_M))]
+    #[pyo3(signature = (points, max_offset_m=scbg::DEFAULT_LANE_KEEPING_M))]
     fn keep_in_lane<'py>(
         &self,
         py: Python<'py>,
@@ -154,7 +154,7 @@ impl Scene {
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let mut plan = polylines(vec![points], "points")?.remove(0);
         let scene = Arc::clone(&self.inner);
-        py.detach(|| scbg::sim::keep_in_lane(&scene, &mut plan, max_offset_m))
+        py.detach(|| scbg::keep_in_lane(&scene, &mut plan, max_offset_m))
             .map_err(py_err)?;
         let mut out = Array2::<f64>::zeros((plan.len(), 2));
         for (k, p) in plan.iter().enumerate() {

@@ -35,6 +35,8 @@ pub struct GeneratorCheckpoint {
     /// Which of the paper's three training variants.
     pub variant: Variant,
     /// The predictor checkpoint folder (its encoder is frozen in the generator; it is J_φ).
+    /// Training records it absolute; a relative path is relative to the generator folder (a
+    /// model shipped with its predictor beside it, as `models/` in the repository).
     pub predictor: String,
     /// The generator's architecture.
     pub generator: GeneratorConfig,
@@ -134,12 +136,25 @@ pub struct LoadedScbg {
     pub device: Device,
 }
 
+/// The predictor folder a generator folder `dir` records: an absolute path as it is, a
+/// relative one joined to `dir`.
+fn recorded_predictor(dir: &Path, recorded: &str) -> PathBuf {
+    let path = PathBuf::from(recorded);
+    if path.is_absolute() {
+        path
+    } else {
+        dir.join(path)
+    }
+}
+
 /// Loads `dir` (from `scbg train generator`) and its predictor (`predictor` overrides the
 /// folder recorded in generator.json).
 pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedScbg> {
     let checkpoint = GeneratorCheckpoint::read(dir)?;
-    let predictor_dir =
-        predictor.map_or_else(|| PathBuf::from(&checkpoint.predictor), Path::to_path_buf);
+    let predictor_dir = predictor.map_or_else(
+        || recorded_predictor(dir, &checkpoint.predictor),
+        Path::to_path_buf,
+    );
     let ckpt = Checkpoint::read(&predictor_dir)
         .with_context(|| format!("predictor of {} (override with --predictor)", dir.display()))?;
     let modes = checkpoint.generator.modes;
@@ -179,4 +194,22 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
         predictor: ckpt,
         device,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_relative_predictor_is_beside_the_generator() {
+        let dir = Path::new("models/courtesy/generator");
+        assert_eq!(
+            recorded_predictor(dir, "../predictor"),
+            Path::new("models/courtesy/generator/../predictor")
+        );
+        assert_eq!(
+            recorded_predictor(dir, "/data/run/predictor"),
+            Path::new("/data/run/predictor")
+        );
+    }
 }

@@ -41,7 +41,7 @@ pub use courtesy::Courtesy;
 pub use model::{LoadOptions, Model};
 pub use scene_arrays::SceneArrays;
 pub use session::{EgoPose, Session, Snapshot};
-pub use sim::{ControlledAgent, LoopOptions};
+pub use sim::{ControlledAgent, DEFAULT_LANE_KEEPING_M, LoopOptions, keep_in_lane};
 
 pub use progress::{Bar, Progress, Quiet};
 pub use scbg_base::atomic::{write as write_atomic, write_json};
