@@ -224,7 +224,8 @@ class _Episode:
         idm.target_speed = max(ego.speed, getattr(ego, "target_speed", ego.speed))
         self.road.vehicles[k] = idm
         self.ego = idm
-        self._jitter()
+        if scenario == "merge-v0":
+            self._jitter()
         self.lanes, self.edges, self.lines, self.lane_types = road_map(self.road, _LANE_TYPES[scenario])
         self.history = []  # [step][car] state rows, in the order of self.cars
         self.cars = list(self.road.vehicles)
@@ -232,9 +233,10 @@ class _Episode:
         self._record()
 
     def _jitter(self):
-        """highway-env's own start varies little with the seed (merge-v0: a few metres); every
-        car but the ego is moved along its lane by up to ±12 m and its speed changed by up to
-        ±2 m/s, drawn from the seed, so that seeds are different situations."""
+        """merge-v0's own start varies little with the seed (a few metres; the other
+        environments draw their traffic at random): every car but the ego is moved along its
+        lane by up to ±12 m and its speed changed by up to ±2 m/s, drawn from the seed, so that
+        seeds are different situations."""
         for v in self.road.vehicles:
             if v is self.ego:
                 continue
@@ -398,51 +400,116 @@ def _make_b_wait_for_a(ep):
     b.act = act_waiting
 
 
+# B's follow-distance guard (IDM, Treiber et al. 2000): B never drives along its plan faster
+# than IDM allows behind the nearest car in its way, as scbg's own closed loop follows a plan
+# that runs into another agent at a safe distance instead.
+GUARD_ACC_MPS2 = 6.0  # highway-env's ACC_MAX
+GUARD_BRAKE_MPS2 = 5.0  # comfortable braking
+GUARD_GAP_M = 2.0  # jam distance
+GUARD_HEADWAY_S = 1.0
+GUARD_CORRIDOR_M = 2.2  # a car whose centre is this close to B's path ahead is in its way
+GUARD_LOOKAHEAD_M = 60.0
+# B's path tracker: pure pursuit of a point this far ahead along the plan, yaw rate bounded.
+TRACK_LOOKAHEAD_M = 4.0
+TRACK_LOOKAHEAD_S = 0.6
+TRACK_YAW_RATE = 0.8  # rad/s
+
+
+def _arc(points):
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+
+
+def _at(points, arc, s):
+    """The point at arc length ``s`` of a polyline, and the unit direction there."""
+    i = int(np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(points) - 2))
+    seg = points[i + 1] - points[i]
+    length = float(np.hypot(*seg))
+    t = 0.0 if length < 1e-9 else float(np.clip((s - arc[i]) / length, 0.0, 1.0))
+    return points[i] + t * seg, (seg / length if length > 1e-9 else None)
+
+
+def _leader_gap(ep, samples, s):
+    """Bumper-to-bumper gap (m) and speed of the nearest car in B's way along its path from arc
+    length ``s``, or (inf, 0). ``samples``: the path's points every metre of arc length."""
+    i0 = int(np.floor(s))
+    pts = samples[i0:i0 + int(GUARD_LOOKAHEAD_M) + 1]
+    others = [v for v in ep.road.vehicles if v is not ep.b]
+    if len(pts) == 0 or not others:
+        return np.inf, 0.0
+    xy = np.array([v.position for v in others])
+    near = np.hypot(*(xy[:, None, :] - pts[None, :, :]).transpose(2, 0, 1)) < GUARD_CORRIDOR_M
+    hit = near.any(axis=1)
+    if not hit.any():
+        return np.inf, 0.0
+    first = np.where(hit, near.argmax(axis=1), np.iinfo(np.int64).max)
+    j = int(first.argmin())
+    return float(i0 + first[j] - s - LENGTH_M), float(others[j].speed)
+
+
 def _follow_plan(ep, model, quantile, stats):
-    """B follows scbg's plan: each step it moves to the plan's next point (inside highway-env's
-    own step, so collisions are checked where B really is)."""
+    """B follows scbg's plan (inside highway-env's own step, so collisions are checked where B
+    really is): along the plan's path, kept in lane, on the plan's timing, but never faster than
+    the follow-distance guard allows behind a car in its way, steered by pure pursuit."""
     b = ep.b
-    state = {"plan": None, "k": 0, "since": 0}
+    state = {"path": None, "arc": None, "s": 0.0, "k": 0, "since": 0}
 
     def replan():
         scene, a_id, b_id = ep.scene(len(ep.history))
         raw = np.asarray(model.generate(scene, a_id, b_id, quantile=quantile)["world_xy_m"], float)
         kept = scene.keep_in_lane(raw, LANE_KEEPING_M)
         flip = np.array([1.0, -1.0])  # back to highway-env's frame
-        state["plan"], state["k"] = kept * flip, 0
+        path = np.vstack([b.position, kept * flip])
+        arc = _arc(path)
+        every_m = np.arange(0.0, arc[-1] + 1e-9, 1.0)
+        samples = np.column_stack([np.interp(every_m, arc, path[:, 0]), np.interp(every_m, arc, path[:, 1])])
+        state.update(path=path, arc=arc, samples=samples, s=0.0, k=0)
         stats["b_plan_points"] += len(kept)
         stats["b_plan_points_on_road"] += sum(on_road(ep.road, p) for p in kept * flip)
         stats["b_raw_plan_points_on_road"] += sum(on_road(ep.road, p) for p in raw * flip)
 
     def act(action=None):
-        if state["plan"] is None or state["since"] >= REPLAN_STEPS:
+        if state["path"] is None or state["since"] >= REPLAN_STEPS:
             replan()
             state["since"] = 0
 
     def step(dt):
-        plan = state["plan"]
-        p = plan[min(state["k"], len(plan) - 1)]
-        d = p - b.position
-        dist = float(np.hypot(*d))
-        b.speed = dist / dt
-        if dist > 1e-3:
-            b.heading = float(np.arctan2(d[1], d[0]))
-        b.position = p.copy()
+        path, arc = state["path"], state["arc"]
+        k = min(state["k"] + 1, len(arc) - 1)
+        planned = max(arc[k] - state["s"], 0.0) / dt  # the speed that keeps the plan's timing
+        v = float(b.speed)
+        gap, v_lead = _leader_gap(ep, state["samples"], state["s"])
+        if np.isfinite(gap):
+            want = GUARD_GAP_M + v * GUARD_HEADWAY_S + v * (v - v_lead) / (
+                2.0 * np.sqrt(GUARD_ACC_MPS2 * GUARD_BRAKE_MPS2))
+            acc = GUARD_ACC_MPS2 * (1.0 - (max(want, 0.0) / max(gap, 0.1)) ** 2)
+            planned = min(planned, max(v + acc * dt, 0.0))
+        state["s"] = min(state["s"] + planned * dt, arc[-1])
+        # Pure pursuit of the path (a lane change is steered, not jumped): head for the path
+        # point a look-ahead beyond B's progress, turning at most TRACK_YAW_RATE.
+        target, _ = _at(path, arc, min(state["s"] + max(TRACK_LOOKAHEAD_M, planned * TRACK_LOOKAHEAD_S), arc[-1]))
+        d = target - b.position
+        if np.hypot(*d) > 1e-3 and planned > 0.0:
+            turn = (np.arctan2(d[1], d[0]) - b.heading + np.pi) % (2.0 * np.pi) - np.pi
+            limit = TRACK_YAW_RATE * dt
+            b.heading = float(b.heading + np.clip(turn, -limit, limit))
+        b.speed = planned
+        b.position = b.position + planned * dt * np.array([np.cos(b.heading), np.sin(b.heading)])
         b.on_state_update()
-        state["k"] += 1
+        state["k"] = k
         state["since"] += 1
 
     b.act, b.step = act, step
 
 
-def episode(model, scenario: str, seed: int, arm: dict) -> dict:
+def episode(model, scenario: str, seed: int, arm: dict, trace: list | None = None) -> dict:
     """One episode of ``scenario`` with ``seed``, B driven by ``arm``:
     ``{"kind": "scbg", "quantile": q}``, ``{"kind": "yardstick", "level": "low" | "high"}`` or
     ``{"kind": "default"}``; ``model`` (a :class:`scbg.Model`) is needed for scbg arms only.
 
     Returns A's mean speed over the 8 s after the takeover, B's collision, and how many of B's
     planned points (as followed, and as generated before lane keeping) and realised positions
-    lie on highway-env's road. Raises ``ValueError`` for an unknown
+    lie on highway-env's road. ``trace``, when given, receives per measured step A's and B's
+    position (scbg's frame) and speed. Raises ``ValueError`` for an unknown
     scenario or arm, and ``RuntimeError`` when the seed never brings A and B together."""
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown highway-env scenario {scenario!r}: expected one of {sorted(SCENARIOS)}")
@@ -461,6 +528,8 @@ def episode(model, scenario: str, seed: int, arm: dict) -> dict:
             ep.step()
             warm += 1
         ep.a, ep.b = pair
+        if ep.a.crashed or ep.b.crashed:
+            raise RuntimeError(f"{scenario} seed {seed}: A or B crashed before the takeover")
         stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0}
         if arm["kind"] == "scbg":
             _follow_plan(ep, model, float(arm["quantile"]), stats)
@@ -472,6 +541,9 @@ def episode(model, scenario: str, seed: int, arm: dict) -> dict:
             a_speeds.append(float(ep.a.speed))
             b_on_road += on_road(ep.road, ep.b.position)
             b_crashed |= bool(ep.b.crashed)
+            if trace is not None:
+                trace.append({"a_xy_m": _flip(ep.a.position).tolist(), "b_xy_m": _flip(ep.b.position).tolist(),
+                              "a_speed_mps": float(ep.a.speed), "b_speed_mps": float(ep.b.speed)})
         result = {
             "a_speed_mps": float(np.mean(a_speeds)),
             "b_collided": b_crashed,
