@@ -33,3 +33,12 @@ def trained_dirs(tmp_path_factory):
 def trained(trained_dirs):
     gen, file = trained_dirs
     return scbg.Model(gen), file
+
+
+RELEASE_MODEL = os.path.join(os.path.dirname(__file__), "..", "..", "..", "models", "courtesy", "generator")
+
+
+@pytest.fixture(scope="session")
+def release():
+    """The release model of the repository (models/courtesy): the default demo's generator."""
+    return scbg.Model(RELEASE_MODEL)
