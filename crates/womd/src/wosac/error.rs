@@ -182,3 +182,29 @@ pub enum WosacExportError {
         trajectory: usize,
     },
 }
+
+impl WosacExportError {
+    /// A short, stable description of the kind of problem, without ids or counts, for skip
+    /// counters in summaries (the full message names the scenario, joint scene, object and
+    /// field).
+    pub fn reason(&self) -> &'static str {
+        match self {
+            Self::MissingScenarioId { .. } => "no scenario_id",
+            Self::ScenarioIdMismatch { .. } => "rollouts of another scenario",
+            Self::SceneLayout { .. } => "the logged scene's current step is not 10",
+            Self::JointSceneCount { .. } => "not 32 joint scenes",
+            Self::NotSimAgent { .. } => "a trajectory of an object that is not a sim agent",
+            Self::MissingSimAgent { .. } => "a sim agent missing from a joint scene",
+            Self::DuplicateObject { .. } => "an object twice in one joint scene",
+            Self::StepCount { .. } => "a trajectory without 80 steps",
+            Self::NonFinite { .. } => "a simulated value is not finite",
+            Self::ObjectIdOverflow { .. } => "an object id beyond int32",
+            Self::DuplicateScenario { .. } => "a scenario repeated in the submission",
+            Self::ShardCount { .. } | Self::ShardName { .. } => "a bad shard layout",
+            Self::Io { .. } => "an I/O error",
+            Self::Proto(_) => "not a SimAgentsChallengeSubmission protobuf",
+            Self::SubmissionType { .. } => "submission_type is not SIM_AGENTS_SUBMISSION",
+            Self::MissingObjectId { .. } => "a trajectory without object_id",
+        }
+    }
+}

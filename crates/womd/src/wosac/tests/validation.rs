@@ -159,3 +159,41 @@ fn validation_errors() {
         "{e}"
     );
 }
+
+#[test]
+fn each_kind_of_invalid_rollouts_has_its_own_reason() {
+    let scene = scene();
+    let good = rollouts_for(&scene);
+    let mutations: [fn(&mut ScenarioRolloutsInput); 7] = [
+        |r| r.scenario_id.clear(),
+        |r| r.scenario_id = "zzz".into(),
+        |r| {
+            r.joint_scenes.pop();
+        },
+        |r| r.joint_scenes[3][0].object_id = 99,
+        |r| {
+            r.joint_scenes[3].pop();
+        },
+        |r| {
+            r.joint_scenes[3][1].x_m.pop();
+        },
+        |r| r.joint_scenes[3][1].x_m[0] = f32::NAN,
+    ];
+    let reasons: BTreeSet<&str> = mutations
+        .iter()
+        .map(|mutate| {
+            let mut r = good.clone();
+            mutate(&mut r);
+            let e = validate_rollouts(&scene, &r).unwrap_err();
+            // The reason is the kind alone: no scenario, joint scene or object named.
+            let reason = e.reason();
+            assert!(
+                !reason.contains("abc123") && !reason.contains("99"),
+                "{reason}"
+            );
+            assert!(e.to_string().contains("abc123"), "{e}");
+            reason
+        })
+        .collect();
+    assert_eq!(reasons.len(), mutations.len(), "{reasons:?}");
+}
