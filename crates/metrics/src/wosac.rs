@@ -4,7 +4,8 @@
 //! Main entry points: [`scenario_metrics`] scores 32 joint rollouts ([`Rollouts`]) of one
 //! [`Scene`]; [`aggregate`] averages many scenarios. [`sim_agent_ids`] and
 //! [`evaluated_agent_ids`] say which objects must be simulated and which are scored;
-//! [`log_replay_rollouts`] and [`constant_velocity_rollouts`] are the two reference baselines.
+//! [`log_replay_rollouts`] and [`constant_velocity_rollouts`] are the two reference baselines,
+//! and [`reference`] holds the official values of both on the specification's genuine scenario.
 //!
 //! The computation reproduces the official evaluation code, quirks included (float32 arithmetic,
 //! NaN padding of the finite differences, the unwrapped heading difference in the
@@ -22,6 +23,7 @@ mod features;
 mod geometry;
 mod interaction;
 mod kinematics;
+pub mod reference;
 mod road_edge;
 pub use road_edge::RoadEdges;
 mod scores;

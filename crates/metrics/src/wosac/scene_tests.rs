@@ -6,6 +6,7 @@ use scbg_scene::{
     SignalLaneState, SignalState, Track,
 };
 
+use super::reference::{CONSTANT_VELOCITY, LOG_REPLAY, Reference, SCENARIO_ID};
 use super::tests::{close, point};
 use super::traffic_light::TrafficLights;
 use super::*;
@@ -248,90 +249,14 @@ fn ids_baselines_and_errors_on_a_synthetic_scene() {
     ));
 }
 
-/// Official values (§11 of the spec) in [`FeatureLikelihoods::to_array`] order.
-struct Reference {
-    metametric: f32,
-    likelihoods: [f32; 10],
-    ade: f32,
-    collision_rate: f32,
-    offroad_rate: f32,
-}
-
-const LOG_REPLAY: Reference = Reference {
-    metametric: 0.8266314,
-    likelihoods: [
-        0.82652855, 0.5305248, 0.48732617, 0.6562856, 0.40035117, 0.99996877, 0.8362134, 0.5591777,
-        0.99996877, 0.99996877,
-    ],
-    ade: 0.0,
-    collision_rate: 0.25,
-    offroad_rate: 0.0,
-};
-
-const CONSTANT_VELOCITY: Reference = Reference {
-    metametric: 0.21769527,
-    likelihoods: [
-        0.075650506,
-        0.12974364,
-        0.061595537,
-        0.3092796,
-        0.26297095,
-        0.07476451,
-        0.64172214,
-        0.22063595,
-        0.0747645,
-        0.99996877,
-    ],
-    ade: 2.1528234,
-    collision_rate: 0.5,
-    offroad_rate: 0.25,
-};
-
-const NAMES: [&str; 10] = [
-    "linear_speed",
-    "linear_acceleration",
-    "angular_speed",
-    "angular_acceleration",
-    "distance_to_nearest_object",
-    "collision_indication",
-    "time_to_collision",
-    "distance_to_road_edge",
-    "offroad_indication",
-    "traffic_light_violation",
-];
-
 /// Compares with the official values; returns the largest absolute difference.
 fn compare(label: &str, m: &ScenarioMetrics, r: &Reference) -> f32 {
-    let mut rows = vec![("metametric", m.metametric, r.metametric)];
-    for (k, name) in NAMES.iter().enumerate() {
-        rows.push((*name, m.likelihoods.to_array()[k], r.likelihoods[k]));
-    }
-    rows.push((
-        "average_displacement_error",
-        m.average_displacement_error_m,
-        r.ade,
-    ));
-    rows.push((
-        "min_average_displacement_error",
-        m.min_average_displacement_error_m,
-        r.ade,
-    ));
-    rows.push((
-        "simulated_collision_rate",
-        m.simulated_collision_rate,
-        r.collision_rate,
-    ));
-    rows.push((
-        "simulated_offroad_rate",
-        m.simulated_offroad_rate,
-        r.offroad_rate,
-    ));
     let mut worst = 0.0f32;
     println!(
         "{label}: {:<32} {:>12} {:>12} {:>10}",
         "field", "ours", "official", "diff"
     );
-    for (name, ours, official) in rows {
+    for (name, ours, official) in r.compare(m) {
         let diff = (ours - official).abs();
         worst = worst.max(if diff.is_nan() { f32::INFINITY } else { diff });
         println!("{label}: {name:<32} {ours:>12.8} {official:>12.8} {diff:>10.2e}");
@@ -347,7 +272,7 @@ fn reference_values_of_scenario_637f20cafde22ff8() {
     let path = dir.join("womd/motion_data_one_scenario.tfrecord");
     let file = scbg_womd::WomdFile::open(&path).unwrap();
     let scene = file.scenes().next().unwrap().unwrap();
-    assert_eq!(scene.scenario_id, "637f20cafde22ff8");
+    assert_eq!(scene.scenario_id, SCENARIO_ID);
     assert_eq!(sim_agent_ids(&scene).len(), 50);
     assert_eq!(evaluated_agent_ids(&scene), vec![1675, 1676, 2320, 2406]);
 
