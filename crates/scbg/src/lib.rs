@@ -15,6 +15,7 @@
 //! | [`data`] | scenes from WOMD files and bytes, inspect, render, the synthetic ground truth | — |
 //! | [`scene_arrays`] | a scene from plain arrays | — |
 //! | [`inputs`] | paths and glob patterns to input files | — |
+//! | [`wosac`] | WOSAC realism of a submission against the logged scenarios; baselines as submissions | — |
 //!
 //! Long-running functions take a [`Progress`]; [`Quiet`] ignores everything.
 //!
@@ -36,6 +37,7 @@ mod progress;
 pub mod scene_arrays;
 pub mod session;
 pub mod sim;
+pub mod wosac;
 
 pub use courtesy::Courtesy;
 pub use model::{LoadOptions, Model};

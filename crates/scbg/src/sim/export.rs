@@ -106,26 +106,7 @@ pub fn write_wosac(
     let inputs = scenarios
         .iter()
         .map(|(log, r)| {
-            let input = scbg_womd::wosac::ScenarioRolloutsInput {
-                scenario_id: log.scenario_id.clone(),
-                joint_scenes: r
-                    .trajectories
-                    .iter()
-                    .map(|joint| {
-                        r.object_ids
-                            .iter()
-                            .zip(joint)
-                            .map(|(&id, poses)| scbg_womd::wosac::ObjectTrajectory {
-                                object_id: id,
-                                x_m: poses.iter().map(|p| p.x_m).collect(),
-                                y_m: poses.iter().map(|p| p.y_m).collect(),
-                                z_m: poses.iter().map(|p| p.z_m).collect(),
-                                heading_rad: poses.iter().map(|p| p.heading_rad).collect(),
-                            })
-                            .collect()
-                    })
-                    .collect(),
-            };
+            let input = crate::wosac::submission_input(&log.scenario_id, r);
             scbg_womd::wosac::validate_rollouts(log, &input)
                 .with_context(|| format!("rollouts of {}", log.scenario_id))?;
             Ok(input)

@@ -55,6 +55,9 @@ pub struct SimOutput {
     pub quantiles: Vec<Vec<Option<f32>>>,
     /// Metrics per rollout.
     pub reports: Vec<RolloutReport>,
+    /// WOSAC 2025 realism of the rollouts, as `scbg eval wosac` scores them: with 32 rollouts
+    /// of a scene that can be scored (`null` otherwise).
+    pub wosac: Option<scbg_metrics::wosac::ScenarioMetrics>,
     /// Files written.
     pub files: Vec<std::path::PathBuf>,
 }
@@ -138,6 +141,11 @@ pub fn run_sim(run: &SimRun, progress: &dyn crate::Progress) -> anyhow::Result<S
         .iter()
         .map(|s| report(s, run.ego, &ids))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let wosac_form = (run.rollouts == scbg_metrics::wosac::ROLLOUTS_PER_SCENARIO)
+        .then(|| wosac_rollouts(&scene, &scenes));
+    let wosac = wosac_form.as_ref().and_then(|r| {
+        scbg_metrics::wosac::scenario_metrics(&scene, r, crate::wosac::CHALLENGE).ok()
+    });
     std::fs::create_dir_all(&run.out).with_context(|| format!("creating {}", run.out.display()))?;
     let files = match run.format {
         ExportFormat::Scenario => {
@@ -164,7 +172,7 @@ pub fn run_sim(run: &SimRun, progress: &dyn crate::Progress) -> anyhow::Result<S
                 // The challenge asks for a policy that acts on the simulated state every step.
                 acknowledge_closed_loop: config.replan_every == 1,
             };
-            let rollouts = wosac_rollouts(&scene, &scenes);
+            let rollouts = wosac_form.unwrap_or_else(|| wosac_rollouts(&scene, &scenes));
             write_wosac(
                 &run.out,
                 &run.name,
@@ -179,6 +187,7 @@ pub fn run_sim(run: &SimRun, progress: &dyn crate::Progress) -> anyhow::Result<S
         synthetic_world: truth.is_some(),
         quantiles,
         reports,
+        wosac,
         files,
     };
     crate::write_json(run.out.join("sim.json"), &output)?;
