@@ -236,6 +236,38 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 }
             }
         }
+        Command::Eval(EvalCommand::Wosac(a)) => {
+            let score = scbg::wosac::score_submission(&a.scenarios, &a.submission, progress)?;
+            if let Some(dir) = &a.out {
+                std::fs::create_dir_all(dir)
+                    .with_context(|| format!("creating {}", dir.display()))?;
+                scbg::write_json(dir.join("wosac.json"), &score)?;
+            }
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&score)?);
+            } else {
+                print!("{}", score.to_text());
+            }
+            anyhow::ensure!(
+                score.scored() > 0,
+                "no scenario scored ({})",
+                score.skipped_line()
+            );
+        }
+        Command::Data(DataCommand::WosacBaseline(a)) => {
+            let out =
+                scbg::wosac::write_baseline(&a.scenarios, a.baseline, &a.out, &a.name, progress)?;
+            for s in &out.skipped {
+                eprintln!("left out: {}", s.detail);
+            }
+            eprintln!(
+                "wrote {} scenario(s) into {} shard(s) in {}",
+                out.scenarios,
+                out.files.len(),
+                a.out.display()
+            );
+            anyhow::ensure!(out.scenarios > 0, "no scenario could be scored");
+        }
         Command::Eval(EvalCommand::Metrics(a)) => {
             let table = predictor::evaluate_external(
                 &a.scenarios,
@@ -316,6 +348,14 @@ fn sim(a: &crate::cli::SimArgs, progress: &dyn Progress) -> anyhow::Result<()> {
             .offroad
             .map_or("n/a".into(), |o| o.to_string()),
     );
+    if let Some(w) = &out.wosac {
+        eprintln!(
+            "WOSAC meta-metric of the {} rollouts {:.4} (minADE {:.2} m)",
+            out.reports.len(),
+            w.metametric,
+            w.min_average_displacement_error_m
+        );
+    }
     for f in &out.files {
         eprintln!("wrote {}", f.display());
     }

@@ -12,6 +12,25 @@ pub enum DataCommand {
     Render(RenderArgs),
     /// Build the prepared, memory-mappable cache of windows and pairs.
     Prepare(PrepareArgs),
+    /// Write the log-replay or constant-velocity baseline of WOMD scenarios as a WOSAC
+    /// submission (one shard per scenario file), the reference for `eval wosac`.
+    WosacBaseline(WosacBaselineArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct WosacBaselineArgs {
+    /// WOMD scenario files (globs, folders or paths).
+    #[arg(long, required = true, num_args = 1..)]
+    pub scenarios: Vec<String>,
+    /// Which baseline.
+    #[arg(long, value_enum, default_value_t = scbg::wosac::Baseline::LogReplay)]
+    pub baseline: scbg::wosac::Baseline,
+    /// Output folder for the shards NAME.binproto-IIIII-of-NNNNN.
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Base name of the shards (the submission's method name).
+    #[arg(long, default_value = "baseline")]
+    pub name: String,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -20,6 +20,28 @@ pub enum EvalCommand {
     /// A and B: the SDC and an object of interest when the log names them, else the pair
     /// `data prepare` mines; every scene left out is listed with why.
     Sim(EvalSimArgs),
+    /// WOSAC 2025 realism of anyone's rollouts: a submission (SimAgentsChallengeSubmission
+    /// shards, or a .tar.gz of them) scored against the logged scenarios, per scenario and
+    /// averaged. Scenarios that cannot be scored are listed with why; exit code 2 when none was
+    /// scored.
+    Wosac(EvalWosacArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct EvalWosacArgs {
+    /// WOMD scenario files holding the logged scenarios (globs, folders or paths).
+    #[arg(long, required = true, num_args = 1..)]
+    pub scenarios: Vec<String>,
+    /// Submission shards NAME.binproto-IIIII-of-NNNNN, or .tar.gz archives of them (globs,
+    /// folders or paths).
+    #[arg(long, required = true, num_args = 1..)]
+    pub submission: Vec<String>,
+    /// Output folder for wosac.json (every number per scenario, the mean, what was skipped).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Print wosac.json's content instead of the table.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -457,10 +457,10 @@ fn train_generator_saves_generator_and_range_predictor() {
         "{}",
         String::from_utf8_lossy(&ok.stderr)
     );
-    assert!(
-        dir.path()
-            .join("simw/mine.binproto-00000-of-00001")
-            .is_file()
+    crate::wosac::own_submission_scores_as_the_closed_loop(
+        std::path::Path::new(&file),
+        &dir.path().join("simw"),
+        "mine",
     );
     // Bad requests: named, exit 2, nothing written.
     let few = closed_loop("format = \"wosac\"\nrollouts = 3\n");

@@ -1,5 +1,5 @@
 //! Integration tests: the `scbg` binary on the genuine Waymo/nuScenes files, on corrupt
-//! inputs, and on generated data. One test binary; helpers at the top.
+//! inputs, on WOSAC submissions, and on generated data. One test binary; helpers at the top.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -15,6 +15,7 @@ mod predictor;
 mod real_data;
 mod repo;
 mod scale;
+mod wosac;
 
 pub fn scbg(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_scbg"))
