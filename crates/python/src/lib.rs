@@ -474,6 +474,30 @@ fn scenarios_from_bytes(py: Python<'_>, data: Vec<u8>) -> PyResult<Vec<Scene>> {
         .collect())
 }
 
+/// WOSAC 2025 realism of a submission (shards or `.tar.gz` archives of them) against the
+/// logged scenarios of WOMD files: `scbg eval wosac`'s `wosac.json` as a dict.
+#[pyfunction]
+fn score_wosac<'py>(
+    py: Python<'py>,
+    scenario_files: Vec<std::path::PathBuf>,
+    submission_files: Vec<std::path::PathBuf>,
+) -> PyResult<Bound<'py, PyAny>> {
+    let text = |paths: Vec<std::path::PathBuf>| -> Vec<String> {
+        paths
+            .iter()
+            .map(|p| p.to_string_lossy().into_owned())
+            .collect()
+    };
+    let (scenarios, submission) = (text(scenario_files), text(submission_files));
+    let json = py
+        .detach(move || -> anyhow::Result<String> {
+            let score = scbg::wosac::score_submission(&scenarios, &submission, &scbg::Quiet)?;
+            Ok(serde_json::to_string(&score)?)
+        })
+        .map_err(py_err)?;
+    py.import("json")?.call_method1("loads", (json,))
+}
+
 #[pymodule]
 fn _scbg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Model>()?;
@@ -481,5 +505,6 @@ fn _scbg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Simulation>()?;
     m.add_function(wrap_pyfunction!(read_scenarios, m)?)?;
     m.add_function(wrap_pyfunction!(scenarios_from_bytes, m)?)?;
+    m.add_function(wrap_pyfunction!(score_wosac, m)?)?;
     Ok(())
 }

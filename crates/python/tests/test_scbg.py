@@ -1,5 +1,10 @@
 """The scbg Python module against a tiny model trained by the scbg binary."""
 
+import json
+import os
+import subprocess
+import tarfile
+
 import numpy as np
 import pytest
 
@@ -122,3 +127,69 @@ def test_bad_inputs_raise_value_errors(trained):
         sim.step()
     with pytest.raises(ValueError):
         scbg.read_scenarios("/nonexistent.tfrecord")
+
+
+def _varint(n):
+    out = bytearray()
+    while True:
+        byte, n = n & 0x7F, n >> 7
+        out.append(byte | (0x80 if n else 0))
+        if not n:
+            return bytes(out)
+
+
+def _field(number, payload):
+    """A length-delimited protobuf field."""
+    return _varint(number << 3 | 2) + _varint(len(payload)) + payload
+
+
+def _submission_with_empty_joint_scenes(scenario_id, joint_scenes):
+    """A SimAgentsChallengeSubmission encoded here, not by scbg: one scenario whose joint
+    scenes hold no trajectory, submission_type SIM_AGENTS_SUBMISSION."""
+    rollouts = _field(1, scenario_id.encode()) + b"".join(_field(2, b"") for _ in range(joint_scenes))
+    return _field(1, rollouts) + bytes([0x10, 0x01])
+
+
+def test_score_wosac_scores_a_submission_as_the_closed_loop_did(trained_dirs, tmp_path):
+    gen, file = trained_dirs
+    scene = scbg.read_scenarios(file)[0]
+    a, b = _pair(scene)
+    settings = tmp_path / "wosac.toml"
+    settings.write_text('[closed_loop]\nformat = "wosac"\nname = "mine"\n')
+    out = tmp_path / "sim"
+    subprocess.run([os.environ.get("SCBG_BIN", "scbg"), "sim", "--model", gen, "--scenario", file,
+                    "--scenario-id", scene.scenario_id, "--a", str(a), "--b", str(b),
+                    "--config", str(settings), "--out", str(out)], check=True, capture_output=True)
+    with open(out / "sim.json") as f:
+        closed_loop = json.load(f)["wosac"]
+    shard = out / "mine.binproto-00000-of-00001"
+
+    score = scbg.score_wosac([file], [shard])
+    assert score["challenge"] == "2025" and score["shards"] == 1
+    assert [s["scenario_id"] for s in score["per_scenario"]] == [scene.scenario_id]
+    scored = score["per_scenario"][0]
+    for key, value in closed_loop.items():
+        assert scored[key] == value, key
+    assert score["aggregate"]["metametric"] == closed_loop["metametric"]
+    assert score["not_submitted"] == len(scbg.read_scenarios(file)) - 1
+    assert score["skipped_items"] == []
+
+    # A .tar.gz of the shard gives the same numbers; a foreign encoder's submission with 2 joint
+    # scenes and a shard that is not protobuf are left out with their reasons.
+    archive = tmp_path / "submission.tar.gz"
+    with tarfile.open(archive, "w:gz") as tar:
+        tar.add(shard, arcname=shard.name)
+    short = tmp_path / "short.binproto-00000-of-00001"
+    short.write_bytes(_submission_with_empty_joint_scenes(scene.scenario_id, 2))
+    garbage = tmp_path / "garbage.binproto-00000-of-00001"
+    garbage.write_bytes(b"\x0a\x05\x01")
+    packed = scbg.score_wosac([file], [archive])
+    assert packed["per_scenario"][0]["metametric"] == scored["metametric"]
+    bad = scbg.score_wosac([file], [short, garbage])
+    assert bad["per_scenario"] == [] and bad["aggregate"] is None
+    assert bad["skipped"] == {"not 32 joint scenes": 1,
+                              "not a SimAgentsChallengeSubmission protobuf": 1}
+    details = " ".join(k["detail"] for k in bad["skipped_items"])
+    assert "2 joint scenes" in details and "garbage.binproto" in details
+    with pytest.raises(ValueError, match="nothing-"):
+        scbg.score_wosac([file], [str(tmp_path / "nothing-*.binproto")])

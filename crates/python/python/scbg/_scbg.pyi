@@ -1,4 +1,5 @@
-from typing import Optional, Sequence, TypedDict
+from os import PathLike
+from typing import Any, Optional, Sequence, TypedDict, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -130,3 +131,32 @@ def read_scenarios(path: str) -> list[Scene]:
 
 def scenarios_from_bytes(data: bytes) -> list[Scene]:
     """Every scenario of WOMD bytes (a TFRecord file or one Scenario message)."""
+
+class WosacScore(TypedDict):
+    challenge: str
+    scenario_files: int
+    scenarios_in_files: int
+    submission_files: int
+    shards: int
+    not_submitted: int
+    per_scenario: list[dict[str, Any]]
+    aggregate: Optional[dict[str, Any]]
+    skipped: dict[str, int]
+    skipped_items: list[dict[str, Optional[str]]]
+    seconds: float
+    seconds_per_scenario: Optional[float]
+    threads: int
+
+def score_wosac(
+    scenario_files: Sequence[Union[str, PathLike[str]]],
+    submission_files: Sequence[Union[str, PathLike[str]]],
+) -> WosacScore:
+    """WOSAC 2025 realism of a submission against the logged scenarios: ``scbg eval wosac``'s
+    ``wosac.json`` as a dict. Both arguments are paths, folders or glob patterns; a submission
+    file is a ``SimAgentsChallengeSubmission`` shard or a ``.tar.gz`` of shards.
+    ``per_scenario`` holds each scored scenario's ``metametric``, ``buckets``,
+    ``likelihoods`` (ten features), ``average_displacement_error_m``,
+    ``min_average_displacement_error_m``, the simulated collision, off-road and
+    traffic-light-violation rates and ``seconds``; ``aggregate`` their means (None when nothing
+    was scored); ``skipped_items`` everything left out with its ``reason`` and ``detail``.
+    Inputs that match no file raise ``ValueError``."""
