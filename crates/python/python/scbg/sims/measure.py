@@ -191,17 +191,22 @@ def figure(summaries, path):
     import matplotlib.pyplot as plt
 
     n = len(summaries)
-    fig, axes = plt.subplots(1, n, figsize=(3.2 * n, 3.0), squeeze=False)
-    for ax, (name, s) in zip(axes[0], summaries.items()):
+    cols = min(4, n)
+    rows = -(-n // cols)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 2.8 * rows), squeeze=False)
+    for ax in axes.flat[n:]:
+        ax.axis("off")
+    for ax, (name, s) in zip(axes.flat, summaries.items()):
         a = s["a_speed_mps"]
         ax.plot(QUANTILES, [a[arm_name({"kind": "scbg", "quantile": q})] for q in QUANTILES],
                 "o-", label="scbg B at quantile q")
         ax.axhline(a["yardstick_low"], color="tab:red", ls="--", label="own model, low courtesy")
         ax.axhline(a["yardstick_high"], color="tab:green", ls="--", label="own model, high courtesy")
         ax.set_title(f"{name} ({s['episodes']} ep.)", fontsize=9)
-        ax.set_xlabel("B's courtesy quantile")
-    axes[0][0].set_ylabel("A's paired mean speed, 8 s (m/s)")
-    axes[0][0].legend(fontsize=7)
+        ax.set_xlabel("B's courtesy quantile", fontsize=8)
+        ax.set_ylabel("A's mean speed, 8 s (m/s)", fontsize=8)
+        ax.tick_params(labelsize=7)
+    axes.flat[0].legend(fontsize=6)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
 
