@@ -79,7 +79,7 @@ def test_bad_requests_are_named():
     highway = _highway()
     with pytest.raises(ValueError, match="unknown highway-env scenario 'merge-v9'"):
         highway.episode(None, "merge-v9", 0, {"kind": "default"})
-    with pytest.raises(ValueError, match="quantile must be a number in"):
+    with pytest.raises(ValueError, match=r"quantile must be a number in \[0, 1\]"):
         highway.episode(None, "merge-v0", 0, {"kind": "scbg", "quantile": 1.5})
     with pytest.raises(ValueError, match="needs a model"):
         highway.episode(None, "merge-v0", 0, {"kind": "scbg", "quantile": 0.5})

@@ -32,6 +32,8 @@ import numpy as np
 
 import scbg
 
+from . import check_arm
+
 STEP_SECS = 0.1
 HISTORY_STEPS = 11  # 1.1 s, the current step included
 MEASURE_STEPS = 80  # 8 s after the takeover
@@ -184,19 +186,6 @@ def on_road(road, xy_highway):
     index = road.network.get_closest_lane_index(np.asarray(xy_highway, float))
     lane = road.network.get_lane(index)
     return bool(lane.on_lane(np.asarray(xy_highway, float)))
-
-
-def _check_arm(arm):
-    kind = arm.get("kind")
-    if kind == "scbg":
-        q = arm.get("quantile")
-        if not isinstance(q, (int, float)) or not 0.0 <= q <= 1.0:
-            raise ValueError(f"arm {arm!r}: quantile must be a number in [0, 1]")
-    elif kind == "yardstick":
-        if arm.get("level") not in ("low", "high"):
-            raise ValueError(f"arm {arm!r}: level must be 'low' or 'high'")
-    elif kind != "default":
-        raise ValueError(f"arm {arm!r}: kind must be 'scbg', 'yardstick' or 'default'")
 
 
 class _Episode:
@@ -513,7 +502,7 @@ def episode(model, scenario: str, seed: int, arm: dict, trace: list | None = Non
     scenario or arm, and ``RuntimeError`` when the seed never brings A and B together."""
     if scenario not in SCENARIOS:
         raise ValueError(f"unknown highway-env scenario {scenario!r}: expected one of {sorted(SCENARIOS)}")
-    _check_arm(arm)
+    check_arm(arm)
     if arm["kind"] == "scbg" and model is None:
         raise ValueError("an scbg arm needs a model")
     ep = _Episode(scenario, seed)

@@ -55,6 +55,8 @@ from collections import deque
 
 import numpy as np
 
+from . import check_arm
+
 SCENARIOS = {
     "sumo-onramp": "SUMO on-ramp: one-lane main road, acceleration lane; A merges from the "
     "ramp, B is the main-road car at A's merge point",
@@ -387,19 +389,6 @@ def add_traffic(traci, scenario: str, seed: int):
 # ---------------------------------------------------------------------------------- episodes
 
 
-def _check_arm(arm):
-    kind = arm.get("kind") if isinstance(arm, dict) else None
-    if kind == "scbg":
-        q = arm.get("quantile")
-        if not isinstance(q, (int, float)) or not (0.0 <= float(q) <= 1.0) or math.isnan(float(q)):
-            raise ValueError(f"scbg arm: quantile must be a number in [0, 1], got {q!r}")
-    elif kind == "yardstick":
-        if arm.get("level") not in ("low", "high"):
-            raise ValueError(f"yardstick arm: level must be 'low' or 'high', got {arm.get('level')!r}")
-    elif kind != "default":
-        raise ValueError(f"arm must be a dict with kind 'scbg', 'yardstick' or 'default', got {arm!r}")
-
-
 def _box_corners(s):
     cx, cy, h, _, _, length, width = s
     c, si = math.cos(h), math.sin(h)
@@ -555,7 +544,7 @@ def episode(model, scenario: str, seed: int, arm: dict, net_folder: str | None =
     ``trace``: a list that gets, per step after t0, ``{"t_s", "states": {id: state row},
     "collisions": [(id, id)], "plan": B's current plan or None}``."""
     _check_scenario(scenario)
-    _check_arm(arm)
+    check_arm(arm)
     if arm["kind"] == "scbg" and model is None:
         raise ValueError("an scbg arm needs a model")
     if not isinstance(replan_every, int) or not 1 <= replan_every <= FUTURE_STEPS:
