@@ -3,6 +3,7 @@
 //! - [`atomic`]: the project's one atomic file writer (temporary file in the destination's
 //!   folder, renamed into place when complete, removed on failure).
 //! - [`fp`]: the floating-point mode of compute threads (subnormals flushed to zero).
+//! - [`skips`]: what a run left out, counted by reason, and the line summaries show.
 //! - [`seed`]: the SplitMix64 mixer that derives independent, reproducible random streams
 //!   from a `(seed, stream)` pair.
 //!
@@ -14,3 +15,4 @@
 pub mod atomic;
 pub mod fp;
 pub mod seed;
+pub mod skips;

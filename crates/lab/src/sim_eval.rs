@@ -388,15 +388,10 @@ impl SimEval {
 
     /// One line on what was left out, by reason (`nothing` when nothing was).
     pub fn skipped_line(&self) -> String {
-        if self.skipped.is_empty() {
-            return "skipped: nothing".into();
-        }
-        let by_reason: Vec<String> = self
-            .skipped
-            .iter()
-            .map(|(reason, n)| format!("{n} × {reason}"))
-            .collect();
-        format!("skipped: {}", by_reason.join("; "))
+        format!(
+            "skipped: {}",
+            scbg_base::skips::by_reason_text(&self.skipped)
+        )
     }
 }
 

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from scbg.sims import sumo
+from scbg.sims import measure, sumo
 
 
 def _run_until(traci, ids, steps):
@@ -137,12 +137,6 @@ def test_the_release_models_knob_moves_a_at_the_junction(release):
     """At SUMO's priority junction, B at courtesy quantile 0.9 lets A drive faster than at 0.1,
     on the paired mean over episodes (same seed, same start, only the quantile changes), and
     B's plans stay on SUMO's road."""
-    deltas, on, points = [], 0, 0
-    for seed in range(8):
-        low = sumo.episode(release, "sumo-4way", seed, {"kind": "scbg", "quantile": 0.1})
-        high = sumo.episode(release, "sumo-4way", seed, {"kind": "scbg", "quantile": 0.9})
-        deltas.append(high["a_speed_mps"] - low["a_speed_mps"])
-        on += low["b_plan_points_on_road"] + high["b_plan_points_on_road"]
-        points += low["b_plan_points"] + high["b_plan_points"]
+    deltas, on_road = measure.paired_effect(release, "sumo-4way", range(8))
     assert np.mean(deltas) > 0.0, deltas
-    assert on >= 0.98 * points, (on, points)
+    assert on_road >= 0.98, on_road

@@ -22,7 +22,7 @@
 //! scenario id (each record decoded once to learn its id, and again when it is scored), and
 //! shards are read one at a time, their scenarios scored in parallel on the rayon pool.
 
-use std::collections::{BTreeMap, HashSet};
+use std::collections::HashSet;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -167,10 +167,7 @@ pub fn score_submission(
     let metrics: Vec<ScenarioMetrics> = scored.iter().map(|s| s.metrics.clone()).collect();
     let seconds_per_scenario = (!scored.is_empty())
         .then(|| scored.iter().map(|s| s.seconds).sum::<f64>() / scored.len() as f64);
-    let mut by_reason = BTreeMap::new();
-    for s in &skipped {
-        *by_reason.entry(s.reason.clone()).or_insert(0) += 1;
-    }
+    let by_reason = scbg_base::skips::count_by_reason(skipped.iter().map(|s| s.reason.as_str()));
     Ok(WosacScore {
         challenge: "2025",
         scenario_files: scenario_paths.len(),

@@ -125,20 +125,15 @@ impl WosacScore {
         self.per_scenario.len()
     }
 
-    /// `skipped: N (reason n; …)`, or `skipped: nothing`.
+    /// `skipped: N (n × reason; …)`, or `skipped: nothing`.
     pub fn skipped_line(&self) -> String {
         if self.skipped.is_empty() {
             return "skipped: nothing".into();
         }
-        let by_reason: Vec<String> = self
-            .skipped
-            .iter()
-            .map(|(reason, n)| format!("{reason} {n}"))
-            .collect();
         format!(
             "skipped: {} ({})",
             self.skipped_items.len(),
-            by_reason.join("; ")
+            scbg_base::skips::by_reason_text(&self.skipped)
         )
     }
 

@@ -258,7 +258,6 @@ class _Episode:
         states[:, :HISTORY_STEPS] = recent.transpose(1, 0, 2)
         valid = np.zeros(states.shape[:2], bool)
         valid[:, :HISTORY_STEPS] = True
-        # A car off the map (left the road network's ends) is not an input.
         ids = np.arange(1, n + 1, dtype=np.int64)
         a, b = self.cars.index(self.a) + 1, self.cars.index(self.b) + 1
         return scbg.Scene.from_arrays(
@@ -382,8 +381,7 @@ def _make_b_wait_for_a(ep):
         act(action)
         ahead = np.dot(a.position - b.position, [np.cos(b.heading), np.sin(b.heading)])
         if ahead > -LENGTH_M and np.linalg.norm(a.position - b.position) < 40.0:
-            gap = max(np.linalg.norm(a.position - b.position) - LENGTH_M, 0.1)
-            acc = b.acceleration(ego_vehicle=b, front_vehicle=a) if gap > 0 else -b.COMFORT_ACC_MAX
+            acc = b.acceleration(ego_vehicle=b, front_vehicle=a)
             b.action["acceleration"] = min(b.action["acceleration"], acc)
 
     b.act = act_waiting

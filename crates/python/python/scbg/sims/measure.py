@@ -88,6 +88,21 @@ def run_seed(scenario, seed):
     return out
 
 
+def paired_effect(model, scenario, seeds, low=0.1, high=0.9):
+    """A's speed with B at quantile ``high`` minus at ``low``, per seed (each pair of episodes the
+    same but for the quantile), and the share of B's followed plan points on the road over both.
+    The quick form of the measurement, for a test or a first look."""
+    mod = _module(scenario)
+    deltas, on, points = [], 0, 0
+    for seed in seeds:
+        lo = mod.episode(model, scenario, seed, {"kind": "scbg", "quantile": low})
+        hi = mod.episode(model, scenario, seed, {"kind": "scbg", "quantile": high})
+        deltas.append(hi["a_speed_mps"] - lo["a_speed_mps"])
+        on += lo["b_plan_points_on_road"] + hi["b_plan_points_on_road"]
+        points += lo["b_plan_points"] + hi["b_plan_points"]
+    return deltas, on / points if points else float("nan")
+
+
 def spearman(x, y):
     """Spearman's rank correlation with average ranks for ties; NaN when either is constant."""
 

@@ -50,7 +50,6 @@ import os
 import shutil
 import subprocess
 import tempfile
-import warnings
 from collections import deque
 
 import numpy as np
@@ -455,41 +454,11 @@ def scene_from_history(scenario: str, history, a: str, b: str, rmap: RoadMap):
                 valid[i, offset + k] = True
     num = {vid: i + 1 for i, vid in enumerate(vids)}
     ids = np.array([num[v] for v in vids], np.int64)
-    kwargs = dict(
-        current_step=HISTORY_STEPS - 1,
-        sdc_id=num[a],
-        objects_of_interest=[num[a], num[b]],
-        lanes=rmap.lanes,
-        road_edges=rmap.road_edges,
-        road_lines=rmap.road_lines,
-    )
-    lane_types = [LANE_TYPE[scenario]] * len(rmap.lanes)
-    if _accepts_lane_types(scbg):
-        kwargs["lane_types"] = lane_types
-    scene = scbg.Scene.from_arrays(f"{scenario}", ids, states, valid, **kwargs)
+    scene = scbg.Scene.from_arrays(
+        scenario, ids, states, valid, current_step=HISTORY_STEPS - 1, sdc_id=num[a],
+        objects_of_interest=[num[a], num[b]], lanes=rmap.lanes, road_edges=rmap.road_edges,
+        road_lines=rmap.road_lines, lane_types=[LANE_TYPE[scenario]] * len(rmap.lanes))
     return scene, num[a], num[b]
-
-
-_LANE_TYPES_OK: dict = {}
-
-
-def _accepts_lane_types(scbg) -> bool:
-    """Whether the installed scbg's ``Scene.from_arrays`` takes ``lane_types`` (warns once
-    when it does not: the learned models read lane types, and untyped lanes are a kind of
-    road they never saw — the demo's model then planned the on-ramp's B off the road's side
-    in about a quarter of its points)."""
-    if "ok" not in _LANE_TYPES_OK:
-        try:
-            scbg.Scene.from_arrays(
-                "probe", np.array([1], np.int64), np.zeros((1, 11, 7)) + [0, 0, 0, 0, 0, 4.5, 1.8],
-                np.ones((1, 11), bool), lanes=[np.array([[0.0, 0.0], [10.0, 0.0]])],
-                lane_types=["freeway"])
-            _LANE_TYPES_OK["ok"] = True
-        except TypeError:
-            _LANE_TYPES_OK["ok"] = False
-            warnings.warn("this scbg's Scene.from_arrays takes no lane_types: SUMO's lanes go "
-                          "to the model untyped", stacklevel=3)
-    return _LANE_TYPES_OK["ok"]
 
 
 def _b_distance_to_conflict(traci, scenario):
