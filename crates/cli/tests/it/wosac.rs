@@ -239,7 +239,7 @@ fn eval_wosac_lists_what_it_cannot_score() {
     assert_eq!(run.status.code(), Some(2));
     let err = String::from_utf8_lossy(&run.stderr);
     assert!(
-        err.contains("no scenario scored") && err.contains("not in the scenario files 1"),
+        err.contains("no scenario scored") && err.contains("1 × not in the scenario files"),
         "{err}"
     );
     let text = String::from_utf8_lossy(&run.stdout);
