@@ -4,6 +4,8 @@
 //!   folder, renamed into place when complete, removed on failure).
 //! - [`fp`]: the floating-point mode of compute threads (subnormals flushed to zero).
 //! - [`skips`]: what a run left out, counted by reason, and the line summaries show.
+//! - [`split`]: the scenario-id marks that decide a scene's split (held-out families,
+//!   siblings).
 //! - [`seed`]: the SplitMix64 mixer that derives independent, reproducible random streams
 //!   from a `(seed, stream)` pair.
 //!
@@ -16,3 +18,4 @@ pub mod atomic;
 pub mod fp;
 pub mod seed;
 pub mod skips;
+pub mod split;

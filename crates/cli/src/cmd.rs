@@ -72,6 +72,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     seed: a.seed,
                     out: a.out,
                     families: a.families,
+                    held_out: a.held_out,
                     scenarios_per_file: a.scenarios_per_file,
                     counterfactuals: a.counterfactuals,
                 },

@@ -39,6 +39,8 @@ pub struct DataConfig {
     pub scenarios: usize,
     /// Counterfactual siblings per synthetic scene for the predictor's training.
     pub counterfactuals: usize,
+    /// Families held out of training, only evaluated.
+    pub held_out_families: Vec<scbg_synth::Family>,
 }
 
 /// `[predictor]`.

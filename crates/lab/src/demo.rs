@@ -113,6 +113,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 seed: options.seed,
                 out: synth_dir.clone(),
                 families: scbg_synth::Family::ALL.to_vec(),
+                held_out: options.config.data.held_out_families.clone(),
                 scenarios_per_file: 250,
                 counterfactuals: options.config.data.counterfactuals,
             },
@@ -384,6 +385,11 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
             windows: manifest.total.windows,
             pairs: manifest.total.pairs,
             skipped: manifest.total.skipped.clone(),
+            held_out_families: if options.data.is_empty() {
+                options.config.data.held_out_families.clone()
+            } else {
+                Vec::new()
+            },
         },
         predictor: eval,
         labels: LabelsReport {

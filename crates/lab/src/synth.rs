@@ -24,6 +24,9 @@ pub struct SynthOptions {
     pub out: PathBuf,
     /// Scene families to draw from.
     pub families: Vec<Family>,
+    /// Families among `families` held out of training: their scenes' ids carry
+    /// [`scbg_base::split::HELD_OUT_MARK`], so every stage only evaluates them.
+    pub held_out: Vec<Family>,
     /// Scenarios per output TFRecord file.
     pub scenarios_per_file: usize,
     /// Counterfactual siblings per scenario ([`scbg_synth::Scenario::counterfactual`]),
@@ -66,7 +69,10 @@ pub fn write_synthetic(
         .map(|f| {
             let range = f * per_file..((f + 1) * per_file).min(options.scenarios);
             let drawn: Vec<_> = range
-                .map(|i| Scenario::draw(options.seed, i as u64, &options.families))
+                .map(|i| {
+                    Scenario::draw(options.seed, i as u64, &options.families)
+                        .held_out_if(&options.held_out)
+                })
                 .collect();
             let generated: Vec<_> = drawn.iter().map(Scenario::generate).collect();
             let path = options.out.join(format!("synth-{f:05}.tfrecord"));

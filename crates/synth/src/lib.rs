@@ -1,9 +1,10 @@
-//! Synthetic interactive two-vehicle traffic with drivers of known courtesy.
+//! Synthetic interactive traffic with drivers of known courtesy.
 //!
 //! [`generate`] builds scenario `index` of a run deterministically from `(seed, index)`: a map
 //! with real geometry (lanes with types, speed limits and links; road lines; road edges; stop
-//! signs and crosswalks where they belong), vehicle A (the SDC, IDM with a reaction delay),
-//! vehicle B with a latent courtesy `c ∈ [0, 1]`, and background traffic. The result is a
+//! signs and crosswalks where they belong; procedural roads in the following family), its
+//! detail varied as other maps vary it (`map_detail`), vehicle A (the SDC, IDM with a reaction
+//! delay), vehicle B with a latent courtesy `c ∈ [0, 1]`, and background traffic. The result is a
 //! [`Scene`] (91 steps at 10 Hz, current step 10, `objects_of_interest = [A, B]`, both in
 //! `tracks_to_predict`) plus its [`GroundTruth`], including A's average future speed in a
 //! re-simulation without B. See [`families`] for how courtesy acts in each scene family.
@@ -15,6 +16,7 @@
 
 mod closed_loop;
 pub mod families;
+mod map_detail;
 mod path;
 mod sim;
 
@@ -45,18 +47,26 @@ pub enum Family {
     Crossing,
     /// Lane change / cut-in on a two-lane road.
     Cutin,
+    /// B leading A in A's lane on a procedural road.
+    Following,
 }
 
 impl Family {
     /// Every family.
-    pub const ALL: [Family; 3] = [Family::Merge, Family::Crossing, Family::Cutin];
+    pub const ALL: [Family; 4] = [
+        Family::Merge,
+        Family::Crossing,
+        Family::Cutin,
+        Family::Following,
+    ];
 
-    /// The family's name (`merge`, `crossing`, `cutin`).
+    /// The family's name (`merge`, `crossing`, `cutin`, `following`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Merge => "merge",
             Self::Crossing => "crossing",
             Self::Cutin => "cutin",
+            Self::Following => "following",
         }
     }
 
@@ -69,9 +79,9 @@ impl Family {
     }
 }
 
-/// A family name that is not `merge`, `crossing` or `cutin` (holds the name given).
+/// A family name that is not `merge`, `crossing`, `cutin` or `following` (holds the name given).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown scene family {0:?} (expected merge, crossing or cutin)")]
+#[error("unknown scene family {0:?} (expected merge, crossing, cutin or following)")]
 pub struct UnknownFamily(pub String);
 
 /// What the generator knows about a scenario and a model has to discover: one line of the
@@ -110,6 +120,10 @@ pub struct GroundTruth {
     pub psi_true: f64,
     /// Whether A's and B's boxes overlapped at some step.
     pub collision: bool,
+    /// Whether the scene's family is held out of training in its run (its id then ends with
+    /// [`scbg_base::split::HELD_OUT_MARK`], and it is only ever evaluated).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub held_out: bool,
 }
 
 /// One generated scenario.
@@ -127,6 +141,7 @@ enum Params {
     Merge(families::MergeParams),
     Crossing(families::CrossingParams),
     Cutin(families::CutinParams),
+    Following(families::FollowingParams),
 }
 
 /// Draws of the courtesy prior `c' ∈ [0, 1]` behind ψ_true's expectation: stratified, the
@@ -174,6 +189,8 @@ pub struct Scenario {
     pub family: Family,
     /// B's latent courtesy.
     pub courtesy: f64,
+    /// Whether the scene's family is held out of training ([`Scenario::held_out_if`]).
+    pub held_out: bool,
     params: Params,
 }
 
@@ -197,6 +214,7 @@ impl Scenario {
             Family::Merge => Params::Merge(families::merge_params(&mut rng)),
             Family::Crossing => Params::Crossing(families::crossing_params(&mut rng)),
             Family::Cutin => Params::Cutin(families::cutin_params(&mut rng)),
+            Family::Following => Params::Following(families::following_params(&mut rng)),
         };
         Self {
             seed,
@@ -204,8 +222,17 @@ impl Scenario {
             families: families.to_vec(),
             family,
             courtesy,
+            held_out: false,
             params,
         }
+    }
+
+    /// The scenario, marked held out of training when its family is one of `held_out`: its id
+    /// (and its siblings') then ends with [`scbg_base::split::HELD_OUT_MARK`], so every split
+    /// puts it in validation. Nothing else about it changes.
+    pub fn held_out_if(mut self, held_out: &[Family]) -> Self {
+        self.held_out = held_out.contains(&self.family);
+        self
     }
 
     /// The scenario a ground-truth line describes (checked against its id).
@@ -213,16 +240,23 @@ impl Scenario {
         if truth.families.is_empty() {
             return Err(OracleError::Mismatch(truth.scenario_id.clone()));
         }
-        let s = Self::draw(truth.seed, truth.index, &truth.families);
+        let mut s = Self::draw(truth.seed, truth.index, &truth.families);
+        s.held_out = truth.held_out;
         if s.scenario_id() != truth.scenario_id || s.family != truth.family {
             return Err(OracleError::Mismatch(truth.scenario_id.clone()));
         }
         Ok(s)
     }
 
-    /// The scene's id (`synth-<seed hex>-<index>`).
+    /// The scene's id (`synth-<seed hex>-<index>`, with
+    /// [`scbg_base::split::HELD_OUT_MARK`] appended when held out).
     pub fn scenario_id(&self) -> String {
-        format!("synth-{:x}-{:07}", self.seed, self.index)
+        let mark = if self.held_out {
+            scbg_base::split::HELD_OUT_MARK
+        } else {
+            ""
+        };
+        format!("synth-{:x}-{:07}{mark}", self.seed, self.index)
     }
 
     /// A run without the map (what the oracle's many runs need).
@@ -240,6 +274,7 @@ impl Scenario {
             Params::Merge(p) => families::merge_paths(p),
             Params::Crossing(p) => families::crossing_paths(p),
             Params::Cutin(p) => families::cutin_paths(p),
+            Params::Following(p) => families::following_paths(p),
         }
     }
 
@@ -250,6 +285,7 @@ impl Scenario {
             Params::Merge(p) => families::simulate_merge(p, paths, b, with_map),
             Params::Crossing(p) => families::simulate_crossing(p, paths, b, with_map),
             Params::Cutin(p) => families::simulate_cutin(p, paths, b, with_map),
+            Params::Following(p) => families::simulate_following(p, paths, b, with_map),
         }
     }
 
@@ -419,6 +455,7 @@ impl Scenario {
             a_avg_speed_expected_mps: expected,
             psi_true: replayed - expected,
             collision,
+            held_out: self.held_out,
         };
         Generated { scene, truth }
     }
@@ -490,6 +527,8 @@ impl Scenario {
             map: {
                 let mut map = std::mem::take(&mut run.map);
                 families::orient_road_edges(&mut map);
+                let parallel_edges = matches!(self.family, Family::Cutin | Family::Following);
+                map_detail::vary(&mut map, self.seed, self.index, parallel_edges);
                 map
             },
             signals_per_step: Vec::new(),

@@ -449,3 +449,4 @@ fn step_wise_world_equals_the_whole_scene_replay() {
         }
     }
 }
+

@@ -19,9 +19,13 @@ pub enum Split {
 /// The split of a scenario: [`Split::Validation`] for about `validation_fraction` of the ids.
 /// FNV-1a (then SplitMix-mixed) of the scenario id: a stable split that does not depend on file
 /// order. A variant of a scene (its id + `~…`, e.g. a counterfactual sibling) shares the
-/// scene's split: only the part before the first `~` counts.
+/// scene's split: only the part before the first `~` counts. A scene of a held-out family
+/// (its id ends with [`scbg_base::split::HELD_OUT_MARK`]) is always validation.
 pub fn split_of(scenario_id: &str, validation_fraction: f64) -> Split {
-    let base = scenario_id.split('~').next().unwrap_or(scenario_id);
+    if scbg_base::split::is_held_out(scenario_id) {
+        return Split::Validation;
+    }
+    let base = scbg_base::split::base_id(scenario_id);
     let mut h: u64 = 0xcbf2_9ce4_8422_2325;
     for b in base.bytes() {
         h ^= u64::from(b);
@@ -225,6 +229,7 @@ mod tests {
             .count();
         assert!((1700..2300).contains(&val), "{val}");
         assert!((0..100).all(|i| split_of(&format!("s{i}"), 0.0) == Split::Train));
+        assert!((0..100).all(|i| split_of(&format!("s{i}+unseen~cf1"), 0.0) == Split::Validation));
         // A variant shares its scene's split.
         assert!(
             (0..100)

@@ -101,9 +101,13 @@ pub struct SynthArgs {
         long,
         value_enum,
         value_delimiter = ',',
-        default_value = "merge,crossing,cutin"
+        default_value = "merge,crossing,cutin,following"
     )]
     pub families: Vec<Family>,
+    /// Families held out of training (comma-separated): their scenes' ids end with `+unseen`,
+    /// which puts them in every stage's held-out split, so they are only evaluated.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub held_out: Vec<Family>,
     /// Scenarios per output TFRecord file.
     #[arg(long, default_value_t = 250)]
     pub scenarios_per_file: usize,

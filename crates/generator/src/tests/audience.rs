@@ -93,8 +93,9 @@ fn measured_courtesy_toward_an_audience_sums_its_members() {
                 scale = scale.max(term_psi.abs());
             }
             let got = f64::from(m.psi[i][j]);
+            // Relative, but not below f32's resolution of rewards near 10 m/s (~1e-6 m/s).
             assert!(
-                (got - want).abs() < 0.02 * scale.max(1e-6),
+                (got - want).abs() < 0.02 * scale.max(1e-4),
                 "example {i}, ψ {j}: measured {got} vs Σ w_j ψ_j {want}"
             );
         }

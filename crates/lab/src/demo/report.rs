@@ -23,6 +23,9 @@ pub struct DataReport {
     pub pairs: usize,
     /// Skipped inputs by reason.
     pub skipped: BTreeMap<String, usize>,
+    /// Synthetic families held out of training (`[data] held_out_families`): their per-family
+    /// results measure transfer.
+    pub held_out_families: Vec<scbg_synth::Family>,
 }
 
 /// The report's `labels` section.

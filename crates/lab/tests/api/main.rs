@@ -27,6 +27,7 @@ fn label_train_and_generate_through_the_library() {
             seed: 12,
             out: p("synth"),
             families: Family::ALL.to_vec(),
+            held_out: Vec::new(),
             scenarios_per_file: 8,
             counterfactuals: 0,
         },

@@ -11,7 +11,11 @@
 //!   with MOBIL politeness `2c`, accepting that A must brake at up to `7 − 6c` m/s²
 //!   (a courteous B drops back to let A pass first), or B, slower
 //!   and ahead of A in A's lane, moves out of A's way to the right once A approaches within
-//!   `200c` m.
+//!   `200c` m;
+//! - **following**: B leads A in A's lane on a procedural road (1–4 lanes, curves down to a
+//!   40 m radius, limits 8–33 m/s) and keeps a steady speed near the limit when courteous,
+//!   dawdles at `(base + 0.2c)` × the limit and brakes needlessly at `(1 − c)` × 1.5–3.5 m/s²
+//!   when not.
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
@@ -254,6 +258,7 @@ impl PairSetup {
 
 mod crossing;
 mod cutin;
+mod following;
 mod merge;
 
 pub use crossing::{CrossingParams, crossing_params, crossing_paths, simulate_crossing};
@@ -261,4 +266,5 @@ pub use cutin::{
     CUT_IN_REACTION_S, CutinParams, LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2, cutin_params, cutin_paths,
     simulate_cutin,
 };
+pub use following::{FollowingParams, following_params, following_paths, simulate_following};
 pub use merge::{MergeParams, merge_params, merge_paths, simulate_merge};
