@@ -117,8 +117,37 @@ impl Scbg {
         courtesy: &[Courtesy],
         device: &Device,
     ) -> Result<Vec<Generated>, GenerateError> {
+        self.generate_in_adjusted(ctx, courtesy, None, device)
+    }
+
+    /// [`Scbg::generate_in`] with each chosen future changed by `adjust` (world frame) before
+    /// J_φ measures it, so that the ψ reported is that of the future returned. The runtime
+    /// keeps futures in lane this way; the generator knows nothing of lanes.
+    pub fn generate_in_adjusted(
+        &self,
+        ctx: &PairContext,
+        courtesy: &[Courtesy],
+        adjust: Option<&dyn Fn(&mut [[f64; 2]])>,
+        device: &Device,
+    ) -> Result<Vec<Generated>, GenerateError> {
         let (low, high) = (ctx.low, ctx.high);
-        let choices = self.choose(&ctx.basis, courtesy, device)?;
+        let mut choices = self.choose(&ctx.basis, courtesy, device)?;
+        // The futures as returned (world frame); with `adjust`, J_φ measures them in B's frame.
+        let pose = choices.b_pose;
+        let mut world: Vec<Vec<[f64; 2]>> =
+            choices.futures_b.iter().map(|f| world_xy(&pose, f)).collect();
+        if let Some(adjust) = adjust {
+            for (future, world) in choices.futures_b.iter_mut().zip(&mut world) {
+                adjust(world);
+                *future = world
+                    .iter()
+                    .map(|p| {
+                        let (x, y) = pose.agent_from_world(p[0], p[1]);
+                        [x as f32, y as f32]
+                    })
+                    .collect();
+            }
+        }
         let measured = measure_futures(
             &self.predictor,
             &[&ctx.example],
@@ -128,8 +157,9 @@ impl Scbg {
         );
         Ok(courtesy
             .iter()
+            .zip(world)
             .enumerate()
-            .map(|(j, c)| Generated {
+            .map(|(j, (c, world_xy_m))| Generated {
                 quantile: match *c {
                     Courtesy::Quantile(q) => q,
                     Courtesy::Psi(p) => quantile_for_psi(p, low, high),
@@ -140,7 +170,7 @@ impl Scbg {
                 achieved_psi: measured.psi[0][j],
                 a_expected_reward_conditional: measured.e_cond[0][j],
                 a_expected_reward_marginal: measured.e_marg[0],
-                world_xy_m: world_xy(&choices.b_pose, &measured.futures_b[0][j]),
+                world_xy_m,
                 step_secs: STEP_SECS,
             })
             .collect())

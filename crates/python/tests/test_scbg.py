@@ -48,13 +48,12 @@ def test_the_ranked_policy_picks_labelled_samples(trained_dirs):
     # lane moves of them: quantile 0 takes the lowest-ψ one, quantile 1 the highest.
     low = model.generate(scene, a, b, quantile=0.0)
     high = model.generate(scene, a, b, quantile=1.0)
-    # J_φ of the two picks, measured again from their world-frame futures, is their label,
-    # and the pick at quantile 1 is the more courteous one.
+    # The pick at quantile 1 has the higher label; each future comes kept in lane, and J_φ of
+    # it, measured again from its world-frame points, is the ψ reported as achieved.
+    assert low["psi"] < high["psi"]
     measured = [model.courtesy(scene, a, b, out["world_xy_m"])["psi"] for out in (low, high)]
     for out, m in zip((low, high), measured):
-        assert abs(out["achieved_psi"] - out["psi"]) < 1e-3
-        assert abs(m - out["psi"]) < 1e-3
-    assert measured[0] < measured[1], measured
+        assert abs(m - out["achieved_psi"]) < 1e-3
     with pytest.raises(ValueError, match="unknown policy"):
         scbg.Model(gen, policy="oracle")
 

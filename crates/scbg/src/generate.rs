@@ -140,22 +140,35 @@ pub fn pair_context(
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 
-/// B's futures at each courtesy for a pair whose context is known ([`pair_context`]).
+/// B's futures at each courtesy for a pair of `scene` whose context is known
+/// ([`pair_context`]), each kept in lane ([`keep_future_in_lane`]) before J_φ measures it.
 pub fn generate_in(
     model: &LoadedScbg,
     context: &PairContext,
+    scene: &Scene,
     courtesy: &[Courtesy],
 ) -> anyhow::Result<Vec<Generated>> {
     let courtesy: Vec<scbg_generator::Courtesy> = courtesy.iter().map(|c| c.get()).collect();
+    let lanes = scbg_sim::lanes::LaneSegments::new(&scene.map);
+    let keep = |future: &mut [[f64; 2]]| keep_future_in_lane(&lanes, future);
     model
         .scbg
-        .generate_in(context, &courtesy, &model.device)
+        .generate_in_adjusted(context, &courtesy, Some(&keep), &model.device)
         .map(|g| g.into_iter().map(Generated::from).collect())
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
 }
 
+/// Keeps a generated future of B in lane as the closed loop keeps every plan it follows
+/// (`scbg_sim::lanes`, [`crate::DEFAULT_LANE_KEEPING_M`]): the generator is trained open loop
+/// and its futures drift sideways (1–2 m in 8 s on a straight road, inside curves on bends;
+/// docs/findings.md, *Map detail*), so what a front end receives is the future B can drive,
+/// and the ψ reported is that future's.
+fn keep_future_in_lane(lanes: &scbg_sim::lanes::LaneSegments, future: &mut [[f64; 2]]) {
+    lanes.keep_near(future, crate::DEFAULT_LANE_KEEPING_M);
+}
+
 /// B's futures for each requested courtesy (a quantile in [0, 1] of the predicted range, or
-/// an explicit ψ), starting at the scene's current step, in the world frame.
+/// an explicit ψ), starting at the scene's current step, in the world frame, kept in lane.
 pub fn generate(
     model: &LoadedScbg,
     scene: &Scene,
@@ -163,16 +176,8 @@ pub fn generate(
     b: i64,
     courtesy: &[Courtesy],
 ) -> anyhow::Result<Generation> {
-    let prepared = prepare(scene)?;
-    let window = &prepared.windows[0];
-    let courtesy: Vec<scbg_generator::Courtesy> = courtesy.iter().map(|c| c.get()).collect();
-    let trajectories = model
-        .scbg
-        .generate(&prepared, window, a, b, &courtesy, &model.device)
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?
-        .into_iter()
-        .map(Generated::from)
-        .collect();
+    let context = pair_context(model, scene, a, b)?;
+    let trajectories = generate_in(model, &context, scene, courtesy)?;
     Ok(Generation {
         scenario_id: scene.scenario_id.clone(),
         a_id: a,
@@ -185,7 +190,8 @@ pub fn generate(
 
 /// B's future only (80 world-frame points after the scene's current step) at one courtesy:
 /// what a closed-loop planner needs, without measuring the achieved ψ (see
-/// `scbg_generator::Scbg::plan`).
+/// `scbg_generator::Scbg::plan`), and before lane keeping: the closed loop keeps it in lane as
+/// it keeps every plan, which makes it the future [`generate`] returns.
 pub fn plan(
     model: &LoadedScbg,
     scene: &Scene,

@@ -103,7 +103,7 @@ impl Model {
         courtesy: &[Courtesy],
     ) -> anyhow::Result<Generation> {
         let context = self.pair_context(scene, a, b)?;
-        let trajectories = crate::generate::generate_in(&self.loaded, &context, courtesy)?;
+        let trajectories = crate::generate::generate_in(&self.loaded, &context, scene, courtesy)?;
         Ok(Generation {
             scenario_id: scene.scenario_id.clone(),
             a_id: a,

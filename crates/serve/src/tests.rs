@@ -33,6 +33,7 @@ fn fixture() -> &'static (tempfile::TempDir, Vec<u8>, scbg_lab::synth::GroundTru
                 seed: 3,
                 out: p("data"),
                 families: Family::ALL.to_vec(),
+                held_out: Vec::new(),
                 scenarios_per_file: 12,
                 counterfactuals: 0,
             },
@@ -87,7 +88,20 @@ fn fixture() -> &'static (tempfile::TempDir, Vec<u8>, scbg_lab::synth::GroundTru
 
 fn state(token: Option<&str>, max_body_bytes: usize) -> Arc<AppState> {
     let (dir, _, _) = fixture();
-    let model = scbg::Model::load(&dir.path().join("gen"), &scbg::LoadOptions::default()).unwrap();
+    state_of(&dir.path().join("gen"), token, max_body_bytes)
+}
+
+/// The server of the repository's release model (`models/courtesy`) on the fixture's data:
+/// for a test of which way the knob moves A, which a tiny model does not decide.
+fn release_state() -> Arc<AppState> {
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../../models/courtesy/generator");
+    state_of(&model, None, 16 << 20)
+}
+
+fn state_of(model: &std::path::Path, token: Option<&str>, max_body_bytes: usize) -> Arc<AppState> {
+    let (dir, _, _) = fixture();
+    let model = scbg::Model::load(model, &scbg::LoadOptions::default()).unwrap();
     AppState::new(
         model,
         ServeConfig {

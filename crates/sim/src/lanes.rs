@@ -12,6 +12,14 @@
 //! intersection a drifting point is not kept on the crossing road. Points farther than
 //! [`REACH_M`] from every lane centre (a car park, a driveway) are left as they are. The
 //! segments are listed once per simulation ([`LaneSegments`]).
+//!
+//! A plan keeps to one lane until it is clearly in another: a point stays with the lane the
+//! point before it was kept to (while it lies alongside that lane, not beyond its ends) unless
+//! another lane is [`SWITCH_MARGIN_M`] nearer, so a plan
+//! drifting half a lane sideways (the generator's futures do, 1–2 m in 8 s on a straight road)
+//! is not split between two lanes. Where the kept lane does change, the correction is ramped
+//! over [`SWITCH_STEPS`] instead of jumping a lane width from one point to the next: a lane
+//! change B can drive.
 
 use scbg_scene::{LaneType, Map};
 
@@ -32,13 +40,22 @@ pub const MOVING_M: f64 = 0.2;
 /// intersection, which then pulled B's points 5 m sideways into A's lane (docs/findings.md,
 /// *The safety guard, rule by rule*).
 pub const CHORD_M: f64 = 2.0;
+/// Another lane takes over a plan only when it is this much nearer than the lane the plan's
+/// previous point was kept to (m).
+pub const SWITCH_MARGIN_M: f64 = 1.0;
+/// Steps over which the correction is ramped where the kept lane changes (3 s at 10 Hz, a
+/// usual lane change).
+pub const SWITCH_STEPS: usize = 30;
 
 /// The car-lane centre-line segments of a map (every lane but bike lanes), listed once per
 /// simulation: the map does not change while plans are made.
 #[derive(Debug, Clone, Default)]
 pub struct LaneSegments {
-    segments: Vec<([f64; 2], [f64; 2])>,
+    segments: Vec<Segment>,
 }
+
+/// `(start, end, lane index, first segment of its lane, last segment of its lane)`.
+type Segment = ([f64; 2], [f64; 2], usize, bool, bool);
 
 impl LaneSegments {
     /// The segments of `map`'s car lanes.
@@ -47,11 +64,14 @@ impl LaneSegments {
             segments: map
                 .lanes
                 .iter()
-                .filter(|l| l.lane_type != LaneType::BikeLane)
-                .flat_map(|l| {
-                    l.polyline
-                        .windows(2)
-                        .map(|w| ([w[0].x_m, w[0].y_m], [w[1].x_m, w[1].y_m]))
+                .enumerate()
+                .filter(|(_, l)| l.lane_type != LaneType::BikeLane)
+                .flat_map(|(k, l)| {
+                    let last = l.polyline.len().saturating_sub(2);
+                    l.polyline.windows(2).enumerate().map(move |(i, w)| {
+                        let (a, b) = ([w[0].x_m, w[0].y_m], [w[1].x_m, w[1].y_m]);
+                        (a, b, k, i == 0, i == last)
+                    })
                 })
                 .collect(),
         }
@@ -77,10 +97,10 @@ impl LaneSegments {
             [lo[0] - REACH_M, lo[1] - REACH_M],
             [hi[0] + REACH_M, hi[1] + REACH_M],
         );
-        let segments: Vec<&([f64; 2], [f64; 2])> = self
+        let segments: Vec<&Segment> = self
             .segments
             .iter()
-            .filter(|(a, b)| {
+            .filter(|(a, b, ..)| {
                 a[0].max(b[0]) >= lo[0]
                     && a[0].min(b[0]) <= hi[0]
                     && a[1].max(b[1]) >= lo[1]
@@ -88,10 +108,14 @@ impl LaneSegments {
             })
             .collect();
         let heading = plan_directions(plan);
-        let mut moved = 0;
-        for (p, heading) in plan.iter_mut().zip(heading) {
-            let mut best = (REACH_M * REACH_M, None);
-            for &(a, b) in &segments {
+        // Per point: the correction that keeps it, and the lane it was kept to.
+        let mut corrections = vec![[0.0f64; 2]; plan.len()];
+        let mut kept_lane: Option<usize> = None;
+        let mut switches = Vec::new();
+        for (t, (p, heading)) in plan.iter().zip(heading).enumerate() {
+            // The nearest point overall and on the lane the previous point was kept to.
+            let (mut best, mut on_kept) = ((REACH_M * REACH_M, None), (f64::INFINITY, None));
+            for &&(a, b, lane, first, last) in &segments {
                 let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
                 let len2 = dx * dx + dy * dy;
                 if let Some(h) = heading
@@ -99,24 +123,65 @@ impl LaneSegments {
                 {
                     continue;
                 }
-                let t = if len2 > 0.0 {
+                let u = if len2 > 0.0 {
                     (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
                 } else {
                     0.0
                 };
-                let q = [a[0] + t * dx, a[1] + t * dy];
+                let q = [a[0] + u * dx, a[1] + u * dy];
                 let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
                 if d2 < best.0 {
-                    best = (d2, Some(q));
+                    best = (d2, Some((q, lane)));
+                }
+                // A point beyond either end of the kept lane has left it (for its successor).
+                let beyond = (first && u <= 0.0) || (last && u >= 1.0);
+                if Some(lane) == kept_lane && !beyond && d2 < on_kept.0 {
+                    on_kept = (d2, Some((q, lane)));
                 }
             }
-            if let (d2, Some(q)) = best {
+            let chosen = match (best.1, on_kept.1) {
+                (Some(_), Some(k)) if on_kept.0.sqrt() <= best.0.sqrt() + SWITCH_MARGIN_M => {
+                    Some((on_kept.0, k))
+                }
+                (Some(b), _) => Some((best.0, b)),
+                (None, _) => None,
+            };
+            if let Some((d2, (q, lane))) = chosen {
+                if kept_lane.is_some_and(|k| k != lane) {
+                    switches.push(t);
+                }
+                kept_lane = Some(lane);
                 let d = d2.sqrt();
                 if d > max_offset_m {
                     let k = max_offset_m / d;
-                    *p = [q[0] + k * (p[0] - q[0]), q[1] + k * (p[1] - q[1])];
-                    moved += 1;
+                    let to = [q[0] + k * (p[0] - q[0]), q[1] + k * (p[1] - q[1])];
+                    corrections[t] = [to[0] - p[0], to[1] - p[1]];
                 }
+            }
+        }
+        // A change of the kept lane moves the correction by up to a lane width: ramp it.
+        for &t in &switches {
+            let (lo, hi) = (
+                t.saturating_sub(SWITCH_STEPS / 2),
+                (t + SWITCH_STEPS / 2).min(plan.len() - 1),
+            );
+            let jump = (corrections[t][0] - corrections[t - 1][0])
+                .hypot(corrections[t][1] - corrections[t - 1][1]);
+            if jump < 2.0 * max_offset_m.max(0.25) || hi <= lo {
+                continue;
+            }
+            let (c0, c1) = (corrections[lo], corrections[hi]);
+            for (j, c) in corrections.iter_mut().enumerate().take(hi).skip(lo + 1) {
+                let w = (j - lo) as f64 / (hi - lo) as f64;
+                let w = w * w * (3.0 - 2.0 * w);
+                *c = [c0[0] + w * (c1[0] - c0[0]), c0[1] + w * (c1[1] - c0[1])];
+            }
+        }
+        let mut moved = 0;
+        for (p, c) in plan.iter_mut().zip(&corrections) {
+            if c[0] != 0.0 || c[1] != 0.0 {
+                *p = [p[0] + c[0], p[1] + c[1]];
+                moved += 1;
             }
         }
         moved
@@ -255,5 +320,65 @@ mod tests {
         // The direction over two steps alone would have taken the crossing road's lane.
         let two_step = plan_directions(&[[0.0, 0.5], [0.5, 0.6], [1.0, 0.7]]);
         assert!(two_step[1].is_some_and(|h| h[0] > 0.9));
+    }
+
+    #[test]
+    fn a_drifting_plan_keeps_its_lane_and_a_lane_change_is_ramped() {
+        let mut straight = lane(0.0, LaneType::Freeway);
+        straight.polyline.extend((11..=30).map(|i| MapPoint {
+            x_m: 10.0 * f64::from(i),
+            y_m: 0.0,
+            z_m: 0.0,
+        }));
+        let mut left = straight.clone();
+        for p in &mut left.polyline {
+            p.y_m = 3.5;
+        }
+        let map = Map {
+            lanes: vec![straight, left],
+            ..Map::default()
+        };
+        let lanes = LaneSegments::new(&map);
+        // Drifting 2.2 m left over 8 s, past the middle between the lanes: kept to its lane.
+        let mut drift: Vec<[f64; 2]> = (0..80)
+            .map(|t| [2.0 * f64::from(t), 2.2 * f64::from(t) / 79.0])
+            .collect();
+        lanes.keep_near(&mut drift, 0.25);
+        assert!(drift.iter().all(|p| p[1] <= 0.25 + 1e-9), "{drift:?}");
+        // Drifting on to 3.0 m, clearly into the other lane: kept as a lane change whose
+        // points never jump sideways by more than a few decimetres a step.
+        let mut change: Vec<[f64; 2]> = (0..80)
+            .map(|t| [2.0 * f64::from(t), 3.0 * f64::from(t) / 79.0])
+            .collect();
+        lanes.keep_near(&mut change, 0.25);
+        assert!(change[0][1].abs() < 1e-9 && (change[79][1] - 3.5).abs() <= 0.25 + 1e-9);
+        let worst_step = change
+            .windows(2)
+            .map(|w| (w[1][1] - w[0][1]).abs())
+            .fold(0.0, f64::max);
+        assert!(worst_step < 0.45, "a sideways step of {worst_step} m");
+        // Past the end of its lane a plan goes on along the lane that continues it, never
+        // pulled back toward the end it passed.
+        let along = |x0: u32, x1: u32| Lane {
+            lane_type: LaneType::Freeway,
+            polyline: (x0..=x1)
+                .map(|i| MapPoint {
+                    x_m: 10.0 * f64::from(i),
+                    y_m: 0.0,
+                    z_m: 0.0,
+                })
+                .collect(),
+            ..Lane::default()
+        };
+        let chained = Map {
+            lanes: vec![along(0, 10), along(10, 30)],
+            ..Map::default()
+        };
+        let x = |t: usize| 80.0 + 0.5 * t as f64;
+        let mut plan: Vec<[f64; 2]> = (0..80).map(|t| [x(t), 0.6]).collect();
+        LaneSegments::new(&chained).keep_near(&mut plan, 0.25);
+        for (t, p) in plan.iter().enumerate() {
+            assert!((p[0] - x(t)).abs() < 1e-9 && (p[1] - 0.25).abs() < 1e-9, "{p:?}");
+        }
     }
 }

@@ -16,12 +16,13 @@ pub(crate) fn ranked_policy_in_the_loop(
     let quantiles = [0.0, 1.0].map(|q| Courtesy::quantile(q).unwrap());
     let out = generate::generate(&model, scene, t.a_id, t.b_id, &quantiles).unwrap();
     let [low, high] = [&out.trajectories[0], &out.trajectories[1]];
-    // The tiny model's labels draw 2 futures of B: the two ends take one each, J_φ measures
-    // each at its label.
+    // The tiny model's labels draw 2 futures of B: the two ends take one each. Each comes kept
+    // in lane, and J_φ of the future returned is the ψ reported as achieved.
     assert!(low.psi < high.psi, "{} vs {}", low.psi, high.psi);
     assert_ne!(low.world_xy_m, high.world_xy_m);
     for g in [low, high] {
-        assert!((g.achieved_psi - g.psi).abs() < 1e-4);
+        let again = generate::courtesy(&model, scene, t.a_id, t.b_id, &g.world_xy_m).unwrap();
+        assert!((g.achieved_psi - again.psi).abs() < 1e-4);
     }
     let planned = generate::plan(
         &model,
@@ -31,7 +32,7 @@ pub(crate) fn ranked_policy_in_the_loop(
         Courtesy::quantile(1.0).unwrap(),
     )
     .unwrap();
-    assert_eq!(planned, high.world_xy_m);
+    assert_eq!(kept_in_lane(scene, planned), high.world_xy_m);
     let b = [ControlledAgent {
         id: t.b_id,
         courtesy: Courtesy::quantile(0.9).unwrap(),
@@ -70,7 +71,8 @@ pub(crate) fn closed_loop_through_the_library(
     dir: &std::path::Path,
 ) {
     use scbg::sim::{self, ControlledAgent, SimConfig};
-    // The planner's fast path gives the future `generate` gives.
+    // The planner's fast path gives the future `generate` gives, once kept in lane as the
+    // closed loop keeps every plan.
     let planned = generate::plan(
         model,
         scene,
@@ -87,7 +89,10 @@ pub(crate) fn closed_loop_through_the_library(
         &[Courtesy::quantile(0.7).unwrap()],
     )
     .unwrap();
-    assert_eq!(planned, generated.trajectories[0].world_xy_m);
+    assert_eq!(
+        kept_in_lane(scene, planned),
+        generated.trajectories[0].world_xy_m
+    );
 
     let b = |q: f32| {
         vec![ControlledAgent {
@@ -320,4 +325,10 @@ pub(crate) fn closed_loop_through_the_library(
         sim::rollout(model, &short, Some(t.a_id), &b(0.5), config, None),
         "fewer than 11 history steps",
     );
+}
+
+/// A plan kept in lane as `generate` and the closed loop keep it.
+fn kept_in_lane(scene: &scbg_scene::Scene, mut plan: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
+    scbg::keep_in_lane(scene, &mut plan, scbg::DEFAULT_LANE_KEEPING_M).unwrap();
+    plan
 }

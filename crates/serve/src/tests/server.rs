@@ -216,7 +216,7 @@ async fn viewer_in_a_headless_browser() {
     let Some(browser) = chromium() else {
         return;
     };
-    let st = state(None, 16 << 20);
+    let st = release_state();
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
