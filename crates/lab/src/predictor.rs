@@ -220,6 +220,10 @@ pub fn evaluate_predictor(
     let model = ckpt.load_model(model_dir, &device)?;
     let dataset = PreparedDataset::open(data_dir)?;
     let mut config = ckpt.train_config.clone();
+    // Only the scenes of `data_dir`: the sibling caches the model trained with are training
+    // data (and need not exist where the model is evaluated).
+    config.counterfactual_cache = None;
+    config.reaction_cache = None;
     let all = split == SplitSelection::All;
     if all {
         config.validation_fraction = 0.0;

@@ -45,12 +45,22 @@ pub(crate) fn tiny_trained_model(dir: &std::path::Path, scenarios: usize, seed: 
 fn train_then_evaluate_on_synthetic_data() {
     let dir = tempfile::tempdir().unwrap();
     let p = |s: &str| dir.path().join(s).display().to_string();
-    tiny_trained_model(dir.path(), 30, 4);
+    tiny_trained_model(dir.path(), 60, 4);
     let ckpt: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("model/checkpoint.json")).unwrap(),
     )
     .unwrap();
     assert_eq!(ckpt["state"]["epoch"], 30);
+    // The evaluation reads the scenes it is given only, never the sibling caches the model
+    // trained with (gone here, as where a shipped model is evaluated).
+    let mut moved = ckpt.clone();
+    moved["train_config"]["counterfactual_cache"] = Value::from(p("gone"));
+    moved["train_config"]["reaction_cache"] = Value::from(p("gone"));
+    std::fs::write(
+        dir.path().join("model/checkpoint.json"),
+        serde_json::to_string_pretty(&moved).unwrap(),
+    )
+    .unwrap();
     let out = scbg_ok(&[
         "eval",
         "predictor",
