@@ -127,6 +127,6 @@ def test_the_release_models_knob_moves_a_behind_b_on_the_highway(release):
     than at 0.1 on the paired mean over episodes (same seed, only the quantile changes), no
     episode goes clearly the wrong way, and B's followed plans stay on highway-env's road."""
     _highway()
-    deltas, on_road = measure.paired_effect(release, "highway-v0", range(6))
+    deltas, on_road = measure.paired_effect(release, "highway-v0", range(12))
     assert np.mean(deltas) > 0.1 and min(deltas) > -0.1, deltas
     assert on_road >= 0.85, on_road
