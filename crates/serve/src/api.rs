@@ -151,7 +151,8 @@ pub struct GenerateResponse {
     pub a_expected_speed_mps: f32,
     /// A's expected average speed without conditioning on B, m/s.
     pub a_expected_speed_marginal_mps: f32,
-    /// B's future: 80 world-frame points, 10 Hz, after the current step.
+    /// B's future: 80 world-frame points, 10 Hz, after the current step, kept in lane as the
+    /// closed loop keeps its plans.
     pub world_xy_m: Vec<[f64; 2]>,
 }
 

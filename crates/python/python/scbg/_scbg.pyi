@@ -108,7 +108,8 @@ class Model:
         quantile: Optional[float] = None,
         psi: Optional[float] = None,
     ) -> Generation:
-        """B's future at a courtesy quantile in [0, 1] (or an explicit ψ) toward A."""
+        """B's future at a courtesy quantile in [0, 1] (or an explicit ψ) toward A, kept in
+        lane as the closed loop keeps every plan; ``achieved_psi`` is that future's ψ."""
     def courtesy(
         self, scene: Scene, a: int, b: int, future_xy_m: npt.NDArray[np.float64]
     ) -> CourtesyScore:
