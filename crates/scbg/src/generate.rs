@@ -3,7 +3,6 @@
 
 use std::path::Path;
 
-pub use scbg_generator::PairContext;
 use scbg_scene::Scene;
 use serde::Serialize;
 
@@ -123,9 +122,16 @@ fn prepare(scene: &Scene) -> anyhow::Result<scbg_features::PreparedScene> {
     Ok(prepared)
 }
 
-/// The context every generation for (scene, A, B) shares (samples, B's embedding, E[r(Y_A) |
-/// x], the predicted range): keep it to generate at many courtesies cheaply
-/// ([`generate_in`]).
+/// The context every generation for (scene, A, B) shares: the generator's (samples, B's
+/// embedding, E[r(Y_A) | x], the predicted range) and the scene's lane segments that keep each
+/// future in lane. Keep it to generate at many courtesies cheaply ([`generate_in`]).
+#[derive(Debug)]
+pub struct PairContext {
+    generator: scbg_generator::PairContext,
+    lanes: scbg_sim::lanes::LaneSegments,
+}
+
+/// The context of the pair (A = `a`, B = `b`) of `scene` ([`PairContext`]).
 pub fn pair_context(
     model: &LoadedScbg,
     scene: &Scene,
@@ -134,37 +140,38 @@ pub fn pair_context(
 ) -> anyhow::Result<PairContext> {
     let prepared = prepare(scene)?;
     let window = &prepared.windows[0];
-    model
+    let generator = model
         .scbg
         .pair_context(&prepared, window, a, b, &model.device)
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
+    Ok(PairContext {
+        generator,
+        lanes: scbg_sim::lanes::LaneSegments::new(&scene.map),
+    })
 }
 
-/// B's futures at each courtesy for a pair of `scene` whose context is known
-/// ([`pair_context`]), each kept in lane ([`keep_future_in_lane`]) before J_φ measures it.
+/// B's futures at each courtesy for a pair whose context is known ([`pair_context`]), each
+/// kept in lane as the closed loop keeps every plan it follows (`scbg_sim::lanes`,
+/// [`crate::DEFAULT_LANE_KEEPING_M`]) before J_φ measures it. The generator is trained open
+/// loop and its futures drift sideways (1–2 m in 8 s on a straight road, inside curves on
+/// bends; docs/findings.md, *Map detail*), so what a front end receives is the future B can
+/// drive, and the ψ reported is that future's.
 pub fn generate_in(
     model: &LoadedScbg,
     context: &PairContext,
-    scene: &Scene,
     courtesy: &[Courtesy],
 ) -> anyhow::Result<Vec<Generated>> {
     let courtesy: Vec<scbg_generator::Courtesy> = courtesy.iter().map(|c| c.get()).collect();
-    let lanes = scbg_sim::lanes::LaneSegments::new(&scene.map);
-    let keep = |future: &mut [[f64; 2]]| keep_future_in_lane(&lanes, future);
+    let keep = |future: &mut [[f64; 2]]| {
+        context
+            .lanes
+            .keep_near(future, crate::DEFAULT_LANE_KEEPING_M);
+    };
     model
         .scbg
-        .generate_in_adjusted(context, &courtesy, Some(&keep), &model.device)
+        .generate_in_adjusted(&context.generator, &courtesy, Some(&keep), &model.device)
         .map(|g| g.into_iter().map(Generated::from).collect())
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
-}
-
-/// Keeps a generated future of B in lane as the closed loop keeps every plan it follows
-/// (`scbg_sim::lanes`, [`crate::DEFAULT_LANE_KEEPING_M`]): the generator is trained open loop
-/// and its futures drift sideways (1–2 m in 8 s on a straight road, inside curves on bends;
-/// docs/findings.md, *Map detail*), so what a front end receives is the future B can drive,
-/// and the ψ reported is that future's.
-fn keep_future_in_lane(lanes: &scbg_sim::lanes::LaneSegments, future: &mut [[f64; 2]]) {
-    lanes.keep_near(future, crate::DEFAULT_LANE_KEEPING_M);
 }
 
 /// B's futures for each requested courtesy (a quantile in [0, 1] of the predicted range, or
@@ -177,7 +184,7 @@ pub fn generate(
     courtesy: &[Courtesy],
 ) -> anyhow::Result<Generation> {
     let context = pair_context(model, scene, a, b)?;
-    let trajectories = generate_in(model, &context, scene, courtesy)?;
+    let trajectories = generate_in(model, &context, courtesy)?;
     Ok(Generation {
         scenario_id: scene.scenario_id.clone(),
         a_id: a,

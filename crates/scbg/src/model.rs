@@ -5,12 +5,12 @@ use std::collections::{HashMap, VecDeque};
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, Weak};
 
-use scbg_generator::{PairContext, Policy, Variant};
+use scbg_generator::{Policy, Variant};
 use scbg_scene::Scene;
 
 use crate::Courtesy;
 pub use crate::artefact::*;
-use crate::generate::{CourtesyOf, Generation};
+use crate::generate::{CourtesyOf, Generation, PairContext};
 
 /// How [`Model::load`] loads a model folder.
 #[derive(Debug, Clone, PartialEq)]
@@ -38,8 +38,8 @@ impl Default for LoadOptions {
 /// [`Session`](crate::session::Session)s.
 ///
 /// Generation keeps what every courtesy of a pair shares (the pair's samples, B's embedding,
-/// E[r(Y_A) | x], the predicted range) per (scene, A, B), so asking the same pair again costs
-/// the generator and J_φ only. A scene is known by its allocation: pass the same
+/// E[r(Y_A) | x], the predicted range, the scene's lane segments) per (scene, A, B), so asking
+/// the same pair again costs the generator, lane keeping and J_φ only. A scene is known by its allocation: pass the same
 /// `Arc<Scene>` to reuse the context; a scene dropped by its owner drops out of the cache.
 #[derive(Debug)]
 pub struct Model {
@@ -103,7 +103,7 @@ impl Model {
         courtesy: &[Courtesy],
     ) -> anyhow::Result<Generation> {
         let context = self.pair_context(scene, a, b)?;
-        let trajectories = crate::generate::generate_in(&self.loaded, &context, scene, courtesy)?;
+        let trajectories = crate::generate::generate_in(&self.loaded, &context, courtesy)?;
         Ok(Generation {
             scenario_id: scene.scenario_id.clone(),
             a_id: a,

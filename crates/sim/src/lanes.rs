@@ -374,7 +374,8 @@ mod tests {
             lanes: vec![along(0, 10), along(10, 30)],
             ..Map::default()
         };
-        let x = |t: usize| 80.0 + 0.5 * t as f64;
+        // (The plan ends just past the joint, so no later switch ramps the correction away.)
+        let x = |t: usize| 61.0 + 0.5 * t as f64;
         let mut plan: Vec<[f64; 2]> = (0..80).map(|t| [x(t), 0.6]).collect();
         LaneSegments::new(&chained).keep_near(&mut plan, 0.25);
         for (t, p) in plan.iter().enumerate() {
