@@ -10,17 +10,29 @@
 //! The file ends up with the permissions [`std::fs::File::create`] gives: on Unix `0o666`
 //! masked by the process umask, not the owner-only `0o600` that `tempfile` uses by default.
 //!
+//! **Stale temporary files.** A process killed mid-write (SIGKILL, power loss) cannot remove
+//! its temporary file. Every writer therefore holds an exclusive advisory lock on its
+//! temporary file while it lives, and the first atomic write of a process into a folder
+//! removes the temporary files there that nobody holds ([`sweep_stale`]): those of dead
+//! writers. Live writers in other processes, such as shards sharing an output folder, keep
+//! theirs. (A library given the temporary path by [`write_with_path`] that *replaces* the file
+//! leaves the replacement unlocked until the rename; a sweep starting in that instant may take
+//! it, and the write fails with an error rather than leaving a wrong file.)
+//!
 //! Entry points:
 //! - [`write()`]: bytes or text;
 //! - [`write_json`]: a value as pretty JSON followed by a newline;
 //! - [`write_with`]: a callback that writes to the open temporary file;
 //! - [`write_with_path`]: a callback given the temporary file's path, for libraries that
 //!   open the file themselves;
-//! - [`AtomicFile`]: a streaming writer ([`Write`]) whose commit comes later.
+//! - [`AtomicFile`]: a streaming writer ([`Write`]) whose commit comes later;
+//! - [`sweep_stale`]: removes dead writers' temporary files from a folder.
 
+use std::collections::HashSet;
 use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 
 use serde::Serialize;
 
@@ -95,14 +107,8 @@ impl AtomicFile {
             .parent()
             .filter(|p| !p.as_os_str().is_empty())
             .unwrap_or(Path::new("."));
-        let mut builder = tempfile::Builder::new();
-        builder.prefix(".tmp").suffix(".tmp");
-        // What `File::create` asks for; the kernel masks it with the umask at creation.
-        #[cfg(unix)]
-        builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
-        let temp = builder
-            .tempfile_in(dir)
-            .map_err(|error| AtomicWriteError::io(path, error))?;
+        sweep_once(dir);
+        let temp = locked_temp_in(dir).map_err(|error| AtomicWriteError::io(path, error))?;
         Ok(Self {
             path: path.to_path_buf(),
             temp,
@@ -153,6 +159,107 @@ impl Write for AtomicFile {
     fn flush(&mut self) -> io::Result<()> {
         self.temp.flush()
     }
+}
+
+/// Prefix and suffix of temporary names: `.tmp<random>.tmp`.
+const TEMP_PREFIX: &str = ".tmp";
+const TEMP_SUFFIX: &str = ".tmp";
+
+/// A new temporary file in `dir`, exclusively locked, and still at its path once locked (a
+/// sweep in another process may have taken it between its creation and the lock: then a new
+/// one is made).
+fn locked_temp_in(dir: &Path) -> io::Result<tempfile::NamedTempFile> {
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(TEMP_PREFIX).suffix(TEMP_SUFFIX);
+    // What `File::create` asks for; the kernel masks it with the umask at creation.
+    #[cfg(unix)]
+    builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+    for _ in 0..8 {
+        let temp = builder.tempfile_in(dir)?;
+        temp.as_file().lock()?;
+        if still_at_path(&temp)? {
+            return Ok(temp);
+        }
+    }
+    Err(io::Error::other(format!(
+        "temporary files in {} keep vanishing (another process sweeping?)",
+        dir.display()
+    )))
+}
+
+/// Whether the file at `temp`'s path is the one `temp` has open.
+fn still_at_path(temp: &tempfile::NamedTempFile) -> io::Result<bool> {
+    let at_path = match std::fs::symlink_metadata(temp.path()) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(false),
+        Err(e) => return Err(e),
+    };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        let open = temp.as_file().metadata()?;
+        Ok(open.dev() == at_path.dev() && open.ino() == at_path.ino())
+    }
+    #[cfg(not(unix))]
+    {
+        Ok(at_path.is_file())
+    }
+}
+
+/// Whether `name` is one of this module's temporary names.
+fn is_temp_name(name: &str) -> bool {
+    name.len() > TEMP_PREFIX.len() + TEMP_SUFFIX.len()
+        && name.starts_with(TEMP_PREFIX)
+        && name.ends_with(TEMP_SUFFIX)
+}
+
+/// Sweeps `dir` the first time this process writes there ([`sweep_stale`]); a failed sweep
+/// is not an error for the write (it only leaves stale files where they were).
+fn sweep_once(dir: &Path) {
+    static SWEPT: Mutex<Option<HashSet<PathBuf>>> = Mutex::new(None);
+    let key = std::fs::canonicalize(dir).unwrap_or_else(|_| dir.to_path_buf());
+    let first = SWEPT
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .get_or_insert_with(HashSet::new)
+        .insert(key);
+    // The base crate has no logger: a failed sweep is said on stderr, once per folder.
+    if first && let Err(e) = sweep_stale(dir) {
+        eprintln!(
+            "warning: could not sweep stale temporary files in {}: {e}",
+            dir.display()
+        );
+    }
+}
+
+/// Removes the temporary files in `dir` that no live writer holds (those a killed process
+/// left) and returns how many it removed. Files another process is writing stay. A file that
+/// vanishes meanwhile (its writer committed it) is not an error.
+pub fn sweep_stale(dir: &Path) -> io::Result<usize> {
+    let mut removed = 0;
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let name = entry.file_name();
+        if !name.to_str().is_some_and(is_temp_name) || !entry.file_type()?.is_file() {
+            continue;
+        }
+        let path = entry.path();
+        let file = match File::open(&path) {
+            Ok(f) => f,
+            Err(e) if e.kind() == io::ErrorKind::NotFound => continue,
+            Err(e) => return Err(e),
+        };
+        match file.try_lock() {
+            Ok(()) => match std::fs::remove_file(&path) {
+                Ok(()) => removed += 1,
+                Err(e) if e.kind() == io::ErrorKind::NotFound => {}
+                Err(e) => return Err(e),
+            },
+            Err(std::fs::TryLockError::WouldBlock) => {}
+            Err(std::fs::TryLockError::Error(e)) => return Err(e),
+        }
+    }
+    Ok(removed)
 }
 
 /// Writes `path` atomically with `write`, which gets the open temporary file. The file is
@@ -354,6 +461,38 @@ mod tests {
         assert!(matches!(e, AtomicWriteError::Json { .. }), "{e:?}");
         assert!(e.to_string().contains("bad.json"), "{e}");
         assert!(listing(dir.path()).is_empty());
+    }
+
+    #[test]
+    fn dead_writers_temporary_files_are_swept_and_live_ones_kept() {
+        let dir = tempfile::tempdir().unwrap();
+        // What a killed writer leaves: a temporary name nobody holds.
+        let stale = dir.path().join(".tmpDEAD01.tmp");
+        std::fs::write(&stale, "partial").unwrap();
+        // A live writer in the same folder (its lock conflicts with the sweep's, as another
+        // process's would).
+        let mut live = AtomicFile::create(dir.path().join("live.bin")).unwrap();
+        live.write_all(b"in progress").unwrap();
+        assert!(!stale.exists(), "the first write into the folder sweeps it");
+        let other_stale = dir.path().join(".tmpDEAD02.tmp");
+        std::fs::write(&other_stale, "partial").unwrap();
+        // Names that only look similar, and folders, are never touched.
+        for keep in [".tmp", "a.tmp", ".tmpx"] {
+            std::fs::write(dir.path().join(keep), "user data").unwrap();
+        }
+        std::fs::create_dir(dir.path().join(".tmpdir.tmp")).unwrap();
+        assert_eq!(sweep_stale(dir.path()).unwrap(), 1);
+        assert!(!other_stale.exists());
+        assert!(live.temp_path().exists(), "a live writer's file stays");
+        live.commit().unwrap();
+        assert_eq!(
+            listing(dir.path()),
+            [".tmp", ".tmpdir.tmp", ".tmpx", "a.tmp", "live.bin"]
+        );
+        assert_eq!(
+            std::fs::read(dir.path().join("live.bin")).unwrap(),
+            b"in progress"
+        );
     }
 
     /// The committed file has the mode `File::create` gives in the same folder (0o666 masked

@@ -143,6 +143,30 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 print!("{}", report.to_text());
             }
         }
+        Command::Bench(BenchCommand::Kill(a)) => {
+            let options = scbg_lab::bench::KillOptions {
+                work: a.work.clone(),
+                kills: a.kills,
+                seed: a.seed,
+                stages: if a.stages.is_empty() {
+                    scbg_lab::bench::KillStage::ALL.to_vec()
+                } else {
+                    a.stages.clone()
+                },
+                scenarios: a.scenarios,
+            };
+            let exe = std::env::current_exe().context("the path of this scbg executable")?;
+            let report = scbg_lab::bench::kill_sweep(&exe, &options)?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{}", report.to_text());
+            }
+            anyhow::ensure!(
+                report.all_passed(),
+                "some kill points failed (listed above)"
+            );
+        }
         Command::Eval(EvalCommand::Sim(a)) => {
             let closed_loop = PipelineConfig::load(a.config.as_deref())?.closed_loop;
             let options = scbg_lab::sim_eval::SimEvalOptions {

@@ -134,8 +134,11 @@ impl Scbg {
         let mut choices = self.choose(&ctx.basis, courtesy, device)?;
         // The futures as returned (world frame); with `adjust`, J_φ measures them in B's frame.
         let pose = choices.b_pose;
-        let mut world: Vec<Vec<[f64; 2]>> =
-            choices.futures_b.iter().map(|f| world_xy(&pose, f)).collect();
+        let mut world: Vec<Vec<[f64; 2]>> = choices
+            .futures_b
+            .iter()
+            .map(|f| world_xy(&pose, f))
+            .collect();
         if let Some(adjust) = adjust {
             for (future, world) in choices.futures_b.iter_mut().zip(&mut world) {
                 adjust(world);

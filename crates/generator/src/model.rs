@@ -83,8 +83,13 @@ impl GeneratorConfig {
         }
     }
 
-    /// Builds the generator on `device` (seed the device first for reproducible weights).
+    /// Builds the generator on `device` (seed the device first for reproducible weights; the
+    /// parameter ids come from their paths, [`scbg_model::param_ids`]).
     pub fn init(&self, device: &Device) -> Generator {
+        scbg_model::param_ids::with_path_ids(self.init_random_ids(device), "generator")
+    }
+
+    fn init_random_ids(&self, device: &Device) -> Generator {
         let mut dims = vec![self.embedding_width + self.psi_width];
         dims.extend(&self.hidden);
         let mut sel = vec![dims[0]];

@@ -24,11 +24,12 @@ pub struct RangePredictor {
 
 impl RangePredictor {
     /// A range predictor for embeddings of `embedding_width`, with two hidden layers of
-    /// `hidden`.
+    /// `hidden`; parameter ids come from their paths ([`scbg_model::param_ids`]).
     pub fn init(embedding_width: usize, hidden: usize, device: &Device) -> Self {
-        Self {
+        let range = Self {
             head: Mlp::init(&[embedding_width, hidden, hidden, 2], device),
-        }
+        };
+        scbg_model::param_ids::with_path_ids(range, "range")
     }
 
     /// The predicted 0.1 and 0.9 quantiles of ψ, `q_high ≥ q_low`.

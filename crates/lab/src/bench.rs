@@ -1,4 +1,5 @@
-//! Throughput measurements (`scbg bench ingest | synth | train`), recorded in BENCHMARKS.md.
+//! Throughput measurements (`scbg bench ingest | synth | train | …`) and the kill sweep
+//! (`scbg bench kill`), recorded in BENCHMARKS.md.
 //! Each returns its measurements; `to_text` gives the table the command prints.
 
 use std::path::PathBuf;
@@ -13,8 +14,10 @@ use scbg_womd::WomdFile;
 
 use crate::{ROAD_SUBSAMPLE, inputs};
 
+mod kill;
 mod sim;
 mod train;
+pub use kill::{KillOptions, KillReport, KillRow, KillStage, kill_sweep};
 pub use sim::{SimBench, sim};
 pub use train::{TrainBench, TrainBenchRow, train};
 

@@ -21,6 +21,7 @@ pub mod loss;
 pub mod lstm_kernel;
 pub mod model;
 pub mod output;
+pub mod param_ids;
 
 pub use batch::{Batch, BatchAugment, Mode};
 pub use config::{MultipathConfig, Preset};

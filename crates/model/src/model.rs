@@ -111,8 +111,13 @@ pub struct Multipath {
 }
 
 impl MultipathConfig {
-    /// Builds the model on `device` (seed the device first for reproducible weights).
+    /// Builds the model on `device` (seed the device first for reproducible weights; the
+    /// parameter ids come from their paths, [`crate::param_ids`]).
     pub fn init(&self, device: &Device) -> Multipath {
+        crate::param_ids::with_path_ids(self.init_random_ids(device), "multipath")
+    }
+
+    fn init_random_ids(&self, device: &Device) -> Multipath {
         let hist_out = 2 * self.lstm_hidden + self.history_width();
         let e = self.embedding_width();
         let mut road_dims = vec![ROAD_FEATURES];

@@ -29,14 +29,23 @@ impl Courtesy {
         }
     }
 
-    /// An explicit ψ: a finite number.
+    /// An explicit ψ: a finite number of at most [`Self::PSI_LIMIT_MPS`] in size.
     pub fn psi(psi: f32) -> Result<Self, InvalidRequest> {
-        if psi.is_finite() {
-            Ok(Self(scbg_generator::Courtesy::Psi(psi)))
-        } else {
+        if !psi.is_finite() {
             Err(InvalidRequest(format!("ψ {psi} is not a finite number")))
+        } else if psi.abs() > Self::PSI_LIMIT_MPS {
+            Err(InvalidRequest(format!(
+                "ψ {psi} is outside [-{0}, {0}] m/s",
+                Self::PSI_LIMIT_MPS
+            )))
+        } else {
+            Ok(Self(scbg_generator::Courtesy::Psi(psi)))
         }
     }
+
+    /// The largest |ψ| asked for, m/s. Both rewards are speeds, and B cannot change A's
+    /// average speed by more than any car's speed; the predicted ranges span a few m/s.
+    pub const PSI_LIMIT_MPS: f32 = 50.0;
 
     /// Exactly one of a quantile and a ψ, as a request carries them.
     pub fn from_request(quantile: Option<f32>, psi: Option<f32>) -> Result<Self, InvalidRequest> {
@@ -105,6 +114,9 @@ mod tests {
         assert!(Courtesy::quantile(1.5).is_err());
         assert!(Courtesy::quantile(f32::NAN).is_err());
         assert!(Courtesy::psi(f32::INFINITY).is_err());
+        assert!(Courtesy::psi(1e30).is_err());
+        assert!(Courtesy::psi(-50.5).is_err());
+        assert!(Courtesy::psi(-50.0).is_ok());
         assert_eq!(Courtesy::psi(-2.0).unwrap().as_quantile(), None);
         assert!(Courtesy::from_request(Some(0.5), Some(1.0)).is_err());
         assert!(Courtesy::from_request(None, None).is_err());

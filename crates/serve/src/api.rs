@@ -97,7 +97,8 @@ pub struct OpenScenario {
     pub scenario_id: Option<String>,
 }
 
-/// A courtesy request: a quantile in [0, 1] of the predicted range, or an explicit ψ.
+/// A courtesy request: a quantile in [0, 1] of the predicted range, or an explicit ψ (m/s,
+/// |ψ| ≤ 50).
 #[derive(Debug, Clone, Copy, Deserialize, Serialize, ToSchema)]
 #[serde(deny_unknown_fields)]
 pub struct CourtesyAsk {
@@ -129,7 +130,7 @@ pub struct GenerateRequest {
     /// Quantile in [0, 1].
     #[serde(default)]
     pub quantile: Option<f32>,
-    /// Or an explicit ψ.
+    /// Or an explicit ψ in m/s, |ψ| ≤ 50.
     #[serde(default)]
     pub psi: Option<f32>,
 }
@@ -191,7 +192,7 @@ pub struct ControlledAsk {
     /// Quantile in [0, 1].
     #[serde(default)]
     pub quantile: Option<f32>,
-    /// Or an explicit ψ.
+    /// Or an explicit ψ in m/s, |ψ| ≤ 50.
     #[serde(default)]
     pub psi: Option<f32>,
 }

@@ -379,7 +379,10 @@ mod tests {
         let mut plan: Vec<[f64; 2]> = (0..80).map(|t| [x(t), 0.6]).collect();
         LaneSegments::new(&chained).keep_near(&mut plan, 0.25);
         for (t, p) in plan.iter().enumerate() {
-            assert!((p[0] - x(t)).abs() < 1e-9 && (p[1] - 0.25).abs() < 1e-9, "{p:?}");
+            assert!(
+                (p[0] - x(t)).abs() < 1e-9 && (p[1] - 0.25).abs() < 1e-9,
+                "{p:?}"
+            );
         }
     }
 }

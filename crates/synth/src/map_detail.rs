@@ -68,7 +68,11 @@ fn resample_map(map: &mut Map, spacing_m: f64) {
     let mapped = |id: i64, i: i32| index_maps.get(&id).map_or(i, |f| f(i));
     for lane in &mut map.lanes {
         let id = lane.id;
-        for n in lane.left_neighbors.iter_mut().chain(&mut lane.right_neighbors) {
+        for n in lane
+            .left_neighbors
+            .iter_mut()
+            .chain(&mut lane.right_neighbors)
+        {
             n.self_start_index = mapped(id, n.self_start_index);
             n.self_end_index = mapped(id, n.self_end_index);
             n.neighbor_start_index = mapped(n.feature_id, n.neighbor_start_index);
@@ -182,7 +186,12 @@ mod tests {
         assert!((l.polyline[1].x_m - 2.5).abs() < 1e-9);
         let n = &l.left_neighbors[0];
         assert_eq!(
-            (n.self_start_index, n.self_end_index, n.neighbor_start_index, n.neighbor_end_index),
+            (
+                n.self_start_index,
+                n.self_end_index,
+                n.neighbor_start_index,
+                n.neighbor_end_index
+            ),
             (8, 40, 4, 36)
         );
     }
@@ -191,8 +200,15 @@ mod tests {
     fn varied_maps_keep_an_edge_and_are_deterministic() {
         for index in 0..200 {
             let g = crate::generate(3, index, &crate::Family::ALL);
-            assert!(!g.scene.map.road_edges.is_empty(), "{}", g.scene.scenario_id);
-            assert_eq!(crate::generate(3, index, &crate::Family::ALL).scene, g.scene);
+            assert!(
+                !g.scene.map.road_edges.is_empty(),
+                "{}",
+                g.scene.scenario_id
+            );
+            assert_eq!(
+                crate::generate(3, index, &crate::Family::ALL).scene,
+                g.scene
+            );
         }
     }
 }

@@ -449,4 +449,3 @@ fn step_wise_world_equals_the_whole_scene_replay() {
         }
     }
 }
-

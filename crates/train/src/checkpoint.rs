@@ -135,6 +135,34 @@ pub fn weights_finite(model: &Multipath) -> bool {
     c.0
 }
 
+/// The optimizer's state as burnpack bytes with its tensors in name order. burn lists them
+/// in a hash map's order, which differs between processes: the same state would otherwise be
+/// different bytes in every run.
+fn ordered_optimizer_record(optimizer: &ModuleOptimizer) -> Result<Vec<u8>, CheckpointError> {
+    let format = |e: String| CheckpointError::Format {
+        path: PathBuf::from("optimizer state"),
+        message: e,
+    };
+    let bytes = optimizer
+        .into_bytes()
+        .map_err(|e| format(format!("{e:?}")))?;
+    let reader = burn_pack::Reader::from_bytes(bytes).map_err(|e| format(format!("{e:?}")))?;
+    let (scalars, metadata) = (reader.scalars().clone(), reader.metadata().clone());
+    let mut tensors = reader
+        .into_tensors()
+        .map_err(|e| format(format!("{e:?}")))?;
+    tensors.sort_by(|a, b| a.name.cmp(&b.name));
+    let mut writer = burn_pack::Writer::new(tensors);
+    for (key, value) in &scalars {
+        writer = writer.with_scalar(key, *value);
+    }
+    for (key, value) in &metadata {
+        writer = writer.with_metadata(key, value);
+    }
+    let bytes = writer.into_bytes().map_err(|e| format(format!("{e:?}")))?;
+    Ok(bytes.to_vec())
+}
+
 /// Saves one record file atomically: `save` writes to a temporary name in `dir`, which is
 /// renamed to `name` when complete (and removed when `save` fails).
 pub fn save_record(
@@ -174,9 +202,9 @@ impl Checkpoint {
         save_record(dir, &self.model_file, |p| {
             model.clone().save_file(p).map_err(|e| format!("{e:?}"))
         })?;
-        save_record(dir, &self.optimizer_file, |p| {
-            optimizer.save(p).map_err(|e| format!("{e:?}"))
-        })?;
+        let optimizer_bytes = ordered_optimizer_record(optimizer)?;
+        let path = dir.join(&self.optimizer_file);
+        scbg_base::atomic::write(&path, &optimizer_bytes).map_err(|e| io(&path)(e.into()))?;
         let path = dir.join(CHECKPOINT_FILE);
         let json = serde_json::to_vec_pretty(&self).map_err(|e| CheckpointError::Format {
             path: path.clone(),

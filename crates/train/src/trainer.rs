@@ -74,8 +74,9 @@ fn optimizer(config: &TrainConfig) -> ModuleOptimizer {
 }
 
 /// Trains on the prepared cache in `data_dir`, writing checkpoints to `out_dir` after every
-/// epoch. With `resume`, continues from the checkpoint in `out_dir`; the result is the same
-/// as an uninterrupted run (data order and augmentation are derived from (seed, epoch/step)).
+/// epoch. With `resume`, continues from the checkpoint in `out_dir` if there is one (else starts
+/// afresh); the result is the same as an uninterrupted run (data order and augmentation are
+/// derived from (seed, epoch/step)).
 pub fn train(
     data_dir: &Path,
     out_dir: &Path,
@@ -130,7 +131,9 @@ pub fn train(
         epochs_without_improvement: 0,
     };
     let mut history = Vec::new();
-    if resume {
+    // `--resume` with no checkpoint yet is a fresh start, so that re-running the same command
+    // finishes an interrupted run whenever it was interrupted.
+    if resume && out_dir.join(crate::checkpoint::CHECKPOINT_FILE).exists() {
         let ckpt = Checkpoint::read(out_dir)?;
         if &ckpt.train_config != config {
             return Err(TrainError::ConfigMismatch(out_dir.display().to_string()));

@@ -18,6 +18,42 @@ pub enum BenchCommand {
     Sim(BenchSimArgs),
     /// Loopback load test of `POST /v1/generate` (latency percentiles, errors, peak RSS).
     Serve(BenchServeArgs),
+    /// Crash safety: kill -9 each stage at seeded random moments, re-run it, and compare its
+    /// outputs with an undisturbed run's (exit status 1 when any kill point fails).
+    Kill(BenchKillArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchKillArgs {
+    /// Working folder (the small world, the references and every killed run).
+    #[arg(long)]
+    pub work: PathBuf,
+    /// Kill points per stage.
+    #[arg(long, default_value_t = 20)]
+    pub kills: usize,
+    /// Seeds the kill delays and the small synthetic world.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Stages to kill (default: all): prepare, train_predictor, label, train_generator, sim,
+    /// eval_sim.
+    #[arg(long, value_delimiter = ',', value_parser = parse_kill_stage)]
+    pub stages: Vec<scbg_lab::bench::KillStage>,
+    /// Synthetic scenarios of the small world (more make every stage run longer).
+    #[arg(long, default_value_t = 400)]
+    pub scenarios: usize,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+fn parse_kill_stage(name: &str) -> Result<scbg_lab::bench::KillStage, String> {
+    scbg_lab::bench::KillStage::parse(name).ok_or_else(|| {
+        let names: Vec<&str> = scbg_lab::bench::KillStage::ALL
+            .iter()
+            .map(|s| s.name())
+            .collect();
+        format!("unknown stage {name:?}; one of {}", names.join(", "))
+    })
 }
 
 #[derive(Debug, Clone, Args)]

@@ -88,7 +88,8 @@ pub struct TrainPredictorArgs {
     /// Checkpoint folder.
     #[arg(long)]
     pub out: PathBuf,
-    /// Continue from the checkpoint in --out.
+    /// Continue from the checkpoint in --out, to the weights an uninterrupted run reaches; with
+    /// no checkpoint there yet, start afresh (so the same command finishes an interrupted run).
     #[arg(long)]
     pub resume: bool,
 }

@@ -62,7 +62,11 @@ fn demo_writes_a_report() {
         assert!(v.get("corr_quantile").is_some() && v.get("corr_quantile_high").is_some());
     }
     let families = report["spearman_latent"].as_object().unwrap();
-    assert_eq!(families.len(), 4, "merge, crossing, cut-in, following: {report}");
+    assert_eq!(
+        families.len(),
+        4,
+        "merge, crossing, cut-in, following: {report}"
+    );
     // The closed-loop stage ran on the held-out scenes.
     let cl = &report["closed_loop"];
     assert_eq!(cl["per_quantile"].as_array().unwrap().len(), 9);

@@ -10,6 +10,7 @@ mod corrupt;
 mod demo;
 mod direction;
 mod generator;
+mod kill;
 mod pipeline;
 mod predictor;
 mod real_data;

@@ -44,6 +44,11 @@ async fn bad_inputs_are_4xx_json_errors() {
             "quantile 1.5",
         ),
         (
+            Body::from(gen_body(json!({"psi": 1e30})).to_string()),
+            StatusCode::BAD_REQUEST,
+            "outside [-50, 50] m/s",
+        ),
+        (
             Body::from(gen_body(json!({"quantile": 0.5, "psi": 0.1})).to_string()),
             StatusCode::BAD_REQUEST,
             "not both",

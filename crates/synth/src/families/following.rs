@@ -227,7 +227,15 @@ pub fn simulate_following(
             v0,
         ));
     }
-    let noise_of = |i: usize| if with_b { i } else if i == 0 { 0 } else { i + 1 };
+    let noise_of = |i: usize| {
+        if with_b {
+            i
+        } else if i == 0 {
+            0
+        } else {
+            i + 1
+        }
+    };
     for t in 0..b.steps() - 1 {
         let c = b.courtesy(t);
         if with_b {
