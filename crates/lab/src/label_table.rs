@@ -120,12 +120,22 @@ fn column<T: arrow_array::Array + Clone + 'static>(
 /// Reads a label table back (resumed shards, summaries, tests); a missing column or a column
 /// of the wrong type is an error naming the file and column.
 pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
-    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
-    let reader =
-        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(file)?.build()?;
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    label_table_from_bytes(bytes, path)
+}
+
+/// [`read_label_table`] of a file's bytes; `path` names it in errors.
+pub fn label_table_from_bytes(bytes: Vec<u8>, path: &Path) -> anyhow::Result<Vec<LabelRow>> {
+    let named = |e: parquet::errors::ParquetError| anyhow::anyhow!("{}: {e}", path.display());
+    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(
+        bytes::Bytes::from(bytes),
+    )
+    .map_err(named)?
+    .build()
+    .map_err(named)?;
     let mut rows = Vec::new();
     for batch in reader {
-        let b = batch?;
+        let b = batch.with_context(|| format!("reading {}", path.display()))?;
         let ids: StringArray = column(&b, "scenario_id", path)?;
         let ws: UInt32Array = column(&b, "window_step", path)?;
         let a: Int64Array = column(&b, "a_id", path)?;

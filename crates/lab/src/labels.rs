@@ -15,7 +15,9 @@ use scbg_model::Multipath;
 use scbg_synth::GroundTruth;
 use scbg_train::Checkpoint;
 
-pub use crate::label_table::{LabelRow, read_label_table, write_label_table};
+pub use crate::label_table::{
+    LabelRow, label_table_from_bytes, read_label_table, write_label_table,
+};
 use crate::{Progress, ensure_request};
 
 mod folder;

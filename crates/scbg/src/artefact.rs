@@ -87,8 +87,14 @@ impl GeneratorCheckpoint {
         }
         let text = std::fs::read_to_string(&json)
             .with_context(|| format!("reading {}", json.display()))?;
+        Self::from_json(&text, &json)
+    }
+
+    /// A generator description from the text of a `generator.json` (`json` names it in
+    /// errors), with the same checks as [`Self::read`].
+    pub fn from_json(text: &str, json: &Path) -> anyhow::Result<Self> {
         let value: serde_json::Value =
-            serde_json::from_str(&text).with_context(|| format!("parsing {}", json.display()))?;
+            serde_json::from_str(text).with_context(|| format!("parsing {}", json.display()))?;
         let kind = value.get("kind").and_then(|k| k.as_str());
         let version = value.get("format_version").and_then(|v| v.as_u64());
         match (kind, version) {

@@ -75,6 +75,13 @@ pub struct ServeConfig {
     pub max_scenarios: usize,
     /// Sessions open at once.
     pub max_sessions: usize,
+    /// Connections open at once; one more is answered 503 and closed.
+    pub max_connections: usize,
+    /// Longest a client may take to send a request's headers (also how long an idle
+    /// keep-alive connection is kept); the connection is closed after it.
+    pub header_timeout: Duration,
+    /// After the shutdown signal, how long requests in flight may take to finish.
+    pub shutdown_grace: Duration,
 }
 
 impl Default for ServeConfig {
@@ -89,6 +96,9 @@ impl Default for ServeConfig {
             session_ttl: Duration::from_secs(600),
             max_scenarios: 256,
             max_sessions: 256,
+            max_connections: 2048,
+            header_timeout: Duration::from_secs(10),
+            shutdown_grace: Duration::from_secs(30),
         }
     }
 }
@@ -105,6 +115,7 @@ impl ServeConfig {
             self.addr
         );
         anyhow::ensure!(self.workers >= 1, "at least one worker");
+        anyhow::ensure!(self.max_connections >= 1, "at least one connection");
         Ok(())
     }
 }
@@ -246,7 +257,21 @@ async fn guard(State(state): State<Arc<AppState>>, req: Request, next: Next) -> 
         )
         .into_response()
     } else {
-        next.run(req).await
+        // The whole request, body included, within the inference's limit plus the headers'
+        // (a client trickling its body gets a 408, not a connection held for ever).
+        let limit = state.config.request_timeout + state.config.header_timeout;
+        tokio::time::timeout(limit, next.run(req))
+            .await
+            .unwrap_or_else(|_| {
+                ApiError::new(
+                    StatusCode::REQUEST_TIMEOUT,
+                    format!(
+                        "the request was not complete within {:.0} s",
+                        limit.as_secs_f64()
+                    ),
+                )
+                .into_response()
+            })
     };
     state.metrics.record(
         &route,
@@ -267,9 +292,18 @@ fn authorized(config: &ServeConfig, headers: &HeaderMap) -> bool {
         .is_some_and(|given| constant_time_eq(given.as_bytes(), token.as_bytes()))
 }
 
-/// Compares two byte strings without stopping at the first difference.
+/// Compares two byte strings in a time that depends on their lengths only: every byte is
+/// looked at, whatever differs first.
 fn constant_time_eq(a: &[u8], b: &[u8]) -> bool {
-    a.len() == b.len() && a.iter().zip(b).fold(0u8, |acc, (x, y)| acc | (x ^ y)) == 0
+    let mut diff = u8::from(a.len() != b.len());
+    for i in 0..a.len().max(b.len()) {
+        let (x, y) = (
+            a.get(i).copied().unwrap_or(0),
+            b.get(i).copied().unwrap_or(0),
+        );
+        diff |= std::hint::black_box(x ^ y);
+    }
+    diff == 0
 }
 
 /// The application: every route, the body limit, the token check, the JSON 404/405.
@@ -300,8 +334,11 @@ pub fn router(state: Arc<AppState>) -> Router {
         .with_state(state)
 }
 
-/// Serves until `shutdown` resolves, then finishes the requests in flight. Sessions idle past
-/// the TTL are closed every 10 s.
+/// Serves until `shutdown` resolves, then finishes the requests in flight (for at most
+/// [`ServeConfig::shutdown_grace`]). Sessions idle past the TTL are closed as they expire
+/// (checked every tenth of the TTL, at most every 10 s). Beyond
+/// [`ServeConfig::max_connections`] a new connection is answered 503 and closed; a client that
+/// does not send its headers within [`ServeConfig::header_timeout`] is disconnected.
 pub async fn serve(
     state: Arc<AppState>,
     listener: tokio::net::TcpListener,
@@ -309,20 +346,84 @@ pub async fn serve(
 ) -> anyhow::Result<()> {
     let reaper = {
         let state = state.clone();
+        let every = (state.config.session_ttl / 10)
+            .clamp(Duration::from_millis(100), Duration::from_secs(10));
         tokio::spawn(async move {
-            let mut tick = tokio::time::interval(Duration::from_secs(10));
+            let mut tick = tokio::time::interval(every);
             loop {
                 tick.tick().await;
                 state.expire_sessions();
             }
         })
     };
-    let app = router(state);
-    let out = axum::serve(listener, app)
-        .with_graceful_shutdown(shutdown)
-        .await;
+    let app = router(state.clone());
+    let connections = Arc::new(Semaphore::new(state.config.max_connections));
+    let graceful = hyper_util::server::graceful::GracefulShutdown::new();
+    let mut shutdown = std::pin::pin!(shutdown);
+    loop {
+        let stream = tokio::select! {
+            accepted = listener.accept() => match accepted {
+                Ok((stream, _)) => stream,
+                // Out of file descriptors and the like: the connection is lost, the server
+                // is not.
+                Err(e) => {
+                    tracing::warn!("accepting a connection: {e}");
+                    tokio::time::sleep(Duration::from_millis(20)).await;
+                    continue;
+                }
+            },
+            () = &mut shutdown => break,
+        };
+        let _ = stream.set_nodelay(true);
+        let Ok(permit) = connections.clone().try_acquire_owned() else {
+            state
+                .metrics
+                .refused_connections
+                .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            tokio::spawn(refuse(stream));
+            continue;
+        };
+        let connection = hyper::server::conn::http1::Builder::new()
+            .timer(hyper_util::rt::TokioTimer::new())
+            .header_read_timeout(state.config.header_timeout)
+            .serve_connection(
+                hyper_util::rt::TokioIo::new(stream),
+                hyper_util::service::TowerToHyperService::new(app.clone()),
+            );
+        let connection = graceful.watch(connection);
+        tokio::spawn(async move {
+            let _ = connection.await;
+            drop(permit);
+        });
+    }
+    drop(listener);
     reaper.abort();
-    Ok(out?)
+    let grace = state.config.shutdown_grace;
+    if tokio::time::timeout(grace, graceful.shutdown())
+        .await
+        .is_err()
+    {
+        tracing::warn!(
+            "requests still in flight {:.0} s after the shutdown signal were dropped",
+            grace.as_secs_f64()
+        );
+    }
+    Ok(())
+}
+
+/// Answers a connection beyond the limit with a 503 and closes it.
+async fn refuse(mut stream: tokio::net::TcpStream) {
+    use tokio::io::AsyncWriteExt;
+    let body = r#"{"error":"too many connections; retry shortly"}"#;
+    let response = format!(
+        "HTTP/1.1 503 Service Unavailable\r\ncontent-type: application/json\r\ncontent-length: {}\r\nretry-after: 1\r\nconnection: close\r\n\r\n{body}",
+        body.len()
+    );
+    let _ = tokio::time::timeout(Duration::from_secs(1), async {
+        let _ = stream.write_all(response.as_bytes()).await;
+        let _ = stream.shutdown().await;
+    })
+    .await;
 }
 
 /// `scbg serve`: loads the model, binds, serves until Ctrl-C (or SIGTERM).

@@ -1,9 +1,9 @@
 //! Prometheus text-format counters (`GET /metrics`): requests and their total time by route
-//! and status, in-flight inference jobs, scenarios and sessions held.
+//! and status, in-flight inference jobs, connections refused, scenarios and sessions held.
 
 use std::collections::BTreeMap;
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicI64, Ordering};
+use std::sync::atomic::{AtomicI64, AtomicU64, Ordering};
 
 /// The server's counters.
 #[derive(Debug, Default)]
@@ -11,6 +11,8 @@ pub struct Metrics {
     requests: Mutex<BTreeMap<(String, u16), (u64, f64)>>,
     /// Inference jobs running or waiting for a worker.
     pub in_flight: AtomicI64,
+    /// Connections answered 503 because [`crate::ServeConfig::max_connections`] were open.
+    pub refused_connections: AtomicU64,
 }
 
 impl Metrics {
@@ -39,9 +41,11 @@ impl Metrics {
         }
         out += &format!(
             "# HELP scbg_inference_in_flight Inference jobs running or queued.\n# TYPE scbg_inference_in_flight gauge\nscbg_inference_in_flight {}\n\
+             # HELP scbg_refused_connections_total Connections refused over the limit.\n# TYPE scbg_refused_connections_total counter\nscbg_refused_connections_total {}\n\
              # HELP scbg_scenarios Scenarios held.\n# TYPE scbg_scenarios gauge\nscbg_scenarios {scenarios}\n\
              # HELP scbg_sessions Open closed-loop sessions.\n# TYPE scbg_sessions gauge\nscbg_sessions {sessions}\n",
-            self.in_flight.load(Ordering::Relaxed)
+            self.in_flight.load(Ordering::Relaxed),
+            self.refused_connections.load(Ordering::Relaxed)
         );
         out
     }

@@ -135,6 +135,15 @@ pub fn weights_finite(model: &Multipath) -> bool {
     c.0
 }
 
+/// A single path component naming a file: not empty, no separator, not `.` or `..`.
+pub fn is_plain_file_name(name: &str) -> bool {
+    let mut parts = Path::new(name).components();
+    matches!(
+        (parts.next(), parts.next()),
+        (Some(std::path::Component::Normal(_)), None)
+    ) && !name.contains(['/', '\\'])
+}
+
 /// The optimizer's state as burnpack bytes with its tensors in name order. burn lists them
 /// in a hash map's order, which differs between processes: the same state would otherwise be
 /// different bytes in every run.
@@ -235,8 +244,16 @@ impl Checkpoint {
                 io(&path)(error)
             }
         })?;
+        Self::from_json(&text, &path)
+    }
+
+    /// A checkpoint description from the text of a `checkpoint.json` (`path` names it in
+    /// errors): the same checks as [`Self::read`], and the record files must be plain names
+    /// inside the folder.
+    pub fn from_json(text: &str, path: &Path) -> Result<Self, CheckpointError> {
+        let path = path.to_path_buf();
         let value: serde_json::Value =
-            serde_json::from_str(&text).map_err(|e| CheckpointError::Format {
+            serde_json::from_str(text).map_err(|e| CheckpointError::Format {
                 path: path.clone(),
                 message: e.to_string(),
             })?;
@@ -264,10 +281,21 @@ impl Checkpoint {
                 )));
             }
         }
-        serde_json::from_value(value).map_err(|e| CheckpointError::Format {
-            path,
+        let ckpt: Self = serde_json::from_value(value).map_err(|e| CheckpointError::Format {
+            path: path.clone(),
             message: e.to_string(),
-        })
+        })?;
+        for (key, name) in [
+            ("model_file", &ckpt.model_file),
+            ("optimizer_file", &ckpt.optimizer_file),
+        ] {
+            if !is_plain_file_name(name) {
+                return Err(refuse(format!(
+                    "{key} {name:?} is not a file name inside the checkpoint folder"
+                )));
+            }
+        }
+        Ok(ckpt)
     }
 
     /// The model with its weights, on `device`.

@@ -9,6 +9,7 @@ use serde_json::Value;
 mod corrupt;
 mod demo;
 mod direction;
+mod fuzz_corpus;
 mod generator;
 mod kill;
 mod pipeline;
