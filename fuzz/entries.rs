@@ -9,8 +9,11 @@
 
 use std::path::Path;
 
+/// A fuzz target's entry: takes any bytes, returns normally.
+pub type Entry = fn(&[u8]);
+
 /// The targets, by name (the folder names under `corpus/`).
-pub const TARGETS: [(&str, fn(&[u8])); 6] = [
+pub const TARGETS: [(&str, Entry); 6] = [
     ("decode_records", decode_records),
     ("serve_requests", serve_requests),
     ("configs", configs),

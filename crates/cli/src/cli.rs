@@ -57,6 +57,17 @@ pub enum Command {
     Bench(BenchCommand),
 }
 
+impl Command {
+    /// Whether the command serves HTTP for as long as it runs (`serve`, and the benchmarks that
+    /// run a server).
+    pub fn is_server(&self) -> bool {
+        matches!(
+            self,
+            Self::Serve(_) | Self::Bench(BenchCommand::Serve(_) | BenchCommand::Soak(_))
+        )
+    }
+}
+
 #[derive(Debug, Clone, Args)]
 pub struct DemoArgs {
     /// Output folder (data, cache, checkpoints, figures, report.md, report.json).

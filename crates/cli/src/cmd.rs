@@ -121,6 +121,8 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     request_timeout: std::time::Duration::from_secs(a.timeout_s),
                     workers: a.workers.unwrap_or(defaults.workers),
                     session_ttl: std::time::Duration::from_secs(a.session_ttl_s),
+                    max_connections: a.max_connections,
+                    header_timeout: std::time::Duration::from_secs(a.header_timeout_s),
                     ..defaults
                 },
             )?;
@@ -142,6 +144,31 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             } else {
                 print!("{}", report.to_text());
             }
+        }
+        Command::Bench(BenchCommand::Soak(a)) => {
+            let model = scbg::Model::load(&a.model, &scbg::LoadOptions::default())?;
+            let (bytes, truth) = scbg_lab::synth::scenario_bytes(0, 2)?;
+            let report = scbg_serve::soak::soak(
+                model,
+                bytes,
+                (truth.a_id, truth.b_id),
+                &scbg_serve::soak::SoakOptions {
+                    rate: a.rate,
+                    seconds: a.seconds,
+                    workers: a
+                        .workers
+                        .unwrap_or_else(|| scbg_serve::ServeConfig::default().workers),
+                    connections: a.connections,
+                    slow_clients: a.slow_clients,
+                    seed: a.seed,
+                },
+            )?;
+            if a.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                print!("{}", report.to_text());
+            }
+            anyhow::ensure!(report.passed(), "the soak missed a bar (listed above)");
         }
         Command::Bench(BenchCommand::Kill(a)) => {
             let options = scbg_lab::bench::KillOptions {

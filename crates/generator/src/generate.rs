@@ -35,6 +35,10 @@ impl PairContext {
     }
 }
 
+/// A change made to each chosen world-frame future before J_φ measures it
+/// ([`Scbg::generate_in_adjusted`]).
+pub type AdjustFuture<'a> = &'a dyn Fn(&mut [[f64; 2]]);
+
 /// One generated future of B.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Generated {
@@ -127,7 +131,7 @@ impl Scbg {
         &self,
         ctx: &PairContext,
         courtesy: &[Courtesy],
-        adjust: Option<&dyn Fn(&mut [[f64; 2]])>,
+        adjust: Option<AdjustFuture<'_>>,
         device: &Device,
     ) -> Result<Vec<Generated>, GenerateError> {
         let (low, high) = (ctx.low, ctx.high);
@@ -205,6 +209,17 @@ impl Scbg {
     ) -> Result<CourtesyOf, GenerateError> {
         // The same samples and E[r(Y_A) | x] as every generation for this pair.
         let ctx = self.pair_context(scene, window, a_id, b_id, device)?;
+        self.courtesy_in(&ctx, future_world, device)
+    }
+
+    /// [`Self::courtesy_of`] for a pair whose context is known ([`Self::pair_context`]): one
+    /// conditional forward of the predictor.
+    pub fn courtesy_in(
+        &self,
+        ctx: &PairContext,
+        future_world: &[[f64; 2]],
+        device: &Device,
+    ) -> Result<CourtesyOf, GenerateError> {
         let (a, e_marg) = (&ctx.example.a, ctx.example.e_marg);
         let t = a.condition_future_valid.len();
         if future_world.len() != t {

@@ -250,11 +250,18 @@ pub fn courtesy(
     b: i64,
     future_world: &[[f64; 2]],
 ) -> anyhow::Result<CourtesyOf> {
-    let prepared = prepare(scene)?;
-    let window = &prepared.windows[0];
+    courtesy_in(model, &pair_context(model, scene, a, b)?, future_world)
+}
+
+/// [`courtesy`] for a pair whose context is known ([`pair_context`]).
+pub fn courtesy_in(
+    model: &LoadedScbg,
+    context: &PairContext,
+    future_world: &[[f64; 2]],
+) -> anyhow::Result<CourtesyOf> {
     model
         .scbg
-        .courtesy_of(&prepared, window, a, b, future_world, &model.device)
+        .courtesy_in(&context.generator, future_world, &model.device)
         .map(|c| CourtesyOf {
             psi: c.psi,
             a_expected_reward_conditional: c.a_expected_reward_conditional,

@@ -115,15 +115,17 @@ impl Model {
     }
 
     /// ψ of a given world-frame future of B (80 points after the scene's current step) toward
-    /// A, with both expectations (paper eq. 2).
+    /// A, with both expectations (paper eq. 2). Shares the pair's cached context with
+    /// [`Self::generate`].
     pub fn courtesy_of(
         &self,
-        scene: &Scene,
+        scene: &Arc<Scene>,
         a: i64,
         b: i64,
         future_world: &[[f64; 2]],
     ) -> anyhow::Result<CourtesyOf> {
-        crate::generate::courtesy(&self.loaded, scene, a, b, future_world)
+        let context = self.pair_context(scene, a, b)?;
+        crate::generate::courtesy_in(&self.loaded, &context, future_world)
     }
 
     /// The pair's context, from the cache or computed and kept.

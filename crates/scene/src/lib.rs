@@ -23,6 +23,6 @@ pub use map::{
     RoadEdge, RoadEdgeType, RoadLine, RoadLineType, SpeedBump, StopSign,
 };
 pub use scene::{
-    AgentState, ObjectType, PredictionDifficulty, PredictionTarget, Scene, SceneError,
-    SignalLaneState, SignalState, Track,
+    AgentState, MAX_ABS_VALUE, ObjectType, PredictionDifficulty, PredictionTarget, Scene,
+    SceneError, SignalLaneState, SignalState, Track,
 };

@@ -231,8 +231,10 @@ pub enum SceneError {
         /// Number of steps of the scene.
         num_steps: usize,
     },
-    /// A valid state has a NaN or infinite field.
-    #[error("track {track_id} step {step}: field `{field}` is not finite in a valid state")]
+    /// A valid state has a NaN, infinite or huge field (beyond [`MAX_ABS_VALUE`]).
+    #[error(
+        "track {track_id} step {step}: field `{field}` is not finite or beyond ±1e7 in a valid state"
+    )]
     NonFiniteState {
         /// Id of the track.
         track_id: i64,
@@ -241,14 +243,22 @@ pub enum SceneError {
         /// Name of the non-finite field (e.g. `center_x`).
         field: &'static str,
     },
-    /// A map point is NaN or infinite.
+    /// A map point is NaN, infinite or huge.
     #[allow(missing_docs)]
-    #[error("map feature {feature_id}: a point is not finite")]
+    #[error("map feature {feature_id}: a point is not finite or beyond ±1e7 m")]
     NonFiniteMapPoint { feature_id: i64 },
     /// A timestamp is NaN or infinite.
     #[allow(missing_docs)]
     #[error("timestamp at step {step} is not finite")]
     NonFiniteTimestamp { step: usize },
+    /// A timestamp is not after the one before it.
+    #[allow(missing_docs)]
+    #[error("timestamps out of order: step {step} at {secs} s is not after the step before")]
+    TimestampOrder { step: usize, secs: f64 },
+    /// Two tracks share an id.
+    #[allow(missing_docs)]
+    #[error("track id {track_id} is used by more than one track")]
+    DuplicateTrackId { track_id: i64 },
     /// An SDC or prediction-target track index is out of range.
     #[error("{what} index {index} is outside the {num_tracks} tracks")]
     TrackIndexOutOfRange {
@@ -265,6 +275,17 @@ pub enum SceneError {
     SignalLength { got: usize, num_steps: usize },
 }
 
+/// The largest magnitude of any number of a valid state or map point (metres, m/s, radians):
+/// 10,000 km, far beyond any map, and small enough that every later computation in `f32`
+/// stays finite.
+pub const MAX_ABS_VALUE: f64 = 1e7;
+
+/// Finite and within [`MAX_ABS_VALUE`].
+fn plausible(v: impl Into<f64>) -> bool {
+    let v = v.into();
+    v.is_finite() && v.abs() <= MAX_ABS_VALUE
+}
+
 impl Scene {
     /// Number of time steps (`timestamps_secs.len()`).
     pub fn num_steps(&self) -> usize {
@@ -277,7 +298,8 @@ impl Scene {
     }
 
     /// Checks the invariants every consumer relies on: consistent lengths, indices in range,
-    /// finite numbers wherever `valid` is set. Readers call this before returning a scene.
+    /// timestamps in order, unique track ids, finite numbers within [`MAX_ABS_VALUE`] wherever
+    /// `valid` is set and in the map. Readers call this before returning a scene.
     pub fn validate(&self) -> Result<(), SceneError> {
         let num_steps = self.num_steps();
         if num_steps == 0 {
@@ -292,6 +314,19 @@ impl Scene {
         if let Some(step) = self.timestamps_secs.iter().position(|t| !t.is_finite()) {
             return Err(SceneError::NonFiniteTimestamp { step });
         }
+        if let Some(step) =
+            (1..num_steps).find(|&k| self.timestamps_secs[k] <= self.timestamps_secs[k - 1])
+        {
+            return Err(SceneError::TimestampOrder {
+                step,
+                secs: self.timestamps_secs[step],
+            });
+        }
+        let mut ids: Vec<i64> = self.tracks.iter().map(|t| t.id).collect();
+        ids.sort_unstable();
+        if let Some(w) = ids.windows(2).find(|w| w[0] == w[1]) {
+            return Err(SceneError::DuplicateTrackId { track_id: w[0] });
+        }
         for track in &self.tracks {
             if track.states.len() != num_steps {
                 return Err(SceneError::TrackLength {
@@ -305,15 +340,15 @@ impl Scene {
                     continue;
                 }
                 let checks: [(&'static str, bool); 9] = [
-                    ("center_x", s.x_m.is_finite()),
-                    ("center_y", s.y_m.is_finite()),
-                    ("center_z", s.z_m.is_finite()),
-                    ("length", s.length_m.is_finite()),
-                    ("width", s.width_m.is_finite()),
-                    ("height", s.height_m.is_finite()),
-                    ("heading", s.heading_rad.is_finite()),
-                    ("velocity_x", s.velocity_x_mps.is_finite()),
-                    ("velocity_y", s.velocity_y_mps.is_finite()),
+                    ("center_x", plausible(s.x_m)),
+                    ("center_y", plausible(s.y_m)),
+                    ("center_z", plausible(s.z_m)),
+                    ("length", plausible(s.length_m)),
+                    ("width", plausible(s.width_m)),
+                    ("height", plausible(s.height_m)),
+                    ("heading", plausible(s.heading_rad)),
+                    ("velocity_x", plausible(s.velocity_x_mps)),
+                    ("velocity_y", plausible(s.velocity_y_mps)),
                 ];
                 if let Some((field, _)) = checks.iter().find(|(_, ok)| !ok) {
                     return Err(SceneError::NonFiniteState {
@@ -349,7 +384,7 @@ impl Scene {
                 num_steps,
             });
         }
-        let finite = |p: &MapPoint| p.x_m.is_finite() && p.y_m.is_finite() && p.z_m.is_finite();
+        let finite = |p: &MapPoint| plausible(p.x_m) && plausible(p.y_m) && plausible(p.z_m);
         let m = &self.map;
         let bad = m
             .lanes
@@ -465,5 +500,35 @@ mod tests {
             scene.validate(),
             Err(SceneError::TrackIndexOutOfRange { .. })
         ));
+    }
+
+    #[test]
+    fn huge_values_duplicate_ids_and_time_out_of_order_are_reported() {
+        let mut scene = tiny_scene();
+        scene.tracks[0].states[1].velocity_y_mps = 1e30;
+        assert_eq!(
+            scene.validate(),
+            Err(SceneError::NonFiniteState {
+                track_id: 7,
+                step: 1,
+                field: "velocity_y"
+            })
+        );
+        let mut scene = tiny_scene();
+        scene.tracks[0].states[0].x_m = -MAX_ABS_VALUE;
+        scene.validate().unwrap();
+        scene.tracks[0].states[0].x_m = -1e300;
+        assert!(scene.validate().is_err());
+        let mut scene = tiny_scene();
+        scene.tracks.push(scene.tracks[0].clone());
+        assert_eq!(
+            scene.validate(),
+            Err(SceneError::DuplicateTrackId { track_id: 7 })
+        );
+        let mut scene = tiny_scene();
+        scene.timestamps_secs = vec![0.0, 0.2, 0.2];
+        let e = scene.validate().unwrap_err();
+        assert_eq!(e, SceneError::TimestampOrder { step: 2, secs: 0.2 });
+        assert!(e.to_string().contains("step 2"), "{e}");
     }
 }

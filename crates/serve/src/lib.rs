@@ -33,6 +33,7 @@ mod error;
 mod handlers;
 pub mod load;
 mod metrics;
+pub mod soak;
 
 use std::collections::{HashMap, VecDeque};
 use std::net::SocketAddr;
@@ -273,6 +274,18 @@ async fn guard(State(state): State<Arc<AppState>>, req: Request, next: Next) -> 
                 .into_response()
             })
     };
+    // A request whose body was not read to its end (too large, too slow) leaves the
+    // connection unusable: say so, so that no client sends another request on it.
+    let mut response = response;
+    if matches!(
+        response.status(),
+        StatusCode::PAYLOAD_TOO_LARGE | StatusCode::REQUEST_TIMEOUT
+    ) {
+        response.headers_mut().insert(
+            axum::http::header::CONNECTION,
+            axum::http::HeaderValue::from_static("close"),
+        );
+    }
     state.metrics.record(
         &route,
         response.status().as_u16(),

@@ -18,9 +18,41 @@ pub enum BenchCommand {
     Sim(BenchSimArgs),
     /// Loopback load test of `POST /v1/generate` (latency percentiles, errors, peak RSS).
     Serve(BenchServeArgs),
+    /// Loopback soak of the server: a long mixed load with ~10 % malformed requests, a burst of
+    /// connections, clients that leave or trickle, idle sessions, a graceful shutdown (exit
+    /// status 1 when a bar is missed).
+    Soak(BenchSoakArgs),
     /// Crash safety: kill -9 each stage at seeded random moments, re-run it, and compare its
     /// outputs with an undisturbed run's (exit status 1 when any kill point fails).
     Kill(BenchKillArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct BenchSoakArgs {
+    /// Generator folder (e.g. models/courtesy/generator, the release model).
+    #[arg(long)]
+    pub model: PathBuf,
+    /// Requests per second of the mix.
+    #[arg(long, default_value_t = 200.0)]
+    pub rate: f64,
+    /// Seconds of the mix.
+    #[arg(long, default_value_t = 600.0)]
+    pub seconds: f64,
+    /// Connections opened at once after the mix.
+    #[arg(long, default_value_t = 1000)]
+    pub connections: usize,
+    /// Clients trickling their headers.
+    #[arg(long, default_value_t = 100)]
+    pub slow_clients: usize,
+    /// Inference workers of the server (default: the number of cores).
+    #[arg(long)]
+    pub workers: Option<usize>,
+    /// Seeds the mix.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Print the report as JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 #[derive(Debug, Clone, Args)]

@@ -121,4 +121,11 @@ pub struct ServeArgs {
     /// Close sessions idle this long, seconds.
     #[arg(long, default_value_t = 600)]
     pub session_ttl_s: u64,
+    /// Connections open at once; one more is answered 503 and closed.
+    #[arg(long, default_value_t = 2048)]
+    pub max_connections: usize,
+    /// Seconds a client may take to send a request's headers (and an idle keep-alive
+    /// connection is kept).
+    #[arg(long, default_value_t = 10)]
+    pub header_timeout_s: u64,
 }

@@ -97,7 +97,7 @@ fn corrupt_files_give_clear_errors() {
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(2));
     assert!(
-        stderr.contains("track 9 step 0: field `center_x` is not finite")
+        stderr.contains("track 9 step 0: field `center_x` is not finite or beyond ±1e7")
             && stderr.contains("nan.tfrecord"),
         "{stderr}"
     );

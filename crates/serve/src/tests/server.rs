@@ -280,3 +280,90 @@ async fn viewer_in_a_headless_browser() {
         "A's expected speed shown at quantile 0.9 ({high}) is not above 0.1's ({low})"
     );
 }
+
+/// The connection cap answers 503, a client trickling its headers is cut, one trickling its
+/// body gets a 408, and a client stuck mid-request does not hold up the shutdown for longer
+/// than its grace.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn hostile_clients_are_bounded() {
+    use std::time::{Duration, Instant};
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let model =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/courtesy/generator");
+    let model = scbg::Model::load(&model, &scbg::LoadOptions::default()).unwrap();
+    let st = AppState::new(
+        model,
+        ServeConfig {
+            workers: 1,
+            max_connections: 1,
+            header_timeout: Duration::from_millis(300),
+            request_timeout: Duration::from_millis(200),
+            shutdown_grace: Duration::from_secs(1),
+            ..ServeConfig::default()
+        },
+    )
+    .unwrap();
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
+    let held = st.clone();
+    let server = tokio::spawn(serve(st, listener, async move {
+        let _ = stop_rx.await;
+    }));
+    // Reads whatever comes until the server closes (or 3 s pass).
+    async fn answer(stream: &mut tokio::net::TcpStream) -> (String, Duration) {
+        let started = Instant::now();
+        let mut out = Vec::new();
+        let _ = tokio::time::timeout(Duration::from_secs(3), stream.read_to_end(&mut out)).await;
+        (
+            String::from_utf8_lossy(&out).into_owned(),
+            started.elapsed(),
+        )
+    }
+    // One slow client holds the only connection.
+    let mut slow = tokio::net::TcpStream::connect(addr).await.unwrap();
+    slow.write_all(b"GET /healthz HTTP/1.1\r\nho")
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let mut over = tokio::net::TcpStream::connect(addr).await.unwrap();
+    let (text, _) = answer(&mut over).await;
+    assert!(text.starts_with("HTTP/1.1 503"), "{text}");
+    assert!(text.contains("too many connections"), "{text}");
+    // The slow client is cut once its header time is up.
+    let (text, waited) = answer(&mut slow).await;
+    assert!(
+        waited < Duration::from_secs(2),
+        "cut after {waited:?}: {text:?}"
+    );
+    assert_eq!(
+        held.metrics
+            .refused_connections
+            .load(std::sync::atomic::Ordering::Relaxed),
+        1
+    );
+    // Its connection is free again; a body that never completes gets a 408.
+    let mut trickle = tokio::net::TcpStream::connect(addr).await.unwrap();
+    trickle
+        .write_all(b"POST /v1/generate HTTP/1.1\r\nhost: x\r\ncontent-type: application/json\r\ncontent-length: 100\r\n\r\n{\"scen")
+        .await
+        .unwrap();
+    let (text, waited) = answer(&mut trickle).await;
+    assert!(text.starts_with("HTTP/1.1 408"), "{text}");
+    assert!(waited < Duration::from_secs(2), "{waited:?}");
+    // A client stuck mid-body at shutdown: the server still returns, within its grace.
+    let mut stuck = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stuck
+        .write_all(b"POST /v1/generate HTTP/1.1\r\nhost: x\r\ncontent-length: 100\r\n\r\n{")
+        .await
+        .unwrap();
+    tokio::time::sleep(Duration::from_millis(50)).await;
+    let stopping = Instant::now();
+    stop_tx.send(()).unwrap();
+    server.await.unwrap().unwrap();
+    assert!(
+        stopping.elapsed() < Duration::from_secs(2),
+        "{:?}",
+        stopping.elapsed()
+    );
+}

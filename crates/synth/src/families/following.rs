@@ -54,10 +54,13 @@ pub struct FollowingParams {
     b_base: f64,
     taps: Vec<BrakeTap>,
     pair: PairSetup,
-    /// Other vehicles: lane (from the right), s0, v0, size, IDM.
-    others: Vec<(usize, f64, f64, (f64, f64), Idm)>,
+    /// Other vehicles.
+    others: Vec<OtherCar>,
     noise: Vec<Vec<f64>>,
 }
+
+/// Another vehicle: lane (from the right), s0, v0, size, IDM.
+type OtherCar = (usize, f64, f64, (f64, f64), Idm);
 
 /// Draws the parameters of a following scene.
 pub fn following_params(rng: &mut Pcg64Mcg) -> FollowingParams {
