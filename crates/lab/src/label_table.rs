@@ -127,12 +127,32 @@ pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
 /// [`read_label_table`] of a file's bytes; `path` names it in errors.
 pub fn label_table_from_bytes(bytes: Vec<u8>, path: &Path) -> anyhow::Result<Vec<LabelRow>> {
     let named = |e: parquet::errors::ParquetError| anyhow::anyhow!("{}: {e}", path.display());
-    let reader = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(
+    let size = bytes.len() as u64;
+    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(
         bytes::Bytes::from(bytes),
     )
-    .map_err(named)?
-    .build()
     .map_err(named)?;
+    // The reader asserts (panics) on a column chunk with a negative offset or size: check
+    // every chunk lies inside the file first.
+    for (g, group) in builder.metadata().row_groups().iter().enumerate() {
+        for (c, chunk) in group.columns().iter().enumerate() {
+            let start = chunk
+                .dictionary_page_offset()
+                .unwrap_or_else(|| chunk.data_page_offset());
+            let len = chunk.compressed_size();
+            let inside = u64::try_from(start)
+                .ok()
+                .zip(u64::try_from(len).ok())
+                .and_then(|(s, l)| s.checked_add(l))
+                .is_some_and(|end| end <= size);
+            anyhow::ensure!(
+                inside,
+                "{}: row group {g}, column {c}: byte range {start} + {len} is outside the {size}-byte file",
+                path.display()
+            );
+        }
+    }
+    let reader = builder.build().map_err(named)?;
     let mut rows = Vec::new();
     for batch in reader {
         let b = batch.with_context(|| format!("reading {}", path.display()))?;
