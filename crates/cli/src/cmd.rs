@@ -139,11 +139,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 a.workers
                     .unwrap_or_else(|| scbg_serve::ServeConfig::default().workers),
             )?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                print!("{}", report.to_text());
-            }
+            print_report(a.json, &report, report.to_text())?;
         }
         Command::Bench(BenchCommand::Soak(a)) => {
             let model = scbg::Model::load(&a.model, &scbg::LoadOptions::default())?;
@@ -163,11 +159,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     seed: a.seed,
                 },
             )?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                print!("{}", report.to_text());
-            }
+            print_report(a.json, &report, report.to_text())?;
             anyhow::ensure!(report.passed(), "the soak missed a bar (listed above)");
         }
         Command::Bench(BenchCommand::Kill(a)) => {
@@ -184,11 +176,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
             };
             let exe = std::env::current_exe().context("the path of this scbg executable")?;
             let report = scbg_lab::bench::kill_sweep(&exe, &options)?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                print!("{}", report.to_text());
-            }
+            print_report(a.json, &report, report.to_text())?;
             anyhow::ensure!(
                 report.all_passed(),
                 "some kill points failed (listed above)"
@@ -262,11 +250,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                 truth.as_deref(),
                 progress,
             )?;
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&result)?);
-            } else {
-                print!("{}", result.to_markdown());
-            }
+            print_report(a.json, &result, result.to_markdown())?;
         }
         Command::Eval(EvalCommand::Predictor(a)) => {
             let eval = predictor::evaluate_predictor(
@@ -295,11 +279,7 @@ pub fn run(command: Command) -> anyhow::Result<()> {
                     .with_context(|| format!("creating {}", dir.display()))?;
                 scbg::write_json(dir.join("wosac.json"), &score)?;
             }
-            if a.json {
-                println!("{}", serde_json::to_string_pretty(&score)?);
-            } else {
-                print!("{}", score.to_text());
-            }
+            print_report(a.json, &score, score.to_text())?;
             anyhow::ensure!(
                 score.scored() > 0,
                 "no scenario scored ({})",
@@ -596,6 +576,16 @@ fn generate(args: &GenerateArgs, progress: &dyn Progress) -> anyhow::Result<()> 
     if let Some(png) = &args.render {
         scbg::generate::render_generation(&scene, &generation, png)?;
         progress.note(&format!("rendered {}", png.display()));
+    }
+    Ok(())
+}
+
+/// Prints `report` as pretty JSON, or `text`.
+fn print_report(json: bool, report: &impl serde::Serialize, text: String) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(report)?);
+    } else {
+        print!("{text}");
     }
     Ok(())
 }
