@@ -176,7 +176,11 @@ fn locked_temp_in(dir: &Path) -> io::Result<tempfile::NamedTempFile> {
     builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
     for _ in 0..8 {
         let temp = builder.tempfile_in(dir)?;
-        temp.as_file().lock()?;
+        if temp.as_file().lock().is_err() {
+            // A file system without advisory locks: write unlocked. No sweep can take the
+            // file then (its `try_lock` fails too), so a killed writer's file stays.
+            return Ok(temp);
+        }
         if still_at_path(&temp)? {
             return Ok(temp);
         }
@@ -233,8 +237,9 @@ fn sweep_once(dir: &Path) {
 }
 
 /// Removes the temporary files in `dir` that no live writer holds (those a killed process
-/// left) and returns how many it removed. Files another process is writing stay. A file that
-/// vanishes meanwhile (its writer committed it) is not an error.
+/// left) and returns how many it removed. Files another process is writing stay, and so does
+/// every file where the file system has no advisory locks. A file that vanishes meanwhile (its
+/// writer committed it) is not an error.
 pub fn sweep_stale(dir: &Path) -> io::Result<usize> {
     let mut removed = 0;
     for entry in std::fs::read_dir(dir)? {
@@ -255,8 +260,8 @@ pub fn sweep_stale(dir: &Path) -> io::Result<usize> {
                 Err(e) if e.kind() == io::ErrorKind::NotFound => {}
                 Err(e) => return Err(e),
             },
-            Err(std::fs::TryLockError::WouldBlock) => {}
-            Err(std::fs::TryLockError::Error(e)) => return Err(e),
+            // Held by a live writer, or no advisory locks on this file system: leave it.
+            Err(std::fs::TryLockError::WouldBlock | std::fs::TryLockError::Error(_)) => {}
         }
     }
     Ok(removed)
