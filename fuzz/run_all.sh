@@ -12,11 +12,16 @@ seconds="${1:-600}"
 export RUSTC_BOOTSTRAP=1
 targets=(decode_records serve_requests configs artefacts label_table scene_arrays)
 cargo fuzz build --release
+# Seeds the project generates (never tracked): a few synthetic scenarios in WOMD format.
+cargo run --release -q --manifest-path ../Cargo.toml -p scbg-cli -- \
+  synth --scenarios 4 --scenarios-per-file 1 --out seeds/decode_records >/dev/null
 log_dir="$(mktemp -d)"
 run() {
   local target="$1"
   mkdir -p "corpus/$target" "work/$target"
-  cargo fuzz run --release "$target" "work/$target" "corpus/$target" -- \
+  local seeds=()
+  [[ -d "seeds/$target" ]] && seeds=("seeds/$target")
+  cargo fuzz run --release "$target" "work/$target" "corpus/$target" "${seeds[@]}" -- \
     -max_total_time="$seconds" -timeout=1 -rss_limit_mb=4096 -print_final_stats=1 \
     >"$log_dir/$target.log" 2>&1 || echo "$target: STOPPED, input in artifacts/$target/" >>"$log_dir/failed"
 }

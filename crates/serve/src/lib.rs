@@ -439,14 +439,20 @@ async fn refuse(mut stream: tokio::net::TcpStream) {
     .await;
 }
 
+/// A multi-threaded runtime whose threads carry the caller's floating-point mode (for the
+/// server and the benches that run one).
+pub(crate) fn runtime() -> std::io::Result<tokio::runtime::Runtime> {
+    let mode = scbg::fp::Mode::current();
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .on_thread_start(move || mode.apply())
+        .build()
+}
+
 /// `scbg serve`: loads the model, binds, serves until Ctrl-C (or SIGTERM).
 pub fn run(model: Model, config: ServeConfig) -> anyhow::Result<()> {
     config.check()?;
-    let mode = scbg::fp::Mode::current();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .on_thread_start(move || mode.apply())
-        .build()?;
+    let runtime = runtime()?;
     runtime.block_on(async move {
         let listener = tokio::net::TcpListener::bind(config.addr)
             .await

@@ -88,11 +88,7 @@ pub fn load_test(
         rate > 0.0 && seconds > 0.0,
         "rate and seconds must be positive"
     );
-    let mode = scbg::fp::Mode::current();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .on_thread_start(move || mode.apply())
-        .build()?;
+    let runtime = crate::runtime()?;
     runtime.block_on(async move {
         let config = ServeConfig {
             addr: std::net::SocketAddr::from(([127, 0, 0, 1], 0)),

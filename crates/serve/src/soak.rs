@@ -185,11 +185,7 @@ pub fn soak(
         options.rate > 0.0 && options.seconds > 0.0,
         "rate and seconds must be positive"
     );
-    let mode = scbg::fp::Mode::current();
-    let runtime = tokio::runtime::Builder::new_multi_thread()
-        .enable_all()
-        .on_thread_start(move || mode.apply())
-        .build()?;
+    let runtime = crate::runtime()?;
     let options = options.clone();
     runtime.block_on(async move {
         let config = ServeConfig {
