@@ -126,7 +126,10 @@ impl<'a> Iterator for RecordIter<'a> {
             return fail(self, RecordError::LengthCrc { stored, computed });
         }
         let after_header = available - HEADER_BYTES as u64;
-        if length > after_header.saturating_sub(FOOTER_BYTES as u64) {
+        let fits = after_header
+            .checked_sub(FOOTER_BYTES as u64)
+            .is_some_and(|room| length <= room);
+        if !fits {
             return fail(
                 self,
                 RecordError::TruncatedData {
@@ -282,5 +285,24 @@ mod tests {
             assert!(got[0].is_err(), "cut at {cut}");
         }
         assert_eq!(RecordIter::new(&[]).count(), 0);
+    }
+
+    #[test]
+    fn an_empty_record_cut_inside_its_footer_is_truncated() {
+        // Found by fuzzing: a zero length left room for no footer at all.
+        let bytes = framed(&[b""]);
+        for cut in HEADER_BYTES..bytes.len() {
+            let got: Vec<_> = RecordIter::new(&bytes[..cut]).collect();
+            assert!(
+                matches!(
+                    got[..],
+                    [Err(RecordAt {
+                        kind: RecordError::TruncatedData { length: 0, .. },
+                        ..
+                    })]
+                ),
+                "cut at {cut}: {got:?}"
+            );
+        }
     }
 }
