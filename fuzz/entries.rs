@@ -93,6 +93,22 @@ pub fn artefacts(data: &[u8]) {
     let _ = scbg::model::GeneratorCheckpoint::from_json(text, Path::new("generator.json"));
 }
 
+/// Lets panics raised inside the crates named (by a piece of their source path, such as
+/// `"/parquet-"`) unwind, and aborts on every other. libFuzzer's own hook aborts on any panic,
+/// even one the code under test catches, so a target whose entry catches a dependency's
+/// panics by design installs this once to keep fuzzing past them.
+pub fn unwind_panics_inside(crates: &'static [&'static str]) {
+    let abort = std::panic::take_hook();
+    std::panic::set_hook(Box::new(move |info| {
+        let inside = info
+            .location()
+            .is_some_and(|at| crates.iter().any(|c| at.file().contains(c)));
+        if !inside {
+            abort(info);
+        }
+    }));
+}
+
 /// A label table (Parquet) as `scbg label` reads its finished shards back.
 pub fn label_table(data: &[u8]) {
     let _ = scbg_lab::labels::label_table_from_bytes(data.to_vec(), Path::new("labels.parquet"));

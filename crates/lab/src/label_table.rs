@@ -1,6 +1,8 @@
 //! The label table: one row per labelled future of B ([`LabelRow`]), stored as Parquet (one
 //! file per cache shard), written atomically and read back by column name.
 
+mod bounds;
+
 use std::path::Path;
 use std::sync::Arc;
 
@@ -128,7 +130,9 @@ pub fn read_label_table(path: &Path) -> anyhow::Result<Vec<LabelRow>> {
 ///
 /// The Parquet and Arrow readers assert on some malformed files (fuzzing found two: a negative
 /// column-chunk offset, which is checked first, and bit-buffer bounds deep in the decoding). A
-/// panic there means a bad file, so it is turned into an error naming the file.
+/// panic there means a bad file, so it is turned into an error naming the file. Footers and
+/// page headers that would hold the readers for seconds or gigabytes are refused before they
+/// read them (`bounds`), as are tables claiming more rows than bytes.
 pub fn label_table_from_bytes(bytes: Vec<u8>, path: &Path) -> anyhow::Result<Vec<LabelRow>> {
     std::panic::catch_unwind(|| decode_label_table(bytes, path)).unwrap_or_else(|panic| {
         let why = panic
@@ -143,12 +147,26 @@ pub fn label_table_from_bytes(bytes: Vec<u8>, path: &Path) -> anyhow::Result<Vec
 fn decode_label_table(bytes: Vec<u8>, path: &Path) -> anyhow::Result<Vec<LabelRow>> {
     let named = |e: parquet::errors::ParquetError| anyhow::anyhow!("{}: {e}", path.display());
     let size = bytes.len() as u64;
-    let builder = parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(
-        bytes::Bytes::from(bytes),
-    )
-    .map_err(named)?;
+    bounds::check_footer(&bytes).map_err(|why| anyhow::anyhow!("{}: {why}", path.display()))?;
+    let bytes = bytes::Bytes::from(bytes);
+    let builder =
+        parquet::arrow::arrow_reader::ParquetRecordBatchReaderBuilder::try_new(bytes.clone())
+            .map_err(named)?;
+    // Run-length encoding lets a few bytes claim millions of rows; a label table's three
+    // float columns alone take 12 bytes a row, so more rows than bytes is a malformed file.
+    let rows_claimed: i64 = builder
+        .metadata()
+        .row_groups()
+        .iter()
+        .map(|g| g.num_rows().max(0))
+        .fold(0, i64::saturating_add);
+    anyhow::ensure!(
+        u64::try_from(rows_claimed).is_ok_and(|n| n <= size),
+        "{}: claims {rows_claimed} rows in a {size}-byte file",
+        path.display()
+    );
     // The reader asserts (panics) on a column chunk with a negative offset or size: check
-    // every chunk lies inside the file first.
+    // every chunk lies inside the file first, and that its pages claim sizes Snappy can reach.
     for (g, group) in builder.metadata().row_groups().iter().enumerate() {
         for (c, chunk) in group.columns().iter().enumerate() {
             let start = chunk
@@ -165,6 +183,10 @@ fn decode_label_table(bytes: Vec<u8>, path: &Path) -> anyhow::Result<Vec<LabelRo
                 "{}: row group {g}, column {c}: byte range {start} + {len} is outside the {size}-byte file",
                 path.display()
             );
+            let chunk = &bytes[start as usize..(start + len) as usize];
+            bounds::check_pages(chunk).map_err(|why| {
+                anyhow::anyhow!("{}: row group {g}, column {c}: {why}", path.display())
+            })?;
         }
     }
     let reader = builder.build().map_err(named)?;
