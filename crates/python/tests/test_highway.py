@@ -120,6 +120,43 @@ def test_the_summary_is_paired_within_episodes():
     assert s["b_collision_rate"] == 0.0 and s["yardstick_b_collision_rate"] == 0.5
     assert s["b_plan_on_road_share"] == 0.5 and s["b_on_road_share"] == 1.0
     assert "| s | 2 |" in measure.table({"s": s}, {})
+    assert math.isnan(s["yardstick_spearman_responsive"])  # two settings: no ranking
+
+
+def test_the_yardsticks_own_spearman_ranks_its_settings_within_episodes():
+    # Five settings: A rises with them in one episode, falls in another, and does not
+    # respond in a third, which is left out.
+    seeds = []
+    for slope in (1.0, -1.0, 0.0):
+        arms = {f"q{q:.1f}": _record(10.0) for q in measure.QUANTILES}
+        for i, level in enumerate(measure.YARDSTICK_LEVELS):
+            name = measure.arm_name({"kind": "yardstick", "level": level})
+            arms[name] = _record(10.0 + slope * i)
+        arms["default"] = _record(10.0)
+        seeds.append({"scenario": "s", "seed": len(seeds), "arms": arms})
+    s = measure.summarise(seeds)
+    assert sorted(s["a_speed_mps"], key=str)[-1] == "yardstick_low"
+    assert s["yardstick_spearman_responsive"] == pytest.approx(0.0)
+    assert s["yardstick_responsive_share"] == pytest.approx(2 / 3)
+    assert s["yardstick_effect_mps"] == pytest.approx(0.0)
+    assert s["responsive_share"] == 0.0 and math.isnan(s["spearman_responsive"])
+
+
+def test_a_yardstick_setting_between_its_ends():
+    from scbg.sims import check_arm, yardstick_value
+
+    highway = _highway()
+    braking = highway.YARDSTICKS["merge-v0"]
+    assert yardstick_value(braking, "low") == 8.0 and yardstick_value(braking, 1.0) == 0.5
+    assert yardstick_value(braking, 0.5) == pytest.approx(4.25)
+    with pytest.raises(ValueError, match="two settings only"):
+        yardstick_value(highway.YARDSTICKS["intersection-v0"], 0.5)
+    check_arm({"kind": "yardstick", "level": 0.25})
+    for bad in (1.5, -0.1, True, float("nan")):
+        with pytest.raises(ValueError, match="level must be"):
+            check_arm({"kind": "yardstick", "level": bad})
+    assert [a.get("level") for a in measure.arms("intersection-v0")][5:] == ["low", "high", None]
+    assert len(measure.arms("merge-v0")) == 11
 
 
 def test_the_release_models_knob_moves_a_behind_b_on_the_highway(release):

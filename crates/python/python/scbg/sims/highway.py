@@ -32,7 +32,7 @@ import numpy as np
 
 import scbg
 
-from . import check_arm
+from . import check_arm, yardstick_value
 
 STEP_SECS = 0.1
 HISTORY_STEPS = 11  # 1.1 s, the current step included
@@ -353,7 +353,7 @@ def _pair(ep):
 
 def _apply_yardstick(ep, level):
     ys = YARDSTICKS[ep.scenario]
-    value = ys[level]
+    value = yardstick_value(ys, level)
     b, a = ep.b, ep.a
     if ys["parameter"] == "yields":
         road = ep.road

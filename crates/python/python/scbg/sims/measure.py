@@ -2,16 +2,18 @@
 
 For every scenario and seed, the same episode (same start, same takeover step, same A and B) is
 run once per arm: B driven by scbg at courtesy quantiles 0.1 … 0.9, and B driven by the
-simulator's own model at a low and a high setting of its own courtesy parameter (the
-yardstick) and at its default. The knob is judged *within* each episode (only the quantile
-changes), against what the simulator's own idea of courtesy does to A in the same episodes.
+simulator's own model at five settings of its own courtesy parameter from low to high (the
+yardstick; its two ends where the settings are not numbers) and at its default. The knob is
+judged *within* each episode (only the quantile changes), against what the simulator's own
+idea of courtesy does to A in the same episodes: its effect, and its own within-episode
+Spearman, the ceiling of what a monotone courtesy setting reaches there.
 
     python -m scbg.sims.measure MODEL [--scenarios merge-v0 sumo-onramp ...] [--episodes 30]
                                       [--jobs N] [--out DIR]
 
 writes ``DIR/results.json`` (every episode of every arm), ``DIR/table.md`` and
 ``DIR/figure.png`` (A's paired mean speed against the quantile, one panel per scenario, the
-yardstick's low and high beside it; needs matplotlib), and prints the table.
+yardstick's settings from low to high beside it; needs matplotlib), and prints the table.
 """
 
 from __future__ import annotations
@@ -27,6 +29,9 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 QUANTILES = (0.1, 0.3, 0.5, 0.7, 0.9)
+# The yardstick's settings, as fractions of the way from its low to its high setting. A
+# yardstick whose settings are not numbers (yields never / always) has the two ends alone.
+YARDSTICK_LEVELS = ("low", 0.25, 0.5, 0.75, "high")
 RESPONSE_MPS = 0.05  # A "responds" when its speeds differ by more than this across the arms
 
 
@@ -46,19 +51,25 @@ def all_scenarios():
     return list(highway.SCENARIOS) + list(sumo.SCENARIOS)
 
 
-def arms():
-    """Every arm of one episode, in order."""
+def yardstick_levels(scenario):
+    """The yardstick's settings measured in ``scenario``: five where its settings are numbers."""
+    ys = yardsticks_of([scenario])[scenario]
+    return YARDSTICK_LEVELS if isinstance(ys["low"], (int, float)) else ("low", "high")
+
+
+def arms(scenario):
+    """Every arm of one episode of ``scenario``, in order."""
     out = [{"kind": "scbg", "quantile": q} for q in QUANTILES]
-    out += [{"kind": "yardstick", "level": "low"}, {"kind": "yardstick", "level": "high"},
-            {"kind": "default"}]
-    return out
+    out += [{"kind": "yardstick", "level": level} for level in yardstick_levels(scenario)]
+    return out + [{"kind": "default"}]
 
 
 def arm_name(arm):
     if arm["kind"] == "scbg":
         return f"q{arm['quantile']:.1f}"
     if arm["kind"] == "yardstick":
-        return f"yardstick_{arm['level']}"
+        level = arm["level"]
+        return f"yardstick_{level}" if isinstance(level, str) else f"yardstick_{level:.2f}"
     return "default"
 
 
@@ -81,7 +92,7 @@ def run_seed(scenario, seed):
     mod = _module(scenario)
     out = {"scenario": scenario, "seed": seed, "arms": {}}
     try:
-        for arm in arms():
+        for arm in arms(scenario):
             out["arms"][arm_name(arm)] = mod.episode(_MODEL, scenario, seed, arm)
     except RuntimeError as e:  # the seed never brought A and B together: a counted skip
         out = {"scenario": scenario, "seed": seed, "skipped": str(e)}
@@ -137,11 +148,18 @@ def summarise(seeds):
     """One scenario's numbers from its seeds' records (pure: the table and the tests use it)."""
     done = [s for s in seeds if "arms" in s]
     qs = [arm_name({"kind": "scbg", "quantile": q}) for q in QUANTILES]
+    # The yardstick's arms, from its low to its high setting.
+    ys_names = sorted({n for s in done for n in s["arms"] if n.startswith("yardstick_")}, key=_level_order)
     speed = {name: np.array([s["arms"][name]["a_speed_mps"] for s in done])
-             for name in qs + ["yardstick_low", "yardstick_high", "default"]}
+             for name in qs + ys_names + ["default"]}
     per_episode = np.array([[s["arms"][n]["a_speed_mps"] for n in qs] for s in done]).reshape(len(done), len(qs))
     responsive = (per_episode.max(axis=1) - per_episode.min(axis=1) > RESPONSE_MPS) if len(done) else np.zeros(0, bool)
     rhos = [spearman(QUANTILES, row) for row, r in zip(per_episode, responsive) if r]
+    # The same for the yardstick where it has more than two settings (its own ceiling).
+    ys_rows = np.array([[s["arms"][n]["a_speed_mps"] for n in ys_names] for s in done]).reshape(len(done), len(ys_names))
+    ys_responsive = (ys_rows.max(axis=1) - ys_rows.min(axis=1) > RESPONSE_MPS) if len(done) else np.zeros(0, bool)
+    ys_rhos = ([spearman(range(len(ys_names)), row) for row, r in zip(ys_rows, ys_responsive) if r]
+               if len(ys_names) > 2 else [])
     ys_delta = speed["yardstick_high"] - speed["yardstick_low"]
     effect, effect_ci = _mean_ci(speed[qs[-1]] - speed[qs[0]])
     ys_effect, ys_ci = _mean_ci(ys_delta)
@@ -165,14 +183,25 @@ def summarise(seeds):
         "yardstick_effect_mps": ys_effect,
         "yardstick_effect_ci95_mps": ys_ci,
         "responsive_share": float(responsive.mean()) if len(done) else float("nan"),
-        "yardstick_responsive_share": float(np.mean(np.abs(ys_delta) > RESPONSE_MPS)) if len(done) else float("nan"),
-        "spearman_responsive": float(np.nanmean(rhos)) if rhos and not all(map(math.isnan, rhos)) else float("nan"),
+        "yardstick_responsive_share": float(ys_responsive.mean()) if len(done) else float("nan"),
+        "spearman_responsive": _nanmean(rhos),
+        "yardstick_spearman_responsive": _nanmean(ys_rhos),
         "b_collision_rate": rate(qs, "b_collided"),
-        "yardstick_b_collision_rate": rate(["yardstick_low", "yardstick_high"], "b_collided"),
+        "yardstick_b_collision_rate": rate(ys_names, "b_collided"),
         "b_plan_on_road_share": plan_on / plan_pts if plan_pts else float("nan"),
         "b_on_road_share": steps_on / steps if steps else float("nan"),
         "b_reached_goal_share": float(np.mean(reached)) if reached else None,
     }
+
+
+def _level_order(name):
+    """Sorts yardstick arm names (``yardstick_low``, ``yardstick_0.25``, …) from low to high."""
+    level = name.removeprefix("yardstick_")
+    return {"low": 0.0, "high": 1.0}[level] if level in ("low", "high") else float(level)
+
+
+def _nanmean(v):
+    return float(np.nanmean(v)) if v and not all(map(math.isnan, v)) else float("nan")
 
 
 def _f(x, fmt="{:.2f}"):
@@ -182,7 +211,8 @@ def _f(x, fmt="{:.2f}"):
 def table(summaries, yardsticks):
     head = ("| scenario | episodes | A at q 0.1 / 0.5 / 0.9 (m/s) | effect q0.9−q0.1 (m/s) | "
             "yardstick | yardstick effect high−low (m/s) | responsive (scbg / yardstick) | "
-            "Spearman (responsive) | B collisions (scbg / yardstick) | B plan on road | B on road |")
+            "Spearman, responsive (scbg / yardstick) | B collisions (scbg / yardstick) | "
+            "B plan on road | B on road |")
     rows = [head, "|" + "---|" * 11]
     for name, s in summaries.items():
         a = s["a_speed_mps"]
@@ -193,7 +223,7 @@ def table(summaries, yardsticks):
             f"{ys.get('parameter', '?')} {ys.get('low', '')} → {ys.get('high', '')} | "
             f"{_f(s['yardstick_effect_mps'], '{:+.2f}')} ± {_f(s['yardstick_effect_ci95_mps'])} | "
             f"{_f(s['responsive_share'], '{:.0%}')} / {_f(s['yardstick_responsive_share'], '{:.0%}')} | "
-            f"{_f(s['spearman_responsive'])} | "
+            f"{_f(s['spearman_responsive'])} / {_f(s.get('yardstick_spearman_responsive'))} | "
             f"{_f(s['b_collision_rate'], '{:.1%}')} / {_f(s['yardstick_b_collision_rate'], '{:.1%}')} | "
             f"{_f(s['b_plan_on_road_share'], '{:.1%}')} | {_f(s['b_on_road_share'], '{:.1%}')} |")
     return "\n".join(rows)
@@ -215,8 +245,9 @@ def figure(summaries, path):
         a = s["a_speed_mps"]
         ax.plot(QUANTILES, [a[arm_name({"kind": "scbg", "quantile": q})] for q in QUANTILES],
                 "o-", label="scbg B at quantile q")
-        ax.axhline(a["yardstick_low"], color="tab:red", ls="--", label="own model, low courtesy")
-        ax.axhline(a["yardstick_high"], color="tab:green", ls="--", label="own model, high courtesy")
+        own = sorted((n for n in a if n.startswith("yardstick_")), key=_level_order)
+        ax.plot(np.linspace(QUANTILES[0], QUANTILES[-1], len(own)), [a[n] for n in own], "s--",
+                color="tab:green", label="own model, low → high courtesy")
         ax.set_title(f"{name} ({s['episodes']} ep.)", fontsize=9)
         ax.set_xlabel("B's courtesy quantile", fontsize=8)
         ax.set_ylabel("A's mean speed, 8 s (m/s)", fontsize=8)
@@ -271,7 +302,7 @@ def main(argv=None):
     except ImportError:
         print("matplotlib is not installed: no figure", file=sys.stderr)
     print(text)
-    print(f"{len(tasks)} seeds × {len(arms())} arms in {seconds:.0f} s; {args.out}/results.json")
+    print(f"{len(tasks)} seeds in {seconds:.0f} s; {args.out}/results.json")
 
 
 if __name__ == "__main__":

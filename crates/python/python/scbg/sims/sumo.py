@@ -54,7 +54,7 @@ from collections import deque
 
 import numpy as np
 
-from . import check_arm
+from . import check_arm, yardstick_value
 
 SCENARIOS = {
     "sumo-onramp": "SUMO on-ramp: one-lane main road, acceleration lane; A merges from the "
@@ -471,14 +471,14 @@ def _b_distance_to_conflict(traci, scenario):
 
 def _set_yardstick(traci, scenario, level):
     """Sets ``YARDSTICKS[scenario]``'s ``level`` on SUMO's B."""
-    value = YARDSTICKS[scenario][level]
+    value = yardstick_value(YARDSTICKS[scenario], level)
     if scenario == "sumo-onramp":
         for key in ("lcCooperative", "lcCooperativeSpeed"):
             traci.vehicle.setParameter("B", f"laneChangeModel.{key}", str(value))
     else:
         # SUMO takes junction-model parameters from the vehicle's type only: 4way.rou.xml's
-        # two types differ from "car" in jmIgnoreFoeProb (and jmIgnoreFoeSpeed) alone.
-        traci.vehicle.setType("B", {1.0: "car_never_yields", 0.0: "car_yields"}[value])
+        # yardstick types differ from "car" in jmIgnoreFoeProb (and jmIgnoreFoeSpeed) alone.
+        traci.vehicle.setType("B", f"car_ignores_foes_{value:.2f}")
 
 
 def _follow(traci, plan, j, start_xy, b_state):
