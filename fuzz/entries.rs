@@ -1,6 +1,7 @@
 //! What each fuzz target feeds its input to. The fuzz targets (`fuzz_targets/`) call these,
-//! and `cargo test` replays the committed corpus (`corpus/<target>/`) through the same
-//! functions, so every input that ever crashed a decoder is checked on every build.
+//! and `cargo test` replays the committed corpus (`corpus/<target>/`) and every input that
+//! ever crashed or hung a target (`regressions/<target>/`) through the same functions, so each
+//! is checked on every build.
 //!
 //! Every entry must return normally for any input: an error is a fine answer, a panic, an
 //! abort or a hang is a bug.

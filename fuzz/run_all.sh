@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Fuzzes every target in turn, then minimises each corpus into fuzz/corpus/<target> (which
 # `cargo test` replays). An input that crashes, leaks, runs out of memory (4 GiB) or hangs for
-# over a second stops its worker and is saved under fuzz/artifacts/<target>/. Prints each
+# over a second is saved under fuzz/artifacts/<target>/; once fixed, it goes to
+# fuzz/regressions/<target>/ (named by its SHA-1), which `cargo test` replays too. Prints each
 # target's runs, time, coverage and corpus size.
 #
 #   cargo install cargo-fuzz
@@ -32,7 +33,8 @@ if [[ -z "$bin" ]]; then
   cargo fuzz build --release --sanitizer "$sanitizer" --target-dir "target-$sanitizer"
   bin="$PWD/target-$sanitizer/x86_64-unknown-linux-gnu/release"
   # Seeds the project generates (never tracked): a few synthetic scenarios in WOMD format.
-  cargo run --release -q --manifest-path ../Cargo.toml -p scbg-cli -- \
+  # (without RUSTC_BOOTSTRAP, which would make cargo rebuild the workspace from scratch)
+  env -u RUSTC_BOOTSTRAP cargo run --release -q --manifest-path ../Cargo.toml -p scbg-cli -- \
     synth --scenarios 4 --scenarios-per-file 1 --out seeds/decode_records >/dev/null
 fi
 limits=(-timeout=1 -rss_limit_mb=4096)
@@ -70,6 +72,8 @@ for target in "${targets[@]}"; do
   "$bin/$target" "min/$target" "corpus/$target" "work/$target" -merge=1 -rss_limit_mb=4096 \
     >"$log_dir/$target.merge" 2>&1
   rm -rf "corpus/$target" && mv "min/$target" "corpus/$target"
+  # Mutations of the generated seeds (whole scenarios, ~50 KB each) stay out of the repository.
+  [[ "$target" == decode_records ]] && find "corpus/$target" -type f -size +16k -delete
   log="$log_dir/$target.log"
   if [[ -n "$runs" ]]; then
     # Fork mode's last status line: "#RUNS: cov: … oom/timeout/crash: O/T/C …".
