@@ -123,7 +123,7 @@ def test_bad_requests_raise_value_error(trained):
     for q in (1.5, -0.1, float("nan"), "0.5", None):
         with pytest.raises(ValueError, match=r"quantile must be a number in \[0, 1\]"):
             sumo.episode(model, "sumo-4way", 0, {"kind": "scbg", "quantile": q})
-    with pytest.raises(ValueError, match="level must be 'low' or 'high'"):
+    with pytest.raises(ValueError, match="level must be 'low', 'high' or a number"):
         sumo.episode(model, "sumo-onramp", 0, {"kind": "yardstick", "level": "medium"})
     with pytest.raises(ValueError, match="kind 'scbg', 'yardstick' or 'default'"):
         sumo.episode(model, "sumo-onramp", 0, {"kind": "idm"})
