@@ -43,11 +43,7 @@ pub(super) fn check_footer(file: &[u8]) -> Result<(), String> {
     let Some(start) = (file.len() - 8).checked_sub(length) else {
         return Ok(());
     };
-    let mut walker = Walker {
-        bytes: &file[start..file.len() - 8],
-        at: 0,
-    };
-    walker
+    Walker::new(&file[start..file.len() - 8], &[])
         .schema_struct(format::FILE_METADATA, 0)
         .map_err(|why| format!("footer metadata: {why}"))
 }
@@ -58,27 +54,19 @@ pub(super) fn check_footer(file: &[u8]) -> Result<(), String> {
 /// may claim to expand beyond what Snappy can, and no dictionary more values than its page
 /// has bits.
 pub(super) fn check_pages(chunk: &[u8]) -> Result<(), String> {
+    // The page header's uncompressed and compressed sizes, and its dictionary header's count.
+    const SIZES: &[&[i16]] = &[&[2], &[3], &[7, 1]];
     let mut at = 0usize;
     while at < chunk.len() {
-        let mut walker = Walker {
-            bytes: &chunk[at..],
-            at: 0,
-        };
+        let mut walker = Walker::new(&chunk[at..], SIZES);
         walker
             .schema_struct(format::PAGE_HEADER, 0)
             .map_err(|why| format!("the page header at byte {at} of its column chunk: {why}"))?;
-        // Its wire types are the schema's: read the sizes again by them.
-        walker.at = 0;
-        let header = walker.page_header()?;
-        let PageHeader {
-            uncompressed: Some(uncompressed),
-            compressed: Some(compressed),
-            dictionary_values,
-        } = header
-        else {
+        let (Some(uncompressed), Some(compressed)) = (walker.kept(0), walker.kept(1)) else {
             // No sizes: the Parquet crate refuses the page with its own message.
             return Ok(());
         };
+        let dictionary_values = walker.kept(2);
         let (Ok(uncompressed), Ok(compressed)) =
             (u64::try_from(uncompressed), u64::try_from(compressed))
         else {
@@ -104,24 +92,42 @@ pub(super) fn check_pages(chunk: &[u8]) -> Result<(), String> {
     Ok(())
 }
 
-/// What [`check_pages`] reads of a page header.
-#[derive(Default)]
-struct PageHeader {
-    uncompressed: Option<i64>,
-    compressed: Option<i64>,
-    dictionary_values: Option<i64>,
-}
-
 fn zigzag(v: u64) -> i64 {
     (v >> 1) as i64 ^ -((v & 1) as i64)
 }
 
+/// A walk through Thrift compact-protocol bytes that reads headers and lengths only.
 struct Walker<'a> {
     bytes: &'a [u8],
     at: usize,
+    /// The ids of the known fields from the walk's root to where it is.
+    path: Vec<i16>,
+    /// The i32 fields whose values the walk keeps, by their paths, and the values kept: the
+    /// index into `keep` and the value, in the order read.
+    keep: &'static [&'static [i16]],
+    kept: Vec<(usize, i64)>,
 }
 
-impl Walker<'_> {
+impl<'a> Walker<'a> {
+    fn new(bytes: &'a [u8], keep: &'static [&'static [i16]]) -> Self {
+        Self {
+            bytes,
+            at: 0,
+            path: Vec::new(),
+            keep,
+            kept: Vec::new(),
+        }
+    }
+
+    /// The value of `keep[k]` as the Parquet crate takes it (the last one read), if read.
+    fn kept(&self, k: usize) -> Option<i64> {
+        self.kept
+            .iter()
+            .rev()
+            .find(|(i, _)| *i == k)
+            .map(|&(_, v)| v)
+    }
+
     fn left(&self) -> usize {
         self.bytes.len() - self.at
     }
@@ -166,39 +172,6 @@ impl Walker<'_> {
         Ok(())
     }
 
-    /// A `PageHeader` struct, walked to its stop byte.
-    fn page_header(&mut self) -> Result<PageHeader, String> {
-        let mut header = PageHeader::default();
-        self.struct_fields(|walker, id, kind| match (id, kind) {
-            (2, 5) => walker.i32().map(|v| header.uncompressed = Some(v)),
-            (3, 5) => walker.i32().map(|v| header.compressed = Some(v)),
-            // The dictionary page header; its field 1 is the number of values.
-            (7, 12) => walker.struct_fields(|walker, id, kind| match (id, kind) {
-                (1, 5) => walker.i32().map(|v| header.dictionary_values = Some(v)),
-                _ => walker.value(kind, 1),
-            }),
-            _ => walker.value(kind, 1),
-        })?;
-        Ok(header)
-    }
-
-    /// Walks a struct's fields to its stop byte, handing each field's id and compact type to
-    /// `field`, which must read the field's value.
-    fn struct_fields(
-        &mut self,
-        mut field: impl FnMut(&mut Self, i16, u8) -> Result<(), String>,
-    ) -> Result<(), String> {
-        let mut id = 0i16;
-        loop {
-            let header = self.byte()?;
-            if header & 0x0f == 0 {
-                return Ok(());
-            }
-            id = self.field_id(id, header)?;
-            field(self, id, header & 0x0f)?;
-        }
-    }
-
     /// A field's id from its header and the struct's previous one, as parquet 60.1 reads it
     /// (an id written in full is truncated to 16 bits; a delta past `i16::MAX` is malformed).
     fn field_id(&mut self, previous: i16, header: u8) -> Result<i16, String> {
@@ -225,7 +198,18 @@ impl Walker<'_> {
             }
             id = self.field_id(id, header)?;
             match fields.iter().find(|(known, _)| *known == id) {
-                Some(&(_, ty)) if ty.is_code(code) => self.schema_value(ty, depth)?,
+                Some(&(_, ty)) if ty.is_code(code) => {
+                    self.path.push(id);
+                    let keep = self.keep.iter().position(|p| *p == self.path.as_slice());
+                    match (ty, keep) {
+                        (Ty::I32, Some(k)) => {
+                            let value = self.i32()?;
+                            self.kept.push((k, value));
+                        }
+                        _ => self.schema_value(ty, depth)?,
+                    }
+                    self.path.pop();
+                }
                 Some(&(_, ty)) => {
                     return Err(format!(
                         "field {id} at byte {} has wire type {code}, the format's is {}",
@@ -250,19 +234,14 @@ impl Walker<'_> {
                 self.skip(length)
             }
             Ty::List(element) => {
-                let header = self.byte()?;
-                if header == 0 {
-                    return Ok(()); // an empty list, as some writers write one
+                let (size, code) = self.list_header()?;
+                if (size, code) == (0, 0) {
+                    return Ok(()); // an empty list written as a 0 byte, as some writers do
                 }
-                let size = match header >> 4 {
-                    15 => self.varint()?,
-                    small => u64::from(small),
-                };
-                if !element.is_code(header & 0x0f) {
+                if !element.is_code(code) {
                     return Err(format!(
-                        "a list at byte {} of wire type {}, the format's is {}",
+                        "a list at byte {} of wire type {code}, the format's is {}",
                         self.at,
-                        header & 0x0f,
                         element.name()
                     ));
                 }
@@ -277,6 +256,16 @@ impl Walker<'_> {
             }
             Ty::Struct(fields) => self.schema_struct(fields, depth + 1),
         }
+    }
+
+    /// A list or set header: its size and its elements' compact type.
+    fn list_header(&mut self) -> Result<(u64, u8), String> {
+        let header = self.byte()?;
+        let size = match header >> 4 {
+            15 => self.varint()?,
+            small => u64::from(small),
+        };
+        Ok((size, header & 0x0f))
     }
 
     /// Refuses a collection of `size` elements of `per_element` values each that cannot fit in
@@ -305,12 +294,8 @@ impl Walker<'_> {
                 self.skip(length)
             }
             9 | 10 => {
-                let header = self.byte()?;
-                let size = match header >> 4 {
-                    15 => self.varint()?,
-                    small => u64::from(small),
-                };
-                self.elements(size, &[header & 0x0f], depth)
+                let (size, code) = self.list_header()?;
+                self.elements(size, &[code], depth)
             }
             11 => {
                 let size = self.varint()?;
