@@ -144,7 +144,9 @@ impl Scene {
         self.inner.objects_of_interest.clone()
     }
 
-    /// `points [n, 2]` (world metres) kept in lane as scbg's closed loop keeps a plan.
+    /// `points [n, 2]` (world metres) kept in lane as scbg's closed loop keeps a plan: each
+    /// point pulled to within `max_offset_m` of the nearest lane heading its way, and the rest
+    /// of a plan that leaves every lane carried on along its lane's route.
     #[pyo3(signature = (points, max_offset_m=scbg::DEFAULT_LANE_KEEPING_M))]
     fn keep_in_lane<'py>(
         &self,

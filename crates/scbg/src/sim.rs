@@ -34,7 +34,9 @@ pub use scbg_sim::{
 /// Keeps a plan in lane as the closed loop keeps a controlled agent's plans before following
 /// them ([`scbg_sim::lanes`]): every point (world frame, metres) is pulled to within
 /// `max_offset_m` of the nearest car-lane centre line of `scene`'s map that heads the plan's
-/// way; returns how many points moved. A simulator that drives B from [`crate::Model::generate`]'s
+/// way, and where the plan leaves every such lane (a roundabout's island, past an on-ramp's
+/// end, off a highway's outer lane) the rest goes on along its lane's route at the plan's own
+/// progress; returns how many points moved. A simulator that drives B from [`crate::Model::generate`]'s
 /// futures should follow the kept plan (with [`DEFAULT_LANE_KEEPING_M`]): B then drives as in
 /// scbg's own closed loop. A negative or non-finite offset is an [`InvalidRequest`].
 pub fn keep_in_lane(

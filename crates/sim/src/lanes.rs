@@ -9,9 +9,10 @@
 //! `max_offset_m` from it. Lane changes stay possible — a point between two lanes is pulled
 //! toward the nearer one — and the plan's timing (when B is where along its way, which is what
 //! courtesy is about) is kept. Only lanes heading the plan's way (within 45°) count, so at an
-//! intersection a drifting point is not kept on the crossing road. Points farther than
-//! [`REACH_M`] from every lane centre (a car park, a driveway) are left as they are. The
-//! segments are listed once per simulation ([`LaneSegments`]).
+//! intersection a drifting point is not kept on the crossing road. A lane counts for points up
+//! to [`PAST_END_M`] beyond its ends, not farther. Points farther than [`REACH_M`] from every
+//! lane centre before the plan keeps to any lane (a car park, a driveway) are left as they are.
+//! The segments are listed once per simulation ([`LaneSegments`]).
 //!
 //! A plan keeps to one lane until it is clearly in another: a point stays with the lane the
 //! point before it was kept to (while it lies alongside that lane, not beyond its ends) unless
@@ -20,6 +21,14 @@
 //! is not split between two lanes. Where the kept lane does change, the correction is ramped
 //! over [`SWITCH_STEPS`] instead of jumping a lane width from one point to the next: a lane
 //! change B can drive.
+//!
+//! A plan that leaves every lane heading its way after keeping to one (it cuts across a
+//! roundabout's island, runs on past the end of an on-ramp, drifts off the outermost lane of
+//! a highway: maps unlike the ones the generator learned on) goes on along that lane's route
+//! instead, at the plan's own progress ([`LaneSegments::keep_near`]): timing is what courtesy is
+//! about, and the road is where B can drive it.
+
+use std::collections::HashMap;
 
 use scbg_scene::{LaneType, Map};
 
@@ -47,11 +56,29 @@ pub const SWITCH_MARGIN_M: f64 = 1.0;
 /// usual lane change).
 pub const SWITCH_STEPS: usize = 30;
 
+/// A lane continues another where the map links none when it starts within this of the other's
+/// end, heading its way (within 45°), m.
+pub const JOIN_M: f64 = 1.5;
+/// A point more than this past the end of a lane's centre line (along its last segment, m) is
+/// not kept to that lane: a lane that ends is behind it. Joints between lanes at an angle leave
+/// a point at most a few decimetres past one lane's end and before the next one's start.
+pub const PAST_END_M: f64 = 2.0;
+/// Where no lane starts at a lane's end, a lane passing near it continues it when it heads
+/// within 60° of its way (the cosine): highway-env's roundabout entries meet the ring side-on,
+/// 45–60° off its way, and a crossing road at a junction (90°) does not continue a lane.
+pub const JOIN_ANGLE_COS: f64 = 0.5;
+/// A plan's route runs over at most this many lanes past the one it leaves from.
+pub const MAX_ROUTE_LANES: usize = 32;
+
 /// The car-lane centre-line segments of a map (every lane but bike lanes), listed once per
 /// simulation: the map does not change while plans are made.
 #[derive(Debug, Clone, Default)]
 pub struct LaneSegments {
     segments: Vec<Segment>,
+    /// Each map lane's centre line (world frame, m); empty for bike lanes.
+    centre_lines: Vec<Vec<[f64; 2]>>,
+    /// Each map lane's linked exit lanes (indices into the map's lanes).
+    exits: Vec<Vec<usize>>,
 }
 
 /// `(start, end, lane index, first segment of its lane, last segment of its lane)`.
@@ -60,7 +87,38 @@ type Segment = ([f64; 2], [f64; 2], usize, bool, bool);
 impl LaneSegments {
     /// The segments of `map`'s car lanes.
     pub fn new(map: &Map) -> Self {
+        let car = |l: &scbg_scene::Lane| l.lane_type != LaneType::BikeLane;
+        let index_of: HashMap<i64, usize> = map
+            .lanes
+            .iter()
+            .enumerate()
+            .map(|(k, l)| (l.id, k))
+            .collect();
+        let centre_lines = map
+            .lanes
+            .iter()
+            .map(|l| {
+                if car(l) {
+                    l.polyline.iter().map(|p| [p.x_m, p.y_m]).collect()
+                } else {
+                    Vec::new()
+                }
+            })
+            .collect();
+        let exits = map
+            .lanes
+            .iter()
+            .map(|l| {
+                l.exit_lanes
+                    .iter()
+                    .filter_map(|id| index_of.get(id).copied())
+                    .filter(|&k| car(&map.lanes[k]))
+                    .collect()
+            })
+            .collect();
         Self {
+            centre_lines,
+            exits,
             segments: map
                 .lanes
                 .iter()
@@ -112,6 +170,8 @@ impl LaneSegments {
         let mut corrections = vec![[0.0f64; 2]; plan.len()];
         let mut kept_lane: Option<usize> = None;
         let mut switches = Vec::new();
+        // Where the plan leaves every lane after keeping to one: its route takes over there.
+        let mut left_at: Option<(usize, usize)> = None;
         for (t, (p, heading)) in plan.iter().zip(heading).enumerate() {
             // The nearest point overall and on the lane the previous point was kept to.
             let (mut best, mut on_kept) = ((REACH_M * REACH_M, None), (f64::INFINITY, None));
@@ -123,12 +183,21 @@ impl LaneSegments {
                 {
                     continue;
                 }
-                let u = if len2 > 0.0 {
-                    (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
-                } else {
-                    0.0
-                };
-                let q = [a[0] + u * dx, a[1] + u * dy];
+                // Just past a lane's end (or before its start) a point is kept beside the
+                // lane's line carried on; farther, the lane is behind (ahead of) the point, not
+                // beside it.
+                let len = len2.sqrt();
+                let (before_m, past_m) = (
+                    if first { PAST_END_M } else { 0.0 },
+                    if last { PAST_END_M } else { 0.0 },
+                );
+                let (along, q) = foot(a, b, *p, before_m, past_m);
+                if (last && (along - 1.0) * len > PAST_END_M)
+                    || (first && -along * len > PAST_END_M)
+                {
+                    continue;
+                }
+                let u = along.clamp(0.0, 1.0);
                 let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
                 if d2 < best.0 {
                     best = (d2, Some((q, lane)));
@@ -146,6 +215,10 @@ impl LaneSegments {
                 (Some(b), _) => Some((best.0, b)),
                 (None, _) => None,
             };
+            if let (None, Some(lane)) = (chosen, kept_lane) {
+                left_at = Some((t, lane));
+                break;
+            }
             if let Some((d2, (q, lane))) = chosen {
                 if kept_lane.is_some_and(|k| k != lane) {
                     switches.push(t);
@@ -160,10 +233,11 @@ impl LaneSegments {
             }
         }
         // A change of the kept lane moves the correction by up to a lane width: ramp it.
+        let kept_end = left_at.map_or(plan.len(), |(t, _)| t);
         for &t in &switches {
             let (lo, hi) = (
                 t.saturating_sub(SWITCH_STEPS / 2),
-                (t + SWITCH_STEPS / 2).min(plan.len() - 1),
+                (t + SWITCH_STEPS / 2).min(kept_end - 1),
             );
             let jump = (corrections[t][0] - corrections[t - 1][0])
                 .hypot(corrections[t][1] - corrections[t - 1][1]);
@@ -177,15 +251,228 @@ impl LaneSegments {
                 *c = [c0[0] + w * (c1[0] - c0[0]), c0[1] + w * (c1[1] - c0[1])];
             }
         }
+        let raw = left_at.map(|_| plan.to_vec());
         let mut moved = 0;
-        for (p, c) in plan.iter_mut().zip(&corrections) {
+        for (p, c) in plan.iter_mut().zip(&corrections).take(kept_end) {
             if c[0] != 0.0 || c[1] != 0.0 {
                 *p = [p[0] + c[0], p[1] + c[1]];
                 moved += 1;
             }
         }
+        if let (Some((t, lane)), Some(raw)) = (left_at, raw) {
+            moved += self.continue_along_route(plan, &raw, t, lane, max_offset_m);
+        }
         moved
     }
+
+    /// Re-draws `plan[from..]` along the route of `lane`, the lane `plan[from - 1]` was kept
+    /// to: from that point's place along the lane and its offset beside it (at most
+    /// `max_offset_m`), each point lies as far along the route as `raw` (the plan as
+    /// generated) travels by then. At each lane's end the route takes the lane that continues
+    /// it ([`Self::successor_toward`]) nearest the plan's last point: where the plan means to
+    /// go. Where no lane continues it, the plan's
+    /// own moves carry on from the route's end, kept in lane afresh. Returns how many points
+    /// moved.
+    fn continue_along_route(
+        &self,
+        plan: &mut [[f64; 2]],
+        raw: &[[f64; 2]],
+        from: usize,
+        lane: usize,
+        max_offset_m: f64,
+    ) -> usize {
+        let Some(goal) = raw.last().copied() else {
+            return 0;
+        };
+        let line = &self.centre_lines[lane];
+        let start = plan[from - 1];
+        let Some((seg, foot, offset_m, past_m)) = project(line, start) else {
+            return 0;
+        };
+        let offset_m = offset_m.clamp(-max_offset_m, max_offset_m);
+        let travel_m: f64 = raw[from - 1..].windows(2).map(|w| dist(w[0], w[1])).sum();
+        // The route's centre line, from the foot of `start` on.
+        let mut route = vec![foot];
+        route.extend_from_slice(&line[seg + 1..]);
+        let (mut current, mut length_m) = (lane, polyline_length(&route));
+        for _ in 0..MAX_ROUTE_LANES {
+            if length_m > past_m + travel_m + 1.0 {
+                break;
+            }
+            let Some((next, seg, from_point)) = self.successor_toward(current, goal) else {
+                break;
+            };
+            let next_line = &self.centre_lines[next];
+            let joint = std::iter::once(from_point).chain(next_line[seg + 1..].iter().copied());
+            for p in joint {
+                let last = *route.last().expect("a route has a point");
+                if dist(last, p) > 1e-6 {
+                    length_m += dist(last, p);
+                    route.push(p);
+                }
+            }
+            current = next;
+        }
+        let route_end_m = polyline_length(&route);
+        let mut s_m = past_m;
+        let (mut beyond, mut beyond_from): (Option<[f64; 2]>, Option<usize>) = (None, None);
+        for t in from..plan.len() {
+            let step_m = dist(raw[t - 1], raw[t]);
+            s_m += step_m;
+            let to = if s_m <= route_end_m {
+                let (p, dir) = point_at(&route, s_m);
+                [p[0] - dir[1] * offset_m, p[1] + dir[0] * offset_m]
+            } else {
+                // No lane continues the route: the plan's own moves from its end.
+                let last = beyond.unwrap_or_else(|| {
+                    let (p, dir) = point_at(&route, route_end_m);
+                    let end = [p[0] - dir[1] * offset_m, p[1] + dir[0] * offset_m];
+                    let past = s_m - route_end_m;
+                    let d = [raw[t][0] - raw[t - 1][0], raw[t][1] - raw[t - 1][1]];
+                    let k = if step_m > 0.0 {
+                        (step_m - past) / step_m
+                    } else {
+                        0.0
+                    };
+                    [end[0] - k * d[0], end[1] - k * d[1]]
+                });
+                [
+                    last[0] + raw[t][0] - raw[t - 1][0],
+                    last[1] + raw[t][1] - raw[t - 1][1],
+                ]
+            };
+            if s_m > route_end_m {
+                beyond = Some(to);
+                beyond_from.get_or_insert(t);
+            }
+            plan[t] = to;
+        }
+        // Past a dead end the plan is kept in lane afresh (the far side of a junction whose
+        // map has no lanes across it).
+        if let Some(e) = beyond_from {
+            self.keep_near(&mut plan[e..], max_offset_m);
+        }
+        (from..plan.len()).filter(|&t| plan[t] != raw[t]).count()
+    }
+
+    /// The lane that continues `lane`, and where on it (segment, point): the lanes linked as
+    /// its exits and those starting within [`JOIN_M`] of its end heading its way, from their
+    /// start; where there are none, the lanes passing within [`REACH_M`] of its end heading
+    /// within [`JOIN_ANGLE_COS`] of its way (a roundabout's entry that meets the ring side-on),
+    /// from their point nearest its end. Of these, the one whose centre line comes nearest
+    /// `goal`.
+    fn successor_toward(&self, lane: usize, goal: [f64; 2]) -> Option<(usize, usize, [f64; 2])> {
+        let line = &self.centre_lines[lane];
+        let (end, before) = (line[line.len() - 1], line[line.len().saturating_sub(2)]);
+        let heading = unit(before, end);
+        let along = |h: Option<[f64; 2]>, cos: f64| match (heading, h) {
+            (Some(a), Some(b)) => a[0] * b[0] + a[1] * b[1] >= cos,
+            _ => true,
+        };
+        let lines = || {
+            (0..self.centre_lines.len()).filter(|&k| k != lane && self.centre_lines[k].len() >= 2)
+        };
+        let mut next: Vec<(usize, usize, [f64; 2])> = self.exits[lane]
+            .iter()
+            .copied()
+            .filter(|&k| self.centre_lines[k].len() >= 2)
+            .chain(lines().filter(|&k| {
+                let l = &self.centre_lines[k];
+                dist(l[0], end) <= JOIN_M && along(unit(l[0], l[1]), MAX_ANGLE_COS)
+            }))
+            .map(|k| (k, 0, self.centre_lines[k][0]))
+            .collect();
+        if next.is_empty() {
+            next = lines()
+                .filter_map(|k| {
+                    let l = &self.centre_lines[k];
+                    let (seg, q, ..) = project(l, end)?;
+                    (dist(q, end) <= REACH_M && along(unit(l[seg], l[seg + 1]), JOIN_ANGLE_COS))
+                        .then_some((k, seg, q))
+                })
+                .collect();
+        }
+        next.into_iter()
+            .map(|(k, seg, q)| {
+                let near = project(&self.centre_lines[k][seg..], goal)
+                    .map_or(f64::INFINITY, |(_, g, ..)| dist(g, goal));
+                (near, k, seg, q)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+            .map(|(_, k, seg, q)| (k, seg, q))
+    }
+}
+
+fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (b[0] - a[0]).hypot(b[1] - a[1])
+}
+
+fn unit(a: [f64; 2], b: [f64; 2]) -> Option<[f64; 2]> {
+    let len = dist(a, b);
+    (len > 1e-9).then(|| [(b[0] - a[0]) / len, (b[1] - a[1]) / len])
+}
+
+fn polyline_length(line: &[[f64; 2]]) -> f64 {
+    line.windows(2).map(|w| dist(w[0], w[1])).sum()
+}
+
+/// Where `p` projects onto the line through segment `a`–`b`: the fraction along it (0 at `a`,
+/// 1 at `b`, outside [0, 1] past either end; 0 for a segment of no length) and the nearest
+/// point of the segment carried on `before_a_m` before `a` and `past_b_m` beyond `b`.
+fn foot(a: [f64; 2], b: [f64; 2], p: [f64; 2], before_a_m: f64, past_b_m: f64) -> (f64, [f64; 2]) {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    if len2 <= 0.0 {
+        return (0.0, a);
+    }
+    let along = ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2;
+    let len = len2.sqrt();
+    let u = along.clamp(-before_a_m / len, 1.0 + past_b_m / len);
+    (along, [a[0] + u * dx, a[1] + u * dy])
+}
+
+/// The nearest point of a polyline to `p`, its last segment carried on [`PAST_END_M`]: the
+/// segment, the point (on the polyline itself), `p`'s signed offset from it (m, left of the
+/// line's way positive) and how far past the polyline's end it lies (m, 0 on the polyline);
+/// `None` for fewer than two points.
+fn project(line: &[[f64; 2]], p: [f64; 2]) -> Option<(usize, [f64; 2], f64, f64)> {
+    let mut best: Option<(f64, usize, [f64; 2], f64, f64)> = None;
+    let last = line.len().saturating_sub(2);
+    for (i, w) in line.windows(2).enumerate() {
+        let (a, b) = (w[0], w[1]);
+        let (along, q) = foot(a, b, p, 0.0, if i == last { PAST_END_M } else { 0.0 });
+        let d = dist(p, q);
+        if best.is_none_or(|(bd, ..)| d < bd) {
+            let side = ((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])).signum();
+            let past_m = dist(a, q) - dist(a, b);
+            let (on_line, past_m) = if along > 1.0 && past_m > 0.0 {
+                (b, past_m)
+            } else {
+                (q, 0.0)
+            };
+            best = Some((d, i, on_line, side * d, past_m));
+        }
+    }
+    best.map(|(_, i, q, offset, past_m)| (i, q, offset, past_m))
+}
+
+/// The point at arc length `s_m` along a polyline (clamped to its ends) and the unit direction
+/// of the segment it lies on (+x where the polyline has no length).
+fn point_at(line: &[[f64; 2]], s_m: f64) -> ([f64; 2], [f64; 2]) {
+    let mut dir = [1.0, 0.0];
+    let mut left = s_m.max(0.0);
+    for w in line.windows(2) {
+        let len = dist(w[0], w[1]);
+        if len <= 1e-9 {
+            continue;
+        }
+        dir = [(w[1][0] - w[0][0]) / len, (w[1][1] - w[0][1]) / len];
+        if left <= len {
+            return ([w[0][0] + dir[0] * left, w[0][1] + dir[1] * left], dir);
+        }
+        left -= len;
+    }
+    (*line.last().unwrap_or(&[0.0, 0.0]), dir)
 }
 
 /// The plan's direction at each point: the chord over [`CHORD_M`] on either side
@@ -194,7 +481,6 @@ impl LaneSegments {
 /// plan had, or none before it first moves.
 fn plan_directions(plan: &[[f64; 2]]) -> Vec<Option<[f64; 2]>> {
     let n = plan.len();
-    let dist = |a: [f64; 2], b: [f64; 2]| (b[0] - a[0]).hypot(b[1] - a[1]);
     let unit = |a: [f64; 2], b: [f64; 2]| {
         let len = dist(a, b);
         (len >= MOVING_M).then(|| [(b[0] - a[0]) / len, (b[1] - a[1]) / len])
@@ -218,171 +504,4 @@ fn plan_directions(plan: &[[f64; 2]]) -> Vec<Option<[f64; 2]>> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use scbg_scene::{Lane, MapPoint};
-
-    fn lane(y: f64, lane_type: LaneType) -> Lane {
-        Lane {
-            lane_type,
-            polyline: (0..=10)
-                .map(|i| MapPoint {
-                    x_m: 10.0 * f64::from(i),
-                    y_m: y,
-                    z_m: 0.0,
-                })
-                .collect(),
-            ..Lane::default()
-        }
-    }
-
-    /// A lane heading +y along `x` over `ys` (points 10 m apart).
-    fn lane_along_y(x: f64, ys: std::ops::RangeInclusive<f64>) -> Lane {
-        let n = ((ys.end() - ys.start()) / 10.0).round() as u32;
-        Lane {
-            lane_type: LaneType::SurfaceStreet,
-            polyline: (0..=n)
-                .map(|i| MapPoint {
-                    x_m: x,
-                    y_m: ys.start() + 10.0 * f64::from(i),
-                    z_m: 0.0,
-                })
-                .collect(),
-            ..Lane::default()
-        }
-    }
-
-    #[test]
-    fn points_off_the_lane_come_back_and_points_on_it_stay() {
-        let map = Map {
-            lanes: vec![
-                lane(0.0, LaneType::SurfaceStreet),
-                lane(3.5, LaneType::Freeway),
-            ],
-            ..Map::default()
-        };
-        // One point at a time (no direction, no carried correction).
-        let keep = |p: [f64; 2]| {
-            let mut plan = [p];
-            let moved = LaneSegments::new(&map).keep_near(&mut plan, 0.5);
-            (moved, plan[0])
-        };
-        assert_eq!(keep([5.0, 0.3]), (0, [5.0, 0.3])); // on the first lane: stays
-        let (moved, p) = keep([15.0, -2.0]); // 2 m right of it: to 0.5 m
-        assert!(moved == 1 && (p[0] - 15.0).abs() < 1e-9 && (p[1] + 0.5).abs() < 1e-9);
-        let (moved, p) = keep([25.0, 2.2]); // nearer the second lane (1.3 m): 0.5 m below it
-        assert!(moved == 1 && (p[0] - 25.0).abs() < 1e-9 && (p[1] - 3.0).abs() < 1e-9);
-        assert_eq!(keep([35.0, -20.0]), (0, [35.0, -20.0])); // out of reach: stays
-        // A lane across the plan's way does not count: a plan heading +x drifting onto a
-        // lane along y is pulled to the nearest lane along x (out of reach here: unchanged).
-        let crossing = Map {
-            lanes: vec![lane_along_y(50.0, -50.0..=50.0)],
-            ..Map::default()
-        };
-        let mut p = vec![[48.0, 20.0], [49.0, 20.0], [50.0, 20.0]];
-        assert_eq!(LaneSegments::new(&crossing).keep_near(&mut p, 0.5), 0);
-        // A bike lane does not count.
-        let bike = Map {
-            lanes: vec![lane(0.0, LaneType::BikeLane)],
-            ..Map::default()
-        };
-        let mut p = vec![[15.0, -2.0]];
-        assert_eq!(LaneSegments::new(&bike).keep_near(&mut p, 0.5), 0);
-        assert_eq!(p[0], [15.0, -2.0]);
-    }
-
-    #[test]
-    fn a_plan_wiggling_to_a_stand_before_a_crossing_road_is_not_pulled_onto_it() {
-        // B's lane heads +y along x = 50 and ends at y = 0; the crossing road's lane runs
-        // along x at y = 2.5. B's plan comes up its lane and stands just past the stop line,
-        // wiggling sideways by half a metre: over two steps it heads along x there.
-        let map = Map {
-            lanes: vec![
-                lane_along_y(50.0, -50.0..=0.0),
-                lane(2.5, LaneType::SurfaceStreet),
-            ],
-            ..Map::default()
-        };
-        let mut plan: Vec<[f64; 2]> = (0..10).map(|k| [50.0, f64::from(k) - 9.0]).collect();
-        plan.extend([
-            [50.0, 0.5],
-            [50.5, 0.6],
-            [51.0, 0.7],
-            [50.5, 0.8],
-            [50.0, 0.9],
-        ]);
-        LaneSegments::new(&map).keep_near(&mut plan, 0.25);
-        for p in &plan {
-            assert!(p[1] < 1.0, "{p:?} pulled toward the crossing road");
-        }
-        // Its own lane's end pulls the wiggle back toward it instead.
-        assert!(plan[11][0] < 50.5 && plan[12][0] < 51.0);
-        // The direction over two steps alone would have taken the crossing road's lane.
-        let two_step = plan_directions(&[[0.0, 0.5], [0.5, 0.6], [1.0, 0.7]]);
-        assert!(two_step[1].is_some_and(|h| h[0] > 0.9));
-    }
-
-    #[test]
-    fn a_drifting_plan_keeps_its_lane_and_a_lane_change_is_ramped() {
-        let mut straight = lane(0.0, LaneType::Freeway);
-        straight.polyline.extend((11..=30).map(|i| MapPoint {
-            x_m: 10.0 * f64::from(i),
-            y_m: 0.0,
-            z_m: 0.0,
-        }));
-        let mut left = straight.clone();
-        for p in &mut left.polyline {
-            p.y_m = 3.5;
-        }
-        let map = Map {
-            lanes: vec![straight, left],
-            ..Map::default()
-        };
-        let lanes = LaneSegments::new(&map);
-        // Drifting 2.2 m left over 8 s, past the middle between the lanes: kept to its lane.
-        let mut drift: Vec<[f64; 2]> = (0..80)
-            .map(|t| [2.0 * f64::from(t), 2.2 * f64::from(t) / 79.0])
-            .collect();
-        lanes.keep_near(&mut drift, 0.25);
-        assert!(drift.iter().all(|p| p[1] <= 0.25 + 1e-9), "{drift:?}");
-        // Drifting on to 3.0 m, clearly into the other lane: kept as a lane change whose
-        // points never jump sideways by more than a few decimetres a step.
-        let mut change: Vec<[f64; 2]> = (0..80)
-            .map(|t| [2.0 * f64::from(t), 3.0 * f64::from(t) / 79.0])
-            .collect();
-        lanes.keep_near(&mut change, 0.25);
-        assert!(change[0][1].abs() < 1e-9 && (change[79][1] - 3.5).abs() <= 0.25 + 1e-9);
-        let worst_step = change
-            .windows(2)
-            .map(|w| (w[1][1] - w[0][1]).abs())
-            .fold(0.0, f64::max);
-        assert!(worst_step < 0.45, "a sideways step of {worst_step} m");
-        // Past the end of its lane a plan goes on along the lane that continues it, never
-        // pulled back toward the end it passed.
-        let along = |x0: u32, x1: u32| Lane {
-            lane_type: LaneType::Freeway,
-            polyline: (x0..=x1)
-                .map(|i| MapPoint {
-                    x_m: 10.0 * f64::from(i),
-                    y_m: 0.0,
-                    z_m: 0.0,
-                })
-                .collect(),
-            ..Lane::default()
-        };
-        let chained = Map {
-            lanes: vec![along(0, 10), along(10, 30)],
-            ..Map::default()
-        };
-        // (The plan ends just past the joint, so no later switch ramps the correction away.)
-        let x = |t: usize| 61.0 + 0.5 * t as f64;
-        let mut plan: Vec<[f64; 2]> = (0..80).map(|t| [x(t), 0.6]).collect();
-        LaneSegments::new(&chained).keep_near(&mut plan, 0.25);
-        for (t, p) in plan.iter().enumerate() {
-            assert!(
-                (p[0] - x(t)).abs() < 1e-9 && (p[1] - 0.25).abs() < 1e-9,
-                "{p:?}"
-            );
-        }
-    }
-}
+mod tests;

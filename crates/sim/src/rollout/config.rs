@@ -93,7 +93,8 @@ pub struct SimConfig {
     pub safety_guard: bool,
     /// Lane keeping of the controlled agents' plans ([`crate::lanes`]): every plan point is
     /// pulled to within this many metres of the nearest car-lane centre line before it is
-    /// followed; `None` follows the plans as generated. Default 0.25 m.
+    /// followed, and a plan that leaves every lane goes on along its lane's route; `None`
+    /// follows the plans as generated. Default 0.25 m.
     #[serde(default = "default_lane_keeping_m")]
     pub lane_keeping_m: Option<f64>,
     /// The guard lets the synthetic world's B take the right of way at a crossing from a
