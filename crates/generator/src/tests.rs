@@ -17,10 +17,19 @@ mod infer;
 /// Held while a test seeds the device and draws from its random stream.
 pub(crate) static SEED_LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
+/// The families of the tests' scenes: the ones the tolerances of these small-model checks were set
+/// on (the let-in family is checked in `scbg-synth` and by the demo).
+const FAMILIES: [scbg_synth::Family; 4] = [
+    scbg_synth::Family::Merge,
+    scbg_synth::Family::Crossing,
+    scbg_synth::Family::Cutin,
+    scbg_synth::Family::Following,
+];
+
 fn scenes(n: u64) -> Vec<PreparedScene> {
     (0..n)
         .map(|i| {
-            let g = scbg_synth::generate(21, i, &scbg_synth::Family::ALL);
+            let g = scbg_synth::generate(21, i, &FAMILIES);
             PreparedScene::from_scene(
                 &g.scene,
                 &WindowConfig::default(),

@@ -49,24 +49,28 @@ pub enum Family {
     Cutin,
     /// B leading A in A's lane on a procedural road.
     Following,
+    /// B on the main lane letting A in from an on-ramp.
+    Letin,
 }
 
 impl Family {
     /// Every family.
-    pub const ALL: [Family; 4] = [
+    pub const ALL: [Family; 5] = [
         Family::Merge,
         Family::Crossing,
         Family::Cutin,
         Family::Following,
+        Family::Letin,
     ];
 
-    /// The family's name (`merge`, `crossing`, `cutin`, `following`).
+    /// The family's name (`merge`, `crossing`, `cutin`, `following`, `letin`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Merge => "merge",
             Self::Crossing => "crossing",
             Self::Cutin => "cutin",
             Self::Following => "following",
+            Self::Letin => "letin",
         }
     }
 
@@ -79,9 +83,10 @@ impl Family {
     }
 }
 
-/// A family name that is not `merge`, `crossing`, `cutin` or `following` (holds the name given).
+/// A family name that is not `merge`, `crossing`, `cutin`, `following` or `letin` (holds the
+/// name given).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown scene family {0:?} (expected merge, crossing, cutin or following)")]
+#[error("unknown scene family {0:?} (expected merge, crossing, cutin, following or letin)")]
 pub struct UnknownFamily(pub String);
 
 /// What the generator knows about a scenario and a model has to discover: one line of the
@@ -142,6 +147,7 @@ enum Params {
     Crossing(families::CrossingParams),
     Cutin(families::CutinParams),
     Following(families::FollowingParams),
+    Letin(families::LetinParams),
 }
 
 /// Draws of the courtesy prior `c' ∈ [0, 1]` behind ψ_true's expectation: stratified, the
@@ -215,6 +221,7 @@ impl Scenario {
             Family::Crossing => Params::Crossing(families::crossing_params(&mut rng)),
             Family::Cutin => Params::Cutin(families::cutin_params(&mut rng)),
             Family::Following => Params::Following(families::following_params(&mut rng)),
+            Family::Letin => Params::Letin(families::letin_params(&mut rng)),
         };
         Self {
             seed,
@@ -275,6 +282,7 @@ impl Scenario {
             Params::Crossing(p) => families::crossing_paths(p),
             Params::Cutin(p) => families::cutin_paths(p),
             Params::Following(p) => families::following_paths(p),
+            Params::Letin(p) => families::letin_paths(p),
         }
     }
 
@@ -286,6 +294,7 @@ impl Scenario {
             Params::Crossing(p) => families::simulate_crossing(p, paths, b, with_map),
             Params::Cutin(p) => families::simulate_cutin(p, paths, b, with_map),
             Params::Following(p) => families::simulate_following(p, paths, b, with_map),
+            Params::Letin(p) => families::simulate_letin(p, paths, b, with_map),
         }
     }
 

@@ -64,8 +64,8 @@ fn demo_writes_a_report() {
     let families = report["spearman_latent"].as_object().unwrap();
     assert_eq!(
         families.len(),
-        4,
-        "merge, crossing, cut-in, following: {report}"
+        5,
+        "merge, crossing, cut-in, following, let-in: {report}"
     );
     // The closed-loop stage ran on the held-out scenes.
     let cl = &report["closed_loop"];

@@ -107,7 +107,7 @@ impl DemoReport {
             }
         };
         let mut out = format!(
-            "Mean ± standard deviation over {} generator seeds ({:?}):\n\n| model | CourtesyMSE *data* | CourtesyMSE *range* | CourtesyMSE *arbitrary* | TrajADE (m) | corr(q, ψ) all | corr(q, ψ) high | Spearman(q, ψ_true) all | merge | crossing | cutin | following | within an example |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+            "Mean ± standard deviation over {} generator seeds ({:?}):\n\n| model | CourtesyMSE *data* | CourtesyMSE *range* | CourtesyMSE *arbitrary* | TrajADE (m) | corr(q, ψ) all | corr(q, ψ) high | Spearman(q, ψ_true) all | merge | crossing | cutin | following | letin | within an example |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
             self.generator_seeds.len(),
             self.generator_seeds
         );
@@ -121,7 +121,7 @@ impl DemoReport {
             }
             let rho = |k: &str| cell(name, &["spearman_quantile_psi_true", k], true);
             out += &format!(
-                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 cell(name, &["courtesy_mse_data", "mean"], false),
                 cell(name, &["courtesy_mse_range", "mean"], false),
                 cell(name, &["courtesy_mse_arbitrary", "mean"], false),
@@ -133,6 +133,7 @@ impl DemoReport {
                 rho("crossing"),
                 rho("cutin"),
                 rho("following"),
+                rho("letin"),
                 cell(
                     name,
                     &["spearman_within_example", crate::fidelity::POOLED],
@@ -161,12 +162,13 @@ impl DemoReport {
                     .map_or("-".into(), |x| format!("{x:.3}"))
             };
             out += &format!(
-                "| {label} | | | | | | | {} | {} | {} | {} | {} | {} |\n",
+                "| {label} | | | | | | | {} | {} | {} | {} | {} | {} | {} |\n",
                 rho(crate::fidelity::POOLED),
                 rho("merge"),
                 rho("crossing"),
                 rho("cutin"),
                 rho("following"),
+                rho("letin"),
                 w.spearman_within_example
                     .get(crate::fidelity::POOLED)
                     .map_or("-".into(), |x| format!("{x:.3}")),

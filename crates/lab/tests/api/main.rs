@@ -26,7 +26,14 @@ fn label_train_and_generate_through_the_library() {
             scenarios: 16,
             seed: 12,
             out: p("synth"),
-            families: Family::ALL.to_vec(),
+            // The families the tiny model's checks below were set on (the let-in family is
+            // checked in `scbg-synth` and by the demo).
+            families: vec![
+                Family::Merge,
+                Family::Crossing,
+                Family::Cutin,
+                Family::Following,
+            ],
             held_out: Vec::new(),
             scenarios_per_file: 8,
             counterfactuals: 0,

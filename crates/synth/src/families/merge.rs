@@ -20,22 +20,29 @@ const RAMP_BLEND_M: f64 = 90.0;
 /// The random draws of one merge scene (geometry, A and B, background traffic, noise).
 #[derive(Debug, Clone)]
 pub struct MergeParams {
-    curvature: f64,
-    lane_width_m: f64,
-    /// Main-path arclength where the taper ends (B fully in A's lane).
-    merge_end_s: f64,
-    taper_m: f64,
-    accel_lane_m: f64,
-    ramp_angle_rad: f64,
+    ramp: Ramp,
     pair: PairSetup,
     background: Vec<(f64, f64, (f64, f64), Idm)>,
     noise: Vec<Vec<f64>>,
 }
 
+/// A main lane along a gently curved path with an on-ramp joining it from the right: the
+/// geometry the merge and let-in families share.
+#[derive(Debug, Clone)]
+pub(super) struct Ramp {
+    pub curvature: f64,
+    pub lane_width_m: f64,
+    /// Main-path arclength where the taper ends (the ramp car fully in the main lane).
+    pub merge_end_s: f64,
+    pub taper_m: f64,
+    pub accel_lane_m: f64,
+    pub ramp_angle_rad: f64,
+}
+
 /// The grass island between the main lane and the on-ramp, as a closed polygon traversed with
 /// the road on its left (as WOMD orients road edges): forward along the main lane's right
 /// edge, back along the ramp's left edge, up to the gore's tip where the two are 0.4 m apart.
-fn gore_island(path: &crate::RefPath, p: &MergeParams, ramp_start: f64) -> Vec<(f64, f64)> {
+fn gore_island(path: &crate::RefPath, p: &Ramp, ramp_start: f64) -> Vec<(f64, f64)> {
     let w = p.lane_width_m;
     let main_d = -w / 2.0 - 0.2;
     let ramp_side = |s: f64| p.ramp_d(s) + w / 2.0 + 0.2;
@@ -103,22 +110,29 @@ pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
         reaction_steps,
     };
     MergeParams {
-        curvature,
-        lane_width_m,
-        merge_end_s,
-        taper_m,
-        accel_lane_m,
-        ramp_angle_rad,
+        ramp: Ramp {
+            curvature,
+            lane_width_m,
+            merge_end_s,
+            taper_m,
+            accel_lane_m,
+            ramp_angle_rad,
+        },
         pair,
         background,
         noise: (0..n_agents).map(|_| noise_track(rng, NUM_STEPS)).collect(),
     }
 }
 
-impl MergeParams {
-    /// B's lateral offset along the ramp: approach at an angle, parallel acceleration lane,
-    /// cosine taper into A's lane ending at `merge_end_s`.
-    fn ramp_d(&self, s: f64) -> f64 {
+impl Ramp {
+    /// Where the taper starts on the main path.
+    pub fn taper_start(&self) -> f64 {
+        self.merge_end_s - self.taper_m
+    }
+
+    /// The ramp's lateral offset from the main lane: approach at an angle, parallel
+    /// acceleration lane, cosine taper into the main lane ending at `merge_end_s`.
+    pub fn ramp_d(&self, s: f64) -> f64 {
         let w = self.lane_width_m;
         let taper_start = self.merge_end_s - self.taper_m;
         let parallel_start = taper_start - self.accel_lane_m;
@@ -141,11 +155,82 @@ impl MergeParams {
             -w - eased * self.ramp_angle_rad.tan()
         }
     }
+
+    /// The scene's reference path (every agent moves along it, the ramp car at
+    /// [`Self::ramp_d`]).
+    pub fn paths(&self) -> Vec<RefPath> {
+        vec![arc_path(0.0, 0.0, 0.0, self.curvature, 700.0)]
+    }
+
+    /// The map: the main lane before and after the merge, the ramp lane from `ramp_start`, the
+    /// acceleration lane's road line, the road edges and the gore island.
+    pub fn map(&self, path: &RefPath, ramp_start: f64) -> Map {
+        let w = self.lane_width_m;
+        let taper_start = self.taper_start();
+        let main_lane = |s0: f64, s1: f64| pts(path.offset_points(s0, s1, 1.0, |_| 0.0));
+        let end = 650.0;
+        let speed = Some(65.0);
+        let lane = |id, polyline, entry: Vec<i64>, exit: Vec<i64>| Lane {
+            id,
+            lane_type: LaneType::Freeway,
+            speed_limit_mph: speed,
+            polyline,
+            entry_lanes: entry,
+            exit_lanes: exit,
+            ..Default::default()
+        };
+        Map {
+            lanes: vec![
+                lane(1, main_lane(-50.0, self.merge_end_s), vec![], vec![2]),
+                lane(2, main_lane(self.merge_end_s, end), vec![1, 3], vec![]),
+                lane(
+                    3,
+                    pts(path.offset_points(ramp_start, self.merge_end_s, 1.0, |s| self.ramp_d(s))),
+                    vec![],
+                    vec![2],
+                ),
+            ],
+            road_lines: vec![RoadLine {
+                id: 10,
+                line_type: RoadLineType::BrokenSingleWhite,
+                polyline: pts(path.offset_points(
+                    taper_start - self.accel_lane_m,
+                    taper_start,
+                    1.0,
+                    |_| -w / 2.0,
+                )),
+            }],
+            road_edges: vec![
+                RoadEdge {
+                    id: 20,
+                    edge_type: RoadEdgeType::Boundary,
+                    polyline: pts(path.offset_points(-50.0, end, 2.0, |_| w / 2.0 + 0.5)),
+                },
+                RoadEdge {
+                    id: 21,
+                    edge_type: RoadEdgeType::Boundary,
+                    polyline: pts(path.offset_points(ramp_start, end, 2.0, |s| {
+                        if s < self.merge_end_s {
+                            self.ramp_d(s) - w / 2.0 - 0.5
+                        } else {
+                            -w / 2.0 - 0.5
+                        }
+                    })),
+                },
+                RoadEdge {
+                    id: 22,
+                    edge_type: RoadEdgeType::Boundary,
+                    polyline: pts(gore_island(path, self, ramp_start)),
+                },
+            ],
+            ..Default::default()
+        }
+    }
 }
 
 /// The reference path of a merge scene (every agent moves along it).
 pub fn merge_paths(p: &MergeParams) -> Vec<RefPath> {
-    vec![arc_path(0.0, 0.0, 0.0, p.curvature, 700.0)]
+    p.ramp.paths()
 }
 
 /// Simulates a merge scene on its `paths` ([`merge_paths`]) with B as `b` says; the map is
@@ -154,7 +239,7 @@ pub fn simulate_merge(p: &MergeParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
     let with_b = b.present();
     let path = &paths[0];
     let mut b_idm = p.pair.b_idm;
-    let mut agents = p.pair.agents(0, p.ramp_d(p.pair.b_s0), with_b);
+    let mut agents = p.pair.agents(0, p.ramp.ramp_d(p.pair.b_s0), with_b);
     let bg0 = agents.len();
     for (k, &(s, v, size, m)) in p.background.iter().enumerate() {
         agents.push(Agent::new(
@@ -168,8 +253,8 @@ pub fn simulate_merge(p: &MergeParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
             v,
         ));
     }
-    let w = p.lane_width_m;
-    let taper_start = p.merge_end_s - p.taper_m;
+    let w = p.ramp.lane_width_m;
+    let taper_start = p.ramp.merge_end_s - p.ramp.taper_m;
     let mut decision: Option<bool> = None; // Some(true) = B goes first
     for t in 0..b.steps() - 1 {
         let mut cmds = vec![0.0; agents.len()];
@@ -178,7 +263,7 @@ pub fn simulate_merge(p: &MergeParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
         // B decides from the current step on, so its courtesy shows in the future to predict.
         if with_b && decision.is_none() && t >= CURRENT_STEP && agents[1].s >= taper_start - 40.0 {
             let (a, b) = (&agents[0], &agents[1]);
-            let mid = p.merge_end_s - p.taper_m * 0.5;
+            let mid = p.ramp.merge_end_s - p.ramp.taper_m * 0.5;
             let lead = (mid - a.s) / a.v.max(1.0) - (mid - b.s) / b.v.max(1.0);
             let go = lead > -0.5 + 3.5 * c;
             decision = Some(go);
@@ -235,7 +320,7 @@ pub fn simulate_merge(p: &MergeParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
         }
         for (i, a) in agents.iter_mut().enumerate() {
             let d_next = if with_b && i == 1 {
-                p.ramp_d(a.s + a.v * STEP_SECS)
+                p.ramp.ramp_d(a.s + a.v * STEP_SECS)
             } else {
                 0.0
             };
@@ -251,67 +336,9 @@ pub fn simulate_merge(p: &MergeParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
             map: Map::default(),
         };
     }
-    // Map: main lane before/after the merge, ramp lane, road lines and edges.
     let ramp_start = (p.pair.b_s0 - 30.0)
-        .min(taper_start - p.accel_lane_m - 20.0)
+        .min(taper_start - p.ramp.accel_lane_m - 20.0)
         .max(-50.0);
-    let main_lane = |s0: f64, s1: f64| pts(path.offset_points(s0, s1, 1.0, |_| 0.0));
-    let end = 650.0;
-    let speed = Some(65.0);
-    let lane = |id, polyline, entry: Vec<i64>, exit: Vec<i64>| Lane {
-        id,
-        lane_type: LaneType::Freeway,
-        speed_limit_mph: speed,
-        polyline,
-        entry_lanes: entry,
-        exit_lanes: exit,
-        ..Default::default()
-    };
-    let map = Map {
-        lanes: vec![
-            lane(1, main_lane(-50.0, p.merge_end_s), vec![], vec![2]),
-            lane(2, main_lane(p.merge_end_s, end), vec![1, 3], vec![]),
-            lane(
-                3,
-                pts(path.offset_points(ramp_start, p.merge_end_s, 1.0, |s| p.ramp_d(s))),
-                vec![],
-                vec![2],
-            ),
-        ],
-        road_lines: vec![RoadLine {
-            id: 10,
-            line_type: RoadLineType::BrokenSingleWhite,
-            polyline: pts(path.offset_points(
-                taper_start - p.accel_lane_m,
-                taper_start,
-                1.0,
-                |_| -w / 2.0,
-            )),
-        }],
-        road_edges: vec![
-            RoadEdge {
-                id: 20,
-                edge_type: RoadEdgeType::Boundary,
-                polyline: pts(path.offset_points(-50.0, end, 2.0, |_| w / 2.0 + 0.5)),
-            },
-            RoadEdge {
-                id: 21,
-                edge_type: RoadEdgeType::Boundary,
-                polyline: pts(path.offset_points(ramp_start, end, 2.0, |s| {
-                    if s < p.merge_end_s {
-                        p.ramp_d(s) - w / 2.0 - 0.5
-                    } else {
-                        -w / 2.0 - 0.5
-                    }
-                })),
-            },
-            RoadEdge {
-                id: 22,
-                edge_type: RoadEdgeType::Boundary,
-                polyline: pts(gore_island(path, p, ramp_start)),
-            },
-        ],
-        ..Default::default()
-    };
+    let map = p.ramp.map(path, ramp_start);
     Run { paths, agents, map }
 }

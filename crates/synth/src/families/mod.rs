@@ -12,6 +12,12 @@
 //!   (a courteous B drops back to let A pass first), or B, slower
 //!   and ahead of A in A's lane, moves out of A's way to the right once A approaches within
 //!   `200c` m;
+//! - **letin**: the merge turned round: A merges from an on-ramp and B is on the main lane.
+//!   B lets A in when A's lead at the merge exceeds `1.5 − 4c` s: it then keeps behind an A
+//!   ahead of it at a 1.8 s headway until A is in its lane; otherwise it presses on at 1.05 ×
+//!   its desired speed while A is beside or ahead of it. A merges ahead only when B's front, as A sees it, is an accepted
+//!   0.8–1.6 s behind A's rear, and otherwise waits at the end of the acceleration lane for B
+//!   to pass;
 //! - **following**: B leads A in A's lane on a procedural road (1–4 lanes, curves down to a
 //!   40 m radius, limits 8–33 m/s) and keeps a steady speed near the limit when courteous,
 //!   dawdles at `(base + 0.2c)` × the limit and brakes needlessly at `(1 − c)` × 1.5–3.5 m/s²
@@ -259,6 +265,7 @@ impl PairSetup {
 mod crossing;
 mod cutin;
 mod following;
+mod letin;
 mod merge;
 
 pub use crossing::{CrossingParams, crossing_params, crossing_paths, simulate_crossing};
@@ -267,4 +274,8 @@ pub use cutin::{
     simulate_cutin,
 };
 pub use following::{FollowingParams, following_params, following_paths, simulate_following};
+pub use letin::{
+    LETIN_HEADWAY_S, LetinParams, PRESS_ON_SHARE, letin_lets_in, letin_params, letin_paths,
+    simulate_letin,
+};
 pub use merge::{MergeParams, merge_params, merge_paths, simulate_merge};
