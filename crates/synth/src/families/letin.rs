@@ -5,7 +5,7 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::{Map, ObjectType};
 
-use super::merge::Ramp;
+use super::merge::{Ramp, main_lane_traffic};
 use super::{BPlan, NUM_STEPS, PairSetup, Run, idm, merging_into_lane, noise_track, vehicle_size};
 use crate::CURRENT_STEP;
 use crate::RefPath;
@@ -45,22 +45,7 @@ pub fn letin_params(rng: &mut Pcg64Mcg) -> LetinParams {
     let tau_b = (merge_mid - b_s0) / b_v0;
     let a_s0 = (merge_mid - (tau_b - lead_s) * a_v0).max(5.0);
     let accepted_lag_s = rng.random_range(0.8..1.6);
-    let mut background = Vec::new();
-    if rng.random_bool(0.6) {
-        let size = vehicle_size(rng);
-        let v = rng.random_range(25.0..28.0);
-        background.push((b_s0 + rng.random_range(60.0..110.0), v, size, idm(rng, v)));
-    }
-    if rng.random_bool(0.5) {
-        let size = vehicle_size(rng);
-        let v = rng.random_range(21.0..26.0);
-        background.push((
-            (b_s0 - rng.random_range(25.0..45.0)).max(-30.0),
-            v * 0.95,
-            size,
-            idm(rng, v),
-        ));
-    }
+    let background = main_lane_traffic(rng, b_s0);
     let n_agents = 2 + background.len();
     let ramp = Ramp {
         curvature: rng.random_range(-1.0 / 900.0..1.0 / 900.0),

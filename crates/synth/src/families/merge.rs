@@ -59,6 +59,28 @@ fn gore_island(path: &crate::RefPath, p: &Ramp, ramp_start: f64) -> Vec<(f64, f6
     pts
 }
 
+/// Main-lane traffic around the main-lane vehicle at `s0`: a faster car 60–110 m ahead (60 %)
+/// and one 25–45 m behind (50 %), as `(s, v, size, idm)`.
+pub(super) fn main_lane_traffic(rng: &mut Pcg64Mcg, s0: f64) -> Vec<(f64, f64, (f64, f64), Idm)> {
+    let mut background = Vec::new();
+    if rng.random_bool(0.6) {
+        let size = vehicle_size(rng);
+        let v = rng.random_range(25.0..28.0);
+        background.push((s0 + rng.random_range(60.0..110.0), v, size, idm(rng, v)));
+    }
+    if rng.random_bool(0.5) {
+        let size = vehicle_size(rng);
+        let v = rng.random_range(21.0..26.0);
+        background.push((
+            (s0 - rng.random_range(25.0..45.0)).max(-30.0),
+            v * 0.95,
+            size,
+            idm(rng, v),
+        ));
+    }
+    background
+}
+
 /// Draws the parameters of a merge scene.
 pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
     let lane_width_m = rng.random_range(3.4..3.9);
@@ -74,22 +96,7 @@ pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
     let merge_mid = merge_end_s - taper_m * 0.5;
     let tau_a = (merge_mid - a_s0) / a_v0;
     let b_s0 = (merge_mid - (tau_a - lead_s) * b_v0).max(5.0);
-    let mut background = Vec::new();
-    if rng.random_bool(0.6) {
-        let size = vehicle_size(rng);
-        let v = rng.random_range(25.0..28.0);
-        background.push((a_s0 + rng.random_range(60.0..110.0), v, size, idm(rng, v)));
-    }
-    if rng.random_bool(0.5) {
-        let size = vehicle_size(rng);
-        let v = rng.random_range(21.0..26.0);
-        background.push((
-            (a_s0 - rng.random_range(25.0..45.0)).max(-30.0),
-            v * 0.95,
-            size,
-            idm(rng, v),
-        ));
-    }
+    let background = main_lane_traffic(rng, a_s0);
     let n_agents = 2 + background.len();
     // Draw order is part of the data: keep it.
     let curvature = rng.random_range(-1.0 / 900.0..1.0 / 900.0);
