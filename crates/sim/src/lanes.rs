@@ -94,7 +94,7 @@ impl LaneSegments {
             .enumerate()
             .map(|(k, l)| (l.id, k))
             .collect();
-        let centre_lines = map
+        let centre_lines: Vec<Vec<[f64; 2]>> = map
             .lanes
             .iter()
             .map(|l| {
@@ -116,22 +116,21 @@ impl LaneSegments {
                     .collect()
             })
             .collect();
+        // Bike lanes have no centre line here, so no segments either.
+        let segments = centre_lines
+            .iter()
+            .enumerate()
+            .flat_map(|(k, line)| {
+                let last = line.len().saturating_sub(2);
+                line.windows(2)
+                    .enumerate()
+                    .map(move |(i, w)| (w[0], w[1], k, i == 0, i == last))
+            })
+            .collect();
         Self {
+            segments,
             centre_lines,
             exits,
-            segments: map
-                .lanes
-                .iter()
-                .enumerate()
-                .filter(|(_, l)| l.lane_type != LaneType::BikeLane)
-                .flat_map(|(k, l)| {
-                    let last = l.polyline.len().saturating_sub(2);
-                    l.polyline.windows(2).enumerate().map(move |(i, w)| {
-                        let (a, b) = ([w[0].x_m, w[0].y_m], [w[1].x_m, w[1].y_m]);
-                        (a, b, k, i == 0, i == last)
-                    })
-                })
-                .collect(),
         }
     }
 
@@ -319,27 +318,25 @@ impl LaneSegments {
         for t in from..plan.len() {
             let step_m = dist(raw[t - 1], raw[t]);
             s_m += step_m;
-            let to = if s_m <= route_end_m {
+            let beside = |s_m: f64| {
                 let (p, dir) = point_at(&route, s_m);
                 [p[0] - dir[1] * offset_m, p[1] + dir[0] * offset_m]
-            } else {
-                // No lane continues the route: the plan's own moves from its end.
-                let last = beyond.unwrap_or_else(|| {
-                    let (p, dir) = point_at(&route, route_end_m);
-                    let end = [p[0] - dir[1] * offset_m, p[1] + dir[0] * offset_m];
-                    let past = s_m - route_end_m;
-                    let d = [raw[t][0] - raw[t - 1][0], raw[t][1] - raw[t - 1][1]];
+            };
+            // Where no lane continues the route, the plan's own moves carry on from its end:
+            // the part of this step past the end, then whole steps.
+            let d = [raw[t][0] - raw[t - 1][0], raw[t][1] - raw[t - 1][1]];
+            let to = match beyond {
+                _ if s_m <= route_end_m => beside(s_m),
+                Some(last) => [last[0] + d[0], last[1] + d[1]],
+                None => {
+                    let end = beside(route_end_m);
                     let k = if step_m > 0.0 {
-                        (step_m - past) / step_m
+                        (s_m - route_end_m) / step_m
                     } else {
                         0.0
                     };
-                    [end[0] - k * d[0], end[1] - k * d[1]]
-                });
-                [
-                    last[0] + raw[t][0] - raw[t - 1][0],
-                    last[1] + raw[t][1] - raw[t - 1][1],
-                ]
+                    [end[0] + k * d[0], end[1] + k * d[1]]
+                }
             };
             if s_m > route_end_m {
                 beyond = Some(to);
