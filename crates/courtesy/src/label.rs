@@ -165,7 +165,7 @@ pub fn label_role(
         sampled.append(&mut baseline);
     }
     let moves: Vec<Vec<[f32; 2]>> = if options.lane_move_steps > 0 {
-        let path = scbg_features::lane_path_points(b);
+        let path = scbg_features::sample_lane_path(b);
         // A at the current step in B's frame, driving on at its current velocity: a move must
         // leave A room when it enters A's lane.
         let a_pose = &a.0.world_from_agent;

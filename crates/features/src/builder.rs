@@ -251,14 +251,14 @@ impl<'a> SampleBuilder<'a> {
             (frame.cos * vx + frame.sin * vy) as f32,
             (-frame.sin * vx + frame.cos * vy) as f32,
         ];
-        let (lane_path_xy_m, lane_path_valid) = if config.lane_path {
+        let (lane_path_xy_m, lane_path_valid, lane_path_beside) = if config.lane_path {
             self.lane_path(
                 &frame,
                 [track.x_m[now], track.y_m[now]],
                 track.heading_rad[now],
             )
         } else {
-            (Vec::new(), Vec::new())
+            (Vec::new(), Vec::new(), Vec::new())
         };
         let sample = AgentSample {
             scenario_id: scene.scenario_id.clone(),
@@ -281,6 +281,7 @@ impl<'a> SampleBuilder<'a> {
             current_velocity_mps,
             lane_path_xy_m,
             lane_path_valid,
+            lane_path_beside,
             condition_required: false,
         };
         Marginal {
@@ -346,31 +347,38 @@ impl<'a> SampleBuilder<'a> {
     }
 
     /// The lane path of a target at `xy` heading `heading_rad` (scene frame) in the target's
-    /// `frame`: `[LANE_PATH_POINTS, 2]` points (zeros where invalid) and their validity. The
-    /// scene's lane network is made on first use.
+    /// `frame`: `[LANE_PATH_POINTS, 2]` points (zeros where invalid), their validity and the
+    /// lanes beside each (`[left, right]`, false where invalid). The scene's lane network is
+    /// made on first use.
     fn lane_path(
         &mut self,
         frame: &AgentFrame,
         xy: [f32; 2],
         heading_rad: f32,
-    ) -> (Vec<f32>, Vec<bool>) {
-        let (mut points_xy_m, mut valid) = (
+    ) -> (Vec<f32>, Vec<bool>, Vec<[bool; 2]>) {
+        let (mut points_xy_m, mut valid, mut beside) = (
             vec![0.0; 2 * LANE_PATH_POINTS],
             vec![false; LANE_PATH_POINTS],
+            vec![[false; 2]; LANE_PATH_POINTS],
         );
         let scene = self.scene;
         let lanes = self
             .lanes
             .get_or_insert_with(|| LaneNetwork::new(&scene.road));
-        let path = lanes.path(
+        let Some(path) = lanes.path(
             xy,
             heading_rad,
             &mut self.lane_scratch,
             &mut self.candidates,
-        );
-        for (k, (p, v)) in path
-            .into_iter()
-            .flat_map(|(p, v)| p.into_iter().zip(v))
+        ) else {
+            return (points_xy_m, valid, beside);
+        };
+        let lanes_beside = lanes.beside(&path);
+        for (k, ((p, &v), b)) in path
+            .points
+            .iter()
+            .zip(&path.valid)
+            .zip(lanes_beside)
             .enumerate()
         {
             if v {
@@ -378,9 +386,10 @@ impl<'a> SampleBuilder<'a> {
                 points_xy_m[2 * k] = x;
                 points_xy_m[2 * k + 1] = y;
                 valid[k] = true;
+                beside[k] = b;
             }
         }
-        (points_xy_m, valid)
+        (points_xy_m, valid, beside)
     }
 
     /// The P closest road segments in the target frame, with their 27 features.

@@ -17,16 +17,30 @@ const LANE_LEAVING_M: f32 = 1.0;
 /// lane path (at a junction, onto another road) rather than changed lanes: no lane move.
 const LANE_MOVE_MAX_DRIFT_M: f32 = 5.0;
 
-/// The valid points of a sample's lane path ([`AgentSample::lane_path_xy_m`]),
-/// in its frame; empty when it has none.
-pub fn lane_path_points(sample: &AgentSample) -> Vec<[f32; 2]> {
-    sample
+/// A sample's lane path with the lanes beside it: what a lane move follows, and where it
+/// may end.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LanePath {
+    /// The valid points of [`AgentSample::lane_path_xy_m`], in the sample's frame.
+    pub points: Vec<[f32; 2]>,
+    /// Per point: whether a lane runs beside it, `[left, right]`
+    /// ([`AgentSample::lane_path_beside`]).
+    pub beside: Vec<[bool; 2]>,
+}
+
+/// The valid points of a sample's lane path ([`AgentSample::lane_path_xy_m`]) and the lanes
+/// beside them, in its frame; empty when it has none.
+pub fn sample_lane_path(sample: &AgentSample) -> LanePath {
+    let beside = |k: usize| sample.lane_path_beside.get(k).copied().unwrap_or_default();
+    let (points, beside) = sample
         .lane_path_xy_m
         .chunks_exact(2)
         .zip(&sample.lane_path_valid)
-        .filter(|(_, valid)| **valid)
-        .map(|(p, _)| [p[0], p[1]])
-        .collect()
+        .enumerate()
+        .filter(|(_, (_, valid))| **valid)
+        .map(|(k, (p, _))| ([p[0], p[1]], beside(k)))
+        .unzip();
+    LanePath { points, beside }
 }
 
 /// A mode that leaves its lane, with the move completed: each step keeps the mode's progress
@@ -38,11 +52,14 @@ pub fn lane_path_points(sample: &AgentSample) -> Vec<[f32; 2]> {
 /// moments, often ends half a lane over, where A still has B ahead. The
 /// offset is taken from the path, not from B's frame, so the copy follows the road's
 /// curvature. `None` when the mode keeps its lane (drifts less than 1 m), turns off it
-/// (drifts more than 5 m: a turn at a junction is not a lane change) or `path` has fewer than
-/// two points.
+/// (drifts more than 5 m: a turn at a junction is not a lane change), `path` has fewer than
+/// two points, or no lane runs beside the path on the mode's side from where the move is half
+/// done to where it is done (it would end on a gore, a shoulder or the verge). After that the
+/// copy keeps its offset from the path, as a driver keeps to the lane it changed into.
 ///
-/// `mode`: `[T]` positions in B's frame; `path`: the lane path in the same frame.
-pub fn lane_move(mode: &[[f32; 2]], path: &[[f32; 2]], steps: usize) -> Option<Vec<[f32; 2]>> {
+/// `mode`: `[T]` positions in B's frame; `lane`: the lane path in the same frame.
+pub fn lane_move(mode: &[[f32; 2]], lane: &LanePath, steps: usize) -> Option<Vec<[f32; 2]>> {
+    let path = &lane.points;
     if path.len() < 2 || mode.is_empty() {
         return None;
     }
@@ -92,8 +109,27 @@ pub fn lane_move(mode: &[[f32; 2]], path: &[[f32; 2]], steps: usize) -> Option<V
         return None;
     }
     let along: Vec<(f32, f32)> = mode.iter().map(|&p| project(p)).collect();
+    let side = usize::from(drift < 0.0);
+    let steps = steps.max(1);
+    // The path point nearest arc length `s`, and whether a lane runs beside it on that side.
+    let lane_beside = |s: f32| {
+        let i = segments
+            .iter()
+            .position(|seg| s < seg.3 + seg.2)
+            .unwrap_or(last);
+        let (_, _, len, s0) = segments[i];
+        let k = if s - s0 < 0.5 * len { i } else { i + 1 };
+        lane.beside.get(k).is_some_and(|b| b[side])
+    };
+    let done = steps.min(along.len());
+    if !along[(steps / 2).min(done - 1)..done]
+        .iter()
+        .all(|&(s, _)| lane_beside(s))
+    {
+        return None;
+    }
     let end = start + drift.signum() * drift.abs().max(LANE_MOVE_M);
-    let steps = steps.max(1) as f32;
+    let steps = steps as f32;
     Some(
         along
             .iter()
@@ -229,13 +265,16 @@ mod tests {
 
     /// A lane path curving left at 1/200 m⁻¹ (points every 5 m from 20 m behind), and the
     /// point `offset` metres left of it at arc length `s`.
-    fn curved_lane() -> (Vec<[f32; 2]>, impl Fn(f32, f32) -> [f32; 2]) {
+    fn curved_lane() -> (LanePath, impl Fn(f32, f32) -> [f32; 2]) {
         let kappa = 1.0f32 / 200.0;
         let at = move |s: f32, offset: f32| {
             let (r, a) = (1.0 / kappa - offset, s * kappa);
             [r * a.sin(), 1.0 / kappa - r * a.cos()]
         };
-        let path = (0..80).map(|k| at(k as f32 * 5.0 - 20.0, 0.0)).collect();
+        let path = LanePath {
+            points: (0..80).map(|k| at(k as f32 * 5.0 - 20.0, 0.0)).collect(),
+            beside: vec![[true, true]; 80],
+        };
         (path, at)
     }
 
@@ -326,6 +365,44 @@ mod tests {
         assert_eq!(lane_move(&keeping, &path, 30), None);
         let turning: Vec<[f32; 2]> = (0..80).map(|t| at(progress(t), -0.2 * t as f32)).collect();
         assert_eq!(lane_move(&turning, &path, 30), None);
-        assert_eq!(lane_move(&drifting, &path[..1], 30), None);
+        let one_point = LanePath {
+            points: path.points[..1].to_vec(),
+            beside: path.beside[..1].to_vec(),
+        };
+        assert_eq!(lane_move(&drifting, &one_point, 30), None);
+    }
+
+    /// A move ends on a lane: none toward a side without one, none where the lane beside ends
+    /// before the move is done, and one where the lane beside starts before it is half done.
+    #[test]
+    fn a_lane_move_needs_a_lane_beside_it() {
+        let (path, at) = curved_lane();
+        // 2 m per step: half done (step 15) at 32 m, done (step 30) at 60 m: path points 10
+        // and 16 (the path starts 20 m behind).
+        let progress = |t: usize| 2.0 * (t + 1) as f32;
+        let drifting = |side: f32| -> Vec<[f32; 2]> {
+            (0..80)
+                .map(|t| at(progress(t), side * 1.5 * ((t + 1) as f32 / 40.0).min(1.0)))
+                .collect()
+        };
+        let with_beside = |f: &dyn Fn(usize) -> [bool; 2]| LanePath {
+            points: path.points.clone(),
+            beside: (0..80).map(f).collect(),
+        };
+        // Only a lane on the left: the left drift moves, the right one does not.
+        let left_only = with_beside(&|_| [true, false]);
+        assert!(lane_move(&drifting(1.0), &left_only, 30).is_some());
+        assert_eq!(lane_move(&drifting(-1.0), &left_only, 30), None);
+        // The lane on the right ends at 50 m (point 14): an acceleration lane, a lane drop.
+        let ends = with_beside(&|k| [false, k <= 14]);
+        assert_eq!(lane_move(&drifting(-1.0), &ends, 30), None);
+        // Ending at 100 m (point 24), after the move is done, it takes the move.
+        let ends_later = with_beside(&|k| [false, k <= 24]);
+        assert!(lane_move(&drifting(-1.0), &ends_later, 30).is_some());
+        // ... or starts at 25 m (point 9) beyond a gore: the move ends on it.
+        let starts = with_beside(&|k| [false, k >= 9]);
+        assert!(lane_move(&drifting(-1.0), &starts, 30).is_some());
+        let later = with_beside(&|k| [false, k >= 12]);
+        assert_eq!(lane_move(&drifting(-1.0), &later, 30), None);
     }
 }

@@ -11,6 +11,7 @@
 //! geometric: the lane polyline whose first point lies within [`CONTINUATION_M`] of the
 //! current end, heading on within [`MAX_TURN_RAD`], the straightest first.
 
+use crate::lane_move::LANE_MOVE_M;
 use crate::prepared::{RoadKind, RoadPolyline};
 use crate::road_index::{Scratch, SegmentIndex};
 
@@ -69,6 +70,9 @@ pub(crate) struct LaneNetwork {
     /// Lane segments in lane order (segment `i` of the grid is `segment_of[i]`).
     grid: SegmentIndex,
     segment_of: Vec<(u32, u32)>,
+    /// Per lane point, once asked: the lanes beside it, `[left, right]`
+    /// ([`LaneNetwork::beside`]). Paths of a scene's targets share their lanes.
+    beside: Vec<Vec<Option<[bool; 2]>>>,
 }
 
 impl LaneNetwork {
@@ -141,6 +145,7 @@ impl LaneNetwork {
             .flat_map(|(l, pts)| (0..pts.len() - 1).map(move |s| (l as u32, s as u32)))
             .collect();
         Self {
+            beside: points.iter().map(|p| vec![None; p.len()]).collect(),
             points,
             arc_m,
             next,
@@ -157,7 +162,7 @@ impl LaneNetwork {
         heading_rad: f32,
         scratch: &mut Scratch,
         found: &mut Vec<(u32, f32)>,
-    ) -> Option<(Vec<[f32; 2]>, Vec<bool>)> {
+    ) -> Option<ScenePath> {
         let dir = [heading_rad.cos(), heading_rad.sin()];
         // The grid ranks by the closest point but admits by the nearer endpoint: ask a reach
         // of a segment length beyond the offset limit, then check the distance itself.
@@ -187,7 +192,8 @@ impl LaneNetwork {
         // Walk the chain of lanes once: `(lane, arc length of its first point on the chain)`.
         let mut chain = vec![(lane, 0.0f32)];
         let mut end = *arc.last().expect("two points");
-        let (mut points, mut valid) = (
+        let (mut points, mut valid, mut nearest) = (
+            Vec::with_capacity(LANE_PATH_POINTS),
             Vec::with_capacity(LANE_PATH_POINTS),
             Vec::with_capacity(LANE_PATH_POINTS),
         );
@@ -221,9 +227,69 @@ impl LaneNetwork {
             let d = sub(pts[k + 1], pts[k]);
             points.push([pts[k][0] + f * d[0], pts[k][1] + f * d[1]]);
             valid.push(s >= 0.0 && s <= end);
+            nearest.push((l as u32, (k + usize::from(f > 0.5)) as u32));
         }
-        Some((points, valid))
+        Some(ScenePath {
+            points,
+            valid,
+            nearest,
+        })
     }
+
+    /// Per point of `path`: whether a vehicle lane heading its way passes a lane's width
+    /// ([`LANE_MOVE_M`]) to its `[left, right]`, within [`NEIGHBOUR_TOLERANCE_M`] (lanes
+    /// 2.0–5.0 m apart count: every lane width in use) and [`MAX_TURN_RAD`]; asked at the lane
+    /// point nearest it. What a lane move needs to end on a lane, not on a gore, a shoulder or
+    /// the verge.
+    pub(crate) fn beside(&mut self, path: &ScenePath) -> Vec<[bool; 2]> {
+        path.nearest
+            .iter()
+            .enumerate()
+            .map(|(i, &(lane, k))| {
+                // Behind the target or past the lanes' ends: no lane move ends there.
+                if !path.valid[i] || lane_path_arc_m(i) < 0.0 {
+                    return [false, false];
+                }
+                let (lane, k) = (lane as usize, k as usize);
+                if let Some(b) = self.beside[lane][k] {
+                    return b;
+                }
+                let pts = &self.points[lane];
+                let d = sub(pts[(k + 1).min(pts.len() - 1)], pts[k.saturating_sub(1)]);
+                let len = norm(d);
+                let b = if len < 1e-6 {
+                    [false, false]
+                } else {
+                    let (dir, left) = ([d[0] / len, d[1] / len], [-d[1] / len, d[0] / len]);
+                    [1.0f32, -1.0].map(|side| {
+                        let at = [
+                            pts[k][0] + side * LANE_MOVE_M * left[0],
+                            pts[k][1] + side * LANE_MOVE_M * left[1],
+                        ];
+                        self.grid.any_within(at, NEIGHBOUR_TOLERANCE_M, |a, b| {
+                            let e = sub(b, a);
+                            norm(e) > 1e-6 && angle_between(e, dir) <= MAX_TURN_RAD
+                        })
+                    })
+                };
+                self.beside[lane][k] = Some(b);
+                b
+            })
+            .collect()
+    }
+}
+
+/// A neighbour lane's centre lies within this of a lane's width beside the path, metres.
+const NEIGHBOUR_TOLERANCE_M: f32 = 1.5;
+
+/// A lane path in the scene frame ([`LaneNetwork::path`]).
+pub(crate) struct ScenePath {
+    /// `[LANE_PATH_POINTS]` points.
+    pub(crate) points: Vec<[f32; 2]>,
+    /// Whether each lies on a known lane.
+    pub(crate) valid: Vec<bool>,
+    /// The lane point nearest each, `(lane, point)`.
+    nearest: Vec<(u32, u32)>,
 }
 
 /// The lane path of a target at `xy` (scene frame) heading `heading_rad`: `LANE_PATH_POINTS`
@@ -237,7 +303,9 @@ pub fn lane_path(
     xy: [f32; 2],
     heading_rad: f32,
 ) -> Option<(Vec<[f32; 2]>, Vec<bool>)> {
-    LaneNetwork::new(road).path(xy, heading_rad, &mut Scratch::default(), &mut Vec::new())
+    LaneNetwork::new(road)
+        .path(xy, heading_rad, &mut Scratch::default(), &mut Vec::new())
+        .map(|p| (p.points, p.valid))
 }
 
 #[cfg(test)]

@@ -31,7 +31,9 @@ mod window;
 pub use build::PrepareError;
 pub use builder::{SampleBuilder, extract_sample};
 pub use codec::DecodeError;
-pub use lane_move::{FollowerRoom, LANE_MOVE_M, lane_move, lane_path_points, leaves_room};
+pub use lane_move::{
+    FollowerRoom, LANE_MOVE_M, LanePath, lane_move, leaves_room, sample_lane_path,
+};
 pub use lane_path::{
     LANE_PATH_BEHIND_M, LANE_PATH_POINTS, LANE_PATH_SPACING_M, lane_path, lane_path_arc_m,
 };

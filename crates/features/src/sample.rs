@@ -96,6 +96,11 @@ pub struct AgentSample {
     /// `[LANE_PATH_POINTS]`: whether each point lies on a known lane; all false when the
     /// target is on no lane; empty unless [`FeatureConfig::lane_path`].
     pub lane_path_valid: Vec<bool>,
+    /// `[LANE_PATH_POINTS]`: whether a vehicle lane heading the path's way runs a lane's width
+    /// ([`LANE_MOVE_M`](crate::LANE_MOVE_M), within 1.5 m) to the `[left, right]` of each
+    /// valid path point (false where invalid): where a lane move may end. Empty unless
+    /// [`FeatureConfig::lane_path`].
+    pub lane_path_beside: Vec<[bool; 2]>,
     /// Training never drops this sample's condition: the target's future is a reaction to a
     /// condition that was imposed (a future of the other agent replayed in a simulator), not
     /// a draw of its own marginal behaviour, so it must not teach the marginal mode. False

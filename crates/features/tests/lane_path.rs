@@ -126,3 +126,77 @@ fn most_moving_real_vehicles_have_a_lane_path() {
     );
     assert!(moving > 100 && share > 0.8, "{with_path} of {moving}");
 }
+
+/// The lanes beside a path (`AgentSample::lane_path_beside`): on the cut-in's two-lane road A
+/// has B's lane on its right and none on its left; in a let-in scene B, on a one-lane main
+/// road, has no lane on its left, and on its right only the acceleration lane (where the ramp
+/// runs beside it), not the gore before it nor the road after the merge.
+#[test]
+fn the_lanes_beside_a_path_are_the_roads_own() {
+    let features = FeatureConfig {
+        lane_path: true,
+        ..Default::default()
+    };
+    let (mut cutins, mut letins) = (0, 0);
+    for index in 0..40 {
+        let g = scbg_synth::generate(11, index, &Family::ALL);
+        let p = PreparedScene::from_scene(
+            &g.scene,
+            &WindowConfig::default(),
+            &PairConfig::default(),
+            4,
+        )
+        .unwrap();
+        let w = p.windows[0];
+        let track = |id| p.tracks.iter().position(|t| t.id == id).unwrap();
+        let at_a = (LANE_PATH_BEHIND_M / LANE_PATH_SPACING_M) as usize;
+        let mut builder = SampleBuilder::new(&p, &features);
+        match g.truth.family {
+            Family::Cutin => {
+                let s = builder.sample(&w, track(g.truth.a_id), None).unwrap();
+                for k in at_a..at_a + 10 {
+                    assert_eq!(s.lane_path_beside[k], [false, true], "{}", p.scenario_id);
+                }
+                cutins += 1;
+            }
+            Family::Letin => {
+                let s = builder.sample(&w, track(g.truth.b_id), None).unwrap();
+                let valid: Vec<[bool; 2]> = (0..s.lane_path_valid.len())
+                    .filter(|&k| s.lane_path_valid[k])
+                    .map(|k| s.lane_path_beside[k])
+                    .collect();
+                assert!(valid.iter().all(|b| !b[0]), "{}", p.scenario_id);
+                // Right: one stretch (the acceleration lane and taper), none before or after.
+                let right: Vec<bool> = valid.iter().map(|b| b[1]).collect();
+                let first = right
+                    .iter()
+                    .position(|&r| r)
+                    .expect("the acceleration lane");
+                let after = first + right[first..].iter().take_while(|&&r| r).count();
+                assert!(
+                    first > 0 && after < right.len(),
+                    "{}: {right:?}",
+                    p.scenario_id
+                );
+                assert!(
+                    right[after..].iter().all(|&r| !r),
+                    "{}: {right:?}",
+                    p.scenario_id
+                );
+                // At least the 20 m acceleration lane, at most it with the taper (≤ 200 m).
+                let metres = (after - first) as f32 * LANE_PATH_SPACING_M;
+                assert!(
+                    (15.0..=200.0).contains(&metres),
+                    "{}: {metres} m",
+                    p.scenario_id
+                );
+                letins += 1;
+            }
+            _ => {}
+        }
+    }
+    assert!(
+        cutins >= 3 && letins >= 3,
+        "{cutins} cut-ins, {letins} let-ins"
+    );
+}

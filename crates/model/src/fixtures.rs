@@ -62,6 +62,7 @@ pub fn straight_sample(cfg: &FeatureConfig, with_condition: bool) -> AgentSample
             .flat_map(|k| [scbg_features::lane_path_arc_m(k), 0.0])
             .collect(),
         lane_path_valid: vec![true; scbg_features::LANE_PATH_POINTS],
+        lane_path_beside: vec![[false, false]; scbg_features::LANE_PATH_POINTS],
         condition_required: false,
     }
 }

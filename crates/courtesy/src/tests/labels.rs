@@ -107,7 +107,8 @@ fn lane_moves_of_the_sampled_futures_are_labelled_after_them() {
         })
         .collect();
     b.lane_path_valid = vec![true; 40];
-    let path = scbg_features::lane_path_points(&b);
+    b.lane_path_beside = vec![[true, true]; 40];
+    let path = scbg_features::sample_lane_path(&b);
     // Those that leave A room where they enter its lane (A driving on at its velocity).
     let a_now = change_frame(
         &[[0.0, 0.0], a.current_velocity_mps],
