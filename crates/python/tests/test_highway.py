@@ -48,6 +48,42 @@ def test_the_road_converts_to_scbg_frame_with_the_acceleration_lane_merging():
         ep.close()
 
 
+def test_b_changes_lanes_only_with_room_behind_it():
+    """The gap acceptance B follows its plans by: merge-v0's ramp car, on the acceleration lane,
+    may enter the right highway lane with nobody there near it, not with a car alongside it nor
+    with a faster car close behind it there (one that would have to brake over 7 m/s²)."""
+    highway = _highway()
+    ep = highway._Episode("merge-v0", 0)
+    try:
+        lanes = ep.road.network
+        accel, right = ("b", "c", 2), ("b", "c", 1)
+        b, other = ep.road.vehicles[0], ep.road.vehicles[1]
+        ep.road.vehicles[:] = [b, other]
+        ep.b = b
+
+        def place(v, lane, s_m, speed):
+            v.position = lanes.get_lane(lane).position(s_m, 0.0)
+            v.heading, v.speed = 0.0, speed
+            v.on_state_update()
+
+        place(b, accel, 30.0, 20.0)
+        # Aiming at the right lane ahead is a lane change into it; along its own lane, none.
+        assert highway._lane_change(ep, lanes.get_lane(right).position(40.0, 0.0)) == right
+        assert highway._lane_change(ep, lanes.get_lane(accel).position(40.0, 0.0)) is None
+        place(other, right, 0.0, 20.0)  # 30 m behind at B's speed
+        assert highway._room_to_enter(ep, right)
+        place(other, right, 28.0, 20.0)  # alongside
+        assert not highway._room_to_enter(ep, right)
+        place(other, right, 15.0, 30.0)  # 15 m behind, 10 m/s faster: needs 12.1 m of 10
+        assert not highway._room_to_enter(ep, right)
+        place(other, right, 10.0, 30.0)  # 20 m behind: 15 m of gap
+        assert highway._room_to_enter(ep, right)
+        place(other, accel, 15.0, 30.0)  # in B's own lane: not the lane it enters
+        assert highway._room_to_enter(ep, right)
+    finally:
+        ep.close()
+
+
 def test_an_episode_is_paired_and_deterministic(trained):
     highway = _highway()
     model, _ = trained

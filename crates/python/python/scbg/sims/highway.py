@@ -396,6 +396,13 @@ GUARD_GAP_M = 2.0  # jam distance
 GUARD_HEADWAY_S = 1.0
 GUARD_CORRIDOR_M = 2.2  # a car whose centre is this close to B's path ahead is in its way
 GUARD_LOOKAHEAD_M = 60.0
+# B's gap acceptance, the rule of scbg's own closed loop (and of the synthetic world's least
+# courteous B): B changes into a lane only when no car there is alongside it and the car behind
+# it there can stay behind braking at most GAP_BRAKE_MPS2 after GAP_REACTION_S; until then it
+# keeps to its lane at the plan's timing, behind the follow-distance guard.
+GAP_BRAKE_MPS2 = 7.0
+GAP_REACTION_S = 0.5
+GAP_REACH_M = 60.0  # cars farther than this from B are never in the way of its lane change
 # B's path tracker: pure pursuit of a point this far ahead along the plan, yaw rate bounded.
 TRACK_LOOKAHEAD_M = 4.0
 TRACK_LOOKAHEAD_S = 0.6
@@ -416,11 +423,12 @@ def _at(points, arc, s):
 
 
 def _leader_gap(ep, samples, s):
-    """Bumper-to-bumper gap (m) and speed of the nearest car in B's way along its path from arc
-    length ``s``, or (inf, 0). ``samples``: the path's points every metre of arc length."""
+    """Bumper-to-bumper gap (m) and speed of the nearest car or obstacle (merge-v0's wall at
+    the end of the acceleration lane) in B's way along its path from arc length ``s``, or
+    (inf, 0). ``samples``: the path's points every metre of arc length."""
     i0 = int(np.floor(s))
     pts = samples[i0:i0 + int(GUARD_LOOKAHEAD_M) + 1]
-    others = [v for v in ep.road.vehicles if v is not ep.b]
+    others = [v for v in list(ep.road.vehicles) + list(ep.road.objects) if v is not ep.b]
     if len(pts) == 0 or not others:
         return np.inf, 0.0
     xy = np.array([v.position for v in others])
@@ -431,6 +439,46 @@ def _leader_gap(ep, samples, s):
     first = np.where(hit, near.argmax(axis=1), np.iinfo(np.int64).max)
     j = int(first.argmin())
     return float(i0 + first[j] - s - LENGTH_M), float(others[j].speed)
+
+
+def _lane_change(ep, target):
+    """The lane B's pursuit of ``target`` changes into (a lane beside B's, on the same road
+    segment), or None while the target is in B's own lane or B turns onto another road."""
+    b = ep.b
+    here = ep.road.network.get_lane(b.lane_index)
+    s_m, lateral_m = here.local_coordinates(np.asarray(target, float))
+    if abs(lateral_m) <= 0.5 * here.width_at(s_m):
+        return None
+    to = ep.road.network.get_closest_lane_index(np.asarray(target, float), b.heading)
+    return to if to[:2] == b.lane_index[:2] and to != b.lane_index else None
+
+
+def _room_to_enter(ep, lane_index):
+    """Whether B may enter lane ``lane_index`` now (:data:`GAP_BRAKE_MPS2`): no car of that lane
+    alongside it, and the car behind it there can stay behind."""
+    b = ep.b
+    lane = ep.road.network.get_lane(lane_index)
+    s_b, _ = lane.local_coordinates(b.position)
+    for v in ep.road.vehicles:
+        if v is b or np.hypot(*(v.position - b.position)) > GAP_REACH_M:
+            continue
+        s_v, lateral_m = lane.local_coordinates(v.position)
+        if abs(lateral_m) > 0.5 * lane.width_at(s_v):
+            continue
+        ahead_m = s_b - s_v
+        if abs(ahead_m) < LENGTH_M:
+            return False
+        closing = float(v.speed - b.speed)
+        if ahead_m > 0.0 and closing > 0.0:
+            needed = closing * GAP_REACTION_S + closing * closing / (2.0 * GAP_BRAKE_MPS2)
+            if ahead_m - LENGTH_M < needed:
+                return False
+    return True
+
+
+def _lookahead(speed_mps):
+    """How far ahead of B's progress its path tracker aims, metres."""
+    return max(TRACK_LOOKAHEAD_M, speed_mps * TRACK_LOOKAHEAD_S)
 
 
 def _follow_plan(ep, model, quantile, stats):
@@ -464,7 +512,16 @@ def _follow_plan(ep, model, quantile, stats):
         k = min(state["k"] + 1, len(arc) - 1)
         planned = max(arc[k] - state["s"], 0.0) / dt  # the speed that keeps the plan's timing
         v = float(b.speed)
-        gap, v_lead = _leader_gap(ep, state["samples"], state["s"])
+        samples, s_guard, here = state["samples"], state["s"], None
+        into = _lane_change(ep, _at(path, arc, min(state["s"] + _lookahead(planned), arc[-1]))[0])
+        if into is not None and not _room_to_enter(ep, into):
+            # No room yet: on along B's own lane, the guard watching that lane.
+            here = ep.road.network.get_lane(b.lane_index)
+            s_here, _ = here.local_coordinates(b.position)
+            samples = np.array([here.position(s_here + i, 0.0) for i in range(int(GUARD_LOOKAHEAD_M) + 1)])
+            s_guard = 0.0
+            stats["b_held_steps"] += 1
+        gap, v_lead = _leader_gap(ep, samples, s_guard)
         if np.isfinite(gap):
             want = GUARD_GAP_M + v * GUARD_HEADWAY_S + v * (v - v_lead) / (
                 2.0 * np.sqrt(GUARD_ACC_MPS2 * GUARD_BRAKE_MPS2))
@@ -472,8 +529,12 @@ def _follow_plan(ep, model, quantile, stats):
             planned = min(planned, max(v + acc * dt, 0.0))
         state["s"] = min(state["s"] + planned * dt, arc[-1])
         # Pure pursuit of the path (a lane change is steered, not jumped): head for the path
-        # point a look-ahead beyond B's progress, turning at most TRACK_YAW_RATE.
-        target, _ = _at(path, arc, min(state["s"] + max(TRACK_LOOKAHEAD_M, planned * TRACK_LOOKAHEAD_S), arc[-1]))
+        # point a look-ahead beyond B's progress (B's own lane's while held), turning at most
+        # TRACK_YAW_RATE.
+        if here is None:
+            target, _ = _at(path, arc, min(state["s"] + _lookahead(planned), arc[-1]))
+        else:
+            target = here.position(s_here + _lookahead(planned), 0.0)
         d = target - b.position
         if np.hypot(*d) > 1e-3 and planned > 0.0:
             turn = (np.arctan2(d[1], d[0]) - b.heading + np.pi) % (2.0 * np.pi) - np.pi
@@ -517,7 +578,8 @@ def episode(model, scenario: str, seed: int, arm: dict, trace: list | None = Non
         ep.a, ep.b = pair
         if ep.a.crashed or ep.b.crashed:
             raise RuntimeError(f"{scenario} seed {seed}: A or B crashed before the takeover")
-        stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0}
+        stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0,
+                 "b_held_steps": 0}
         if arm["kind"] == "scbg":
             _follow_plan(ep, model, float(arm["quantile"]), stats)
         elif arm["kind"] == "yardstick":

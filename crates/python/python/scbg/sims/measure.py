@@ -76,11 +76,11 @@ def arm_name(arm):
 _MODEL = None
 
 
-def _load(model_dir):
+def _load(model_dir, policy="generator"):
     global _MODEL
     import scbg
 
-    _MODEL = scbg.Model(model_dir) if model_dir else None
+    _MODEL = scbg.Model(model_dir, policy=policy) if model_dir else None
 
 
 def run_seed(scenario, seed):
@@ -275,6 +275,9 @@ def main(argv=None):
     ap.add_argument("--episodes", type=int, default=30, help="seeds per scenario")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", default="out/sims")
+    ap.add_argument("--policy", choices=["generator", "ranked"], default="generator",
+                    help="how a courtesy becomes B's future: the learned generator, or sample "
+                    "and rank (B's sampled futures and their lane moves, ranked by ψ label)")
     args = ap.parse_args(argv)
     scenarios = args.scenarios or all_scenarios()
     for s in scenarios:
@@ -285,7 +288,8 @@ def main(argv=None):
     import multiprocessing
 
     ctx = multiprocessing.get_context("spawn")  # a fresh interpreter per worker: highway-env
-    with ProcessPoolExecutor(args.jobs, mp_context=ctx, initializer=_load, initargs=(args.model,)) as pool:
+    with ProcessPoolExecutor(args.jobs, mp_context=ctx, initializer=_load,
+                             initargs=(args.model, args.policy)) as pool:
         results = list(pool.map(run_seed, *zip(*tasks)))
     by_scenario = {s: [r for r in results if r["scenario"] == s] for s in scenarios}
     summaries = {s: summarise(v) for s, v in by_scenario.items()}
@@ -293,7 +297,8 @@ def main(argv=None):
     text = table(summaries, ys)
     seconds = time.time() - started
     with open(os.path.join(args.out, "results.json"), "w") as f:
-        json.dump({"model": args.model, "quantiles": QUANTILES, "seconds": seconds,
+        json.dump({"model": args.model, "policy": args.policy, "quantiles": QUANTILES,
+                   "seconds": seconds,
                    "yardsticks": ys, "summaries": summaries, "episodes": results}, f, indent=1)
     with open(os.path.join(args.out, "table.md"), "w") as f:
         f.write(text + "\n")
