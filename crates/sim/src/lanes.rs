@@ -79,6 +79,9 @@ pub struct LaneSegments {
     centre_lines: Vec<Vec<[f64; 2]>>,
     /// Each map lane's linked exit lanes (indices into the map's lanes).
     exits: Vec<Vec<usize>>,
+    /// Each car lane's bounding box `(min, max)` (empty for the others): a lane's route looks
+    /// for side-on successors only among lanes whose box comes within [`REACH_M`].
+    bounds: Vec<([f64; 2], [f64; 2])>,
 }
 
 /// `(start, end, lane index, first segment of its lane, last segment of its lane)`.
@@ -127,10 +130,25 @@ impl LaneSegments {
                     .map(move |(i, w)| (w[0], w[1], k, i == 0, i == last))
             })
             .collect();
+        let bounds = centre_lines
+            .iter()
+            .map(|line| {
+                line.iter().fold(
+                    ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+                    |(lo, hi), p| {
+                        (
+                            [lo[0].min(p[0]), lo[1].min(p[1])],
+                            [hi[0].max(p[0]), hi[1].max(p[1])],
+                        )
+                    },
+                )
+            })
+            .collect();
         Self {
             segments,
             centre_lines,
             exits,
+            bounds,
         }
     }
 
@@ -380,7 +398,12 @@ impl LaneSegments {
             .map(|k| (k, 0, self.centre_lines[k][0]))
             .collect();
         if next.is_empty() {
+            let near_end = |k: &usize| {
+                let (lo, hi) = self.bounds[*k];
+                (0..2).all(|d| end[d] >= lo[d] - REACH_M && end[d] <= hi[d] + REACH_M)
+            };
             next = lines()
+                .filter(near_end)
                 .filter_map(|k| {
                     let l = &self.centre_lines[k];
                     let (seg, q, ..) = project(l, end)?;
@@ -434,12 +457,16 @@ fn foot(a: [f64; 2], b: [f64; 2], p: [f64; 2], before_a_m: f64, past_b_m: f64) -
 /// `None` for fewer than two points.
 fn project(line: &[[f64; 2]], p: [f64; 2]) -> Option<(usize, [f64; 2], f64, f64)> {
     let mut best: Option<(f64, usize, [f64; 2], f64, f64)> = None;
+    let mut best_d2 = f64::INFINITY;
     let last = line.len().saturating_sub(2);
     for (i, w) in line.windows(2).enumerate() {
         let (a, b) = (w[0], w[1]);
         let (along, q) = foot(a, b, p, 0.0, if i == last { PAST_END_M } else { 0.0 });
-        let d = dist(p, q);
-        if best.is_none_or(|(bd, ..)| d < bd) {
+        // Squared distances rank the segments (a polyline has many; hypot is slow).
+        let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+        if best.is_none() || d2 < best_d2 {
+            best_d2 = d2;
+            let d = dist(p, q);
             let side = ((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])).signum();
             let past_m = dist(a, q) - dist(a, b);
             let (on_line, past_m) = if along > 1.0 && past_m > 0.0 {
@@ -486,8 +513,9 @@ fn plan_directions(plan: &[[f64; 2]]) -> Vec<Option<[f64; 2]>> {
     let mut last = None;
     for k in 0..n {
         let p = plan[k];
-        let behind = (0..k).rev().find(|&j| dist(plan[j], p) >= CHORD_M);
-        let ahead = (k + 1..n).find(|&j| dist(p, plan[j]) >= CHORD_M);
+        let far = |q: [f64; 2]| (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) >= CHORD_M * CHORD_M;
+        let behind = (0..k).rev().find(|&j| far(plan[j]));
+        let ahead = (k + 1..n).find(|&j| far(plan[j]));
         let direction = match (behind, ahead) {
             (None, None) => unit(plan[k.saturating_sub(1)], plan[(k + 1).min(n - 1)]),
             (b, a) => unit(plan[b.unwrap_or(k)], plan[a.unwrap_or(k)]),
