@@ -89,12 +89,15 @@ pub fn lane_move(mode: &[[f32; 2]], lane: &LanePath, steps: usize) -> Option<Vec
         }
         (best.1, best.2)
     };
-    let place = |s: f32, offset: f32| {
-        let i = segments
+    // The segment holding arc length `s` (the first or last beyond the path's ends).
+    let segment_at = |s: f32| {
+        segments
             .iter()
             .position(|seg| s < seg.3 + seg.2)
-            .unwrap_or(last);
-        let (a, t, _, s0) = segments[i];
+            .unwrap_or(last)
+    };
+    let place = |s: f32, offset: f32| {
+        let (a, t, _, s0) = segments[segment_at(s)];
         let u = s - s0;
         [
             a[0] + u * t[0] - offset * t[1],
@@ -113,10 +116,7 @@ pub fn lane_move(mode: &[[f32; 2]], lane: &LanePath, steps: usize) -> Option<Vec
     let steps = steps.max(1);
     // The path point nearest arc length `s`, and whether a lane runs beside it on that side.
     let lane_beside = |s: f32| {
-        let i = segments
-            .iter()
-            .position(|seg| s < seg.3 + seg.2)
-            .unwrap_or(last);
+        let i = segment_at(s);
         let (_, _, len, s0) = segments[i];
         let k = if s - s0 < 0.5 * len { i } else { i + 1 };
         lane.beside.get(k).is_some_and(|b| b[side])

@@ -385,9 +385,7 @@ impl SegmentIndex {
         scratch.found = found;
         scratch.seen = seen;
     }
-}
 
-impl SegmentIndex {
     /// Whether a segment passes within `radius_m` of `origin` (its closest point) for which
     /// `accept(a, b)` holds. A segment is listed in every cell its bounding box meets, so the
     /// cell holding its closest point is among those the square around `origin` meets; the

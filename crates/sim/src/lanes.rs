@@ -215,7 +215,7 @@ impl LaneSegments {
                     continue;
                 }
                 let u = along.clamp(0.0, 1.0);
-                let d2 = (p[0] - q[0]).powi(2) + (p[1] - q[1]).powi(2);
+                let d2 = dist2(q, *p);
                 if d2 < best.0 {
                     best = (d2, Some((q, lane)));
                 }
@@ -427,6 +427,11 @@ fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
     (b[0] - a[0]).hypot(b[1] - a[1])
 }
 
+/// The squared distance: what ranks many candidates (hypot is slow).
+fn dist2(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)
+}
+
 fn unit(a: [f64; 2], b: [f64; 2]) -> Option<[f64; 2]> {
     let len = dist(a, b);
     (len > 1e-9).then(|| [(b[0] - a[0]) / len, (b[1] - a[1]) / len])
@@ -462,8 +467,7 @@ fn project(line: &[[f64; 2]], p: [f64; 2]) -> Option<(usize, [f64; 2], f64, f64)
     for (i, w) in line.windows(2).enumerate() {
         let (a, b) = (w[0], w[1]);
         let (along, q) = foot(a, b, p, 0.0, if i == last { PAST_END_M } else { 0.0 });
-        // Squared distances rank the segments (a polyline has many; hypot is slow).
-        let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+        let d2 = dist2(p, q);
         if best.is_none() || d2 < best_d2 {
             best_d2 = d2;
             let d = dist(p, q);
@@ -513,9 +517,10 @@ fn plan_directions(plan: &[[f64; 2]]) -> Vec<Option<[f64; 2]>> {
     let mut last = None;
     for k in 0..n {
         let p = plan[k];
-        let far = |q: [f64; 2]| (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2) >= CHORD_M * CHORD_M;
-        let behind = (0..k).rev().find(|&j| far(plan[j]));
-        let ahead = (k + 1..n).find(|&j| far(plan[j]));
+        let behind = (0..k)
+            .rev()
+            .find(|&j| dist2(plan[j], p) >= CHORD_M * CHORD_M);
+        let ahead = (k + 1..n).find(|&j| dist2(p, plan[j]) >= CHORD_M * CHORD_M);
         let direction = match (behind, ahead) {
             (None, None) => unit(plan[k.saturating_sub(1)], plan[(k + 1).min(n - 1)]),
             (b, a) => unit(plan[b.unwrap_or(k)], plan[a.unwrap_or(k)]),

@@ -512,8 +512,11 @@ def _follow_plan(ep, model, quantile, stats):
         k = min(state["k"] + 1, len(arc) - 1)
         planned = max(arc[k] - state["s"], 0.0) / dt  # the speed that keeps the plan's timing
         v = float(b.speed)
+        def aim(speed_mps):  # the path point the tracker heads for from B's progress
+            return _at(path, arc, min(state["s"] + _lookahead(speed_mps), arc[-1]))[0]
+
         samples, s_guard, here = state["samples"], state["s"], None
-        into = _lane_change(ep, _at(path, arc, min(state["s"] + _lookahead(planned), arc[-1]))[0])
+        into = _lane_change(ep, aim(planned))
         if into is not None and not _room_to_enter(ep, into):
             # No room yet: on along B's own lane, the guard watching that lane.
             here = ep.road.network.get_lane(b.lane_index)
@@ -532,7 +535,7 @@ def _follow_plan(ep, model, quantile, stats):
         # point a look-ahead beyond B's progress (B's own lane's while held), turning at most
         # TRACK_YAW_RATE.
         if here is None:
-            target, _ = _at(path, arc, min(state["s"] + _lookahead(planned), arc[-1]))
+            target = aim(planned)
         else:
             target = here.position(s_here + _lookahead(planned), 0.0)
         d = target - b.position
