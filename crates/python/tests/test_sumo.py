@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from scbg import sims
 from scbg.sims import measure, sumo
 
 
@@ -66,8 +67,9 @@ def test_b_is_put_where_its_plan_says():
         start = np.array(history[-1]["B"][:2])
         plan = start + np.outer(np.arange(1, 81), [0.0, 1.2])  # 12 m/s north along the lane
         plan[1:, 0] += 0.6  # beside the lane centre from the second point on
+        follower = sumo._PlanFollower(plan, start)
         for j in range(3):
-            sumo._follow(traci, plan, j, start, history[-1]["B"])
+            follower.step(traci, j, history[-1]["B"], [])
             traci.simulationStep()
             history.append({"B": sumo.vehicle_state(traci, "B")})
             x, y, h, vx, vy = history[-1]["B"][:5]
@@ -76,6 +78,43 @@ def test_b_is_put_where_its_plan_says():
             assert math.hypot(vx, vy) == pytest.approx(float(np.hypot(*(plan[j] - (plan[j - 1] if j else start)))) / 0.1, rel=1e-6)
     finally:
         traci.close()
+
+
+def _row(x, y, heading, speed, length=4.8, width=1.9):
+    return (x, y, heading, speed * math.cos(heading), speed * math.sin(heading), length, width)
+
+
+def test_crossing_rule_holds_b_only_for_a_car_that_cannot_stop():
+    """B drives north along x = 0 towards a road along y = 20. A car on that road that can no
+    longer stop short of B's path holds B before the crossing; one far enough to stop, one that
+    has passed, one driving beside B, and any car once B could not stop in time, do not."""
+    path = np.column_stack([np.zeros(61), np.arange(61.0)])
+    arc = sims.arc_lengths(path)
+    b = _row(0.0, 0.0, math.pi / 2, 8.0)
+    # 13 m/s needs 6.5 + 12.1 m to stop: at 15 m before B's path it cannot.
+    near = _row(-15.0 - 3.85, 20.0, 0.0, 13.0)
+    hold = sims.crossing_hold_m(path, arc, 0.0, b, [near])
+    # B's centre stays where its box (half its length ahead) keeps clear of the car's half
+    # width, with the margin on both.
+    assert hold == pytest.approx(20.0 - 0.5 * (1.9 + 4.8) - 2 * sims.CROSS_MARGIN_M, abs=0.5)
+    assert sims.held_speed_mps(hold, 0.0, 0.1) == pytest.approx(math.sqrt(2 * sims.B_BRAKE_MPS2 * hold))
+    assert sims.held_speed_mps(hold, hold + 1.0, 0.1) == 0.0
+    far = _row(-40.0, 20.0, 0.0, 13.0)
+    passed = _row(8.0, 20.0, 0.0, 13.0)
+    beside = _row(3.5, 5.0, math.pi / 2, 13.0)
+    assert sims.crossing_hold_m(path, arc, 0.0, b, [far, passed, beside]) == math.inf
+    # A standing car in the way: it cannot stop short of a B already in its way, nor clear it.
+    assert sims.crossing_hold_m(path, arc, 0.0, b, [_row(0.0, 20.0, 0.0, 0.0)]) < 20.0
+    # B 3 m before the hold at 8 m/s needs 4 m to stop at its hardest: it goes on.
+    assert sims.crossing_hold_m(path, arc, hold - 3.0, b, [near]) == math.inf
+
+
+def test_scbg_b_waits_for_a_priority_car_it_would_hit(release):
+    """At the junction, the release model's least courteous B plans to drive into A's path at
+    seeds 9, 11 and 24: the crossing rule holds it, and it does not collide."""
+    for seed in (9, 11, 24):
+        r = sumo.episode(release, "sumo-4way", seed, {"kind": "scbg", "quantile": 0.1})
+        assert not r["b_collided"] and r["b_held_steps"] > 0, (seed, r)
 
 
 def test_scbg_b_stays_on_the_road_and_episodes_repeat(trained):

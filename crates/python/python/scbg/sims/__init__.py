@@ -2,6 +2,8 @@
 
 import math
 
+import numpy as np
+
 
 def check_arm(arm):
     """Raises ``ValueError`` unless ``arm`` is one of the arms every harness's ``episode`` takes:
@@ -32,3 +34,80 @@ def yardstick_value(yardstick, level):
     if not isinstance(low, (int, float)):
         raise ValueError(f"yardstick {yardstick['parameter']!r} has two settings only: 'low' and 'high'")
     return low + float(level) * (high - low)
+
+
+def arc_lengths(points):
+    """Cumulative arc length (m) at each point of a polyline ``[n, 2]``, from 0."""
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
+
+
+def point_at(points, arc, s):
+    """The point at arc length ``s`` of a polyline (``arc`` from :func:`arc_lengths`), and the
+    unit direction there (None on a segment of zero length)."""
+    i = int(np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(points) - 2))
+    seg = points[i + 1] - points[i]
+    length = float(np.hypot(*seg))
+    t = 0.0 if length < 1e-9 else float(np.clip((s - arc[i]) / length, 0.0, 1.0))
+    return points[i] + t * seg, (seg / length if length > 1e-9 else None)
+
+
+# B's gap acceptance where its path crosses another road (both harnesses), the rule the
+# highway-env harness applies to B's lane changes: B drives into a crossing car's way only if
+# that car can stop short of B braking at most CROSS_BRAKE_MPS2 after CROSS_REACTION_S, or has
+# passed; else B stops before the crossing and waits. A plan that forces its way in still makes
+# A brake hard; one that would leave A no room to stop is held. A crossing car's way is the
+# straight line along its heading.
+CROSS_BRAKE_MPS2 = 7.0
+CROSS_REACTION_S = 0.5
+CROSS_MARGIN_M = 0.5
+CROSS_LOOKAHEAD_M = 40.0  # along B's plan
+CROSS_REACH_M = 80.0  # along the crossing car's heading
+CROSS_MIN_SIN = 0.5  # paths meeting at 30° or more cross; shallower ones are lanes merging
+B_MAX_BRAKE_MPS2 = 8.0  # B holds only where it can stop before the crossing
+B_BRAKE_MPS2 = 4.0  # and brakes for it no harder than this while it has room
+
+
+def crossing_hold_m(path, arc, s_m, b_state, others):
+    """How far along B's path (arc length, from the path's start) B's centre may go: the first
+    place where its box would enter the way of a crossing car that can neither stop short nor
+    has passed, less :data:`CROSS_MARGIN_M`; ``inf`` where no such car is. ``path``/``arc``:
+    B's plan and its arc lengths; ``s_m``: B's progress along it; ``b_state`` and ``others``:
+    B's and the other cars' state rows ``[x, y, heading, vx, vy, length, width]`` now, in the
+    path's frame."""
+    length_b, width_b = b_state[5], b_state[6]
+    ahead = np.arange(s_m, min(s_m + CROSS_LOOKAHEAD_M, arc[-1]) + 1e-9, 0.5)
+    if len(ahead) < 2:
+        return math.inf
+    pts = np.column_stack([np.interp(ahead, arc, path[:, 0]), np.interp(ahead, arc, path[:, 1])])
+    dirs = np.diff(pts, axis=0)
+    dirs = np.vstack([dirs, dirs[-1:]]) / np.maximum(np.hypot(*np.vstack([dirs, dirs[-1:]]).T), 1e-9)[:, None]
+    hold = math.inf
+    for cx, cy, h, vx, vy, length_v, width_v in others:
+        u = np.array([math.cos(h), math.sin(h)])
+        rel = pts - np.array([cx, cy])
+        along = rel @ u
+        lateral = np.abs(rel[:, 0] * u[1] - rel[:, 1] * u[0])
+        crossing = np.abs(dirs[:, 0] * u[1] - dirs[:, 1] * u[0]) > CROSS_MIN_SIN
+        inside = crossing & (lateral < 0.5 * (width_v + length_b) + CROSS_MARGIN_M) & (along < CROSS_REACH_M)
+        if not inside.any():
+            continue
+        i = int(inside.argmax())
+        front_gap_m = along[i] - 0.5 * (length_v + width_b) - CROSS_MARGIN_M
+        if along[i] < -0.5 * (length_v + width_b) - CROSS_MARGIN_M:
+            continue  # it has passed
+        speed = math.hypot(vx, vy)
+        stop_m = speed * CROSS_REACTION_S + speed * speed / (2.0 * CROSS_BRAKE_MPS2)
+        if front_gap_m >= 0.0 and front_gap_m >= stop_m:
+            continue  # it can stop short of B
+        hold = min(hold, ahead[i] - CROSS_MARGIN_M)
+    v_b = math.hypot(b_state[3], b_state[4])
+    if hold - s_m < v_b * v_b / (2.0 * B_MAX_BRAKE_MPS2):
+        return math.inf  # too late to stop: B is committed
+    return hold
+
+
+def held_speed_mps(hold_m, s_m, step_s):
+    """The fastest B may drive over the next step and still stop before ``hold_m`` braking at
+    most :data:`B_BRAKE_MPS2`, from progress ``s_m`` (both along its path)."""
+    room = max(hold_m - s_m, 0.0)
+    return min(math.sqrt(2.0 * B_BRAKE_MPS2 * room), room / step_s)

@@ -32,7 +32,7 @@ import numpy as np
 
 import scbg
 
-from . import check_arm, yardstick_value
+from . import arc_lengths as _arc, check_arm, crossing_hold_m, held_speed_mps, point_at as _at, yardstick_value
 
 STEP_SECS = 0.1
 HISTORY_STEPS = 11  # 1.1 s, the current step included
@@ -173,6 +173,12 @@ def road_map(road, lane_type):
                         line = np.array([_flip(lane.position(t, lat * lane.width_at(t))) for t in s])
                         (edges if kind == LineType.CONTINUOUS_LINE else lines).append(line)
     return lanes, edges, lines, [lane_type] * len(lanes)
+
+
+def _row(v):
+    """A car's state row in highway-env's own frame: x, y, heading, vx, vy, length, width."""
+    h = float(v.heading)
+    return [v.position[0], v.position[1], h, v.speed * np.cos(h), v.speed * np.sin(h), LENGTH_M, WIDTH_M]
 
 
 def _state_row(v):
@@ -399,7 +405,8 @@ GUARD_LOOKAHEAD_M = 60.0
 # B's gap acceptance, the rule of scbg's own closed loop (and of the synthetic world's least
 # courteous B): B changes into a lane only when no car there is alongside it and the car behind
 # it there can stay behind braking at most GAP_BRAKE_MPS2 after GAP_REACTION_S; until then it
-# keeps to its lane at the plan's timing, behind the follow-distance guard.
+# keeps to its lane at the plan's timing, behind the follow-distance guard. Where its plan crosses
+# another road, the same rule holds it before the crossing (:func:`scbg.sims.crossing_hold_m`).
 GAP_BRAKE_MPS2 = 7.0
 GAP_REACTION_S = 0.5
 GAP_REACH_M = 60.0  # cars farther than this from B are never in the way of its lane change
@@ -407,19 +414,6 @@ GAP_REACH_M = 60.0  # cars farther than this from B are never in the way of its 
 TRACK_LOOKAHEAD_M = 4.0
 TRACK_LOOKAHEAD_S = 0.6
 TRACK_YAW_RATE = 0.8  # rad/s
-
-
-def _arc(points):
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
-
-
-def _at(points, arc, s):
-    """The point at arc length ``s`` of a polyline, and the unit direction there."""
-    i = int(np.clip(np.searchsorted(arc, s, side="right") - 1, 0, len(points) - 2))
-    seg = points[i + 1] - points[i]
-    length = float(np.hypot(*seg))
-    t = 0.0 if length < 1e-9 else float(np.clip((s - arc[i]) / length, 0.0, 1.0))
-    return points[i] + t * seg, (seg / length if length > 1e-9 else None)
 
 
 def _leader_gap(ep, samples, s):
@@ -530,6 +524,12 @@ def _follow_plan(ep, model, quantile, stats):
                 2.0 * np.sqrt(GUARD_ACC_MPS2 * GUARD_BRAKE_MPS2))
             acc = GUARD_ACC_MPS2 * (1.0 - (max(want, 0.0) / max(gap, 0.1)) ** 2)
             planned = min(planned, max(v + acc * dt, 0.0))
+        if here is None:  # where B's plan crosses another road, the crossing rule
+            others = [_row(u) for u in ep.road.vehicles if u is not b]
+            hold = crossing_hold_m(path, arc, state["s"], _row(b), others)
+            if np.isfinite(hold) and planned > held_speed_mps(hold, state["s"], dt):
+                planned = held_speed_mps(hold, state["s"], dt)
+                stats["b_held_steps"] += 1
         state["s"] = min(state["s"] + planned * dt, arc[-1])
         # Pure pursuit of the path (a lane change is steered, not jumped): head for the path
         # point a look-ahead beyond B's progress (B's own lane's while held), turning at most

@@ -54,7 +54,7 @@ from collections import deque
 
 import numpy as np
 
-from . import check_arm, yardstick_value
+from . import arc_lengths, check_arm, crossing_hold_m, held_speed_mps, point_at, yardstick_value
 
 SCENARIOS = {
     "sumo-onramp": "SUMO on-ramp: one-lane main road, acceleration lane; A merges from the "
@@ -481,22 +481,49 @@ def _set_yardstick(traci, scenario, level):
         traci.vehicle.setType("B", f"car_ignores_foes_{value:.2f}")
 
 
-def _follow(traci, plan, j, start_xy, b_state):
-    """Puts B at ``plan[j]`` for the next step. ``moveToXY`` with ``keepRoute=1`` maps the
-    planned centre's front bumper (half B's length ahead along its heading, SUMO's lane angle)
-    onto the nearest lane of B's route: SUMO's cars then see B on that lane where it is, and
-    the junction knows which way it goes. B's heading is its lane's, its speed the plan's over
-    the step. A point SUMO cannot map (over 100 m from B's route) leaves B to move on along its
-    lane at the plan's speed."""
-    target = plan[j]
-    prev = plan[j - 1] if j > 0 else start_xy
-    speed = float(np.hypot(*(target - prev))) / STEP_S
-    fx, fy = front_from_centre(target[0], target[1], b_state[2], b_state[5])
+def _put(traci, xy, speed_mps, b_state):
+    """Puts B's centre at ``xy`` for the next step, at ``speed_mps``. ``moveToXY`` with
+    ``keepRoute=1`` maps the front bumper (half B's length ahead along its heading, SUMO's lane
+    angle) onto the nearest lane of B's route: SUMO's cars then see B on that lane where it is,
+    and the junction knows which way it goes. A point SUMO cannot map (over 100 m from B's
+    route) leaves B to move on along its lane at that speed."""
+    fx, fy = front_from_centre(xy[0], xy[1], b_state[2], b_state[5])
     try:
         traci.vehicle.moveToXY("B", "", -1, fx, fy, traci.constants.INVALID_DOUBLE_VALUE, 1)
     except traci.TraCIException:
         pass
-    traci.vehicle.setSpeed("B", speed)
+    traci.vehicle.setSpeed("B", float(speed_mps))
+
+
+B_ACC_MPS2 = 2.6  # catching up with a plan after a hold: SUMO's car type's accel
+
+
+class _PlanFollower:
+    """B along its current plan: at the plan's point of each step, as long as the crossing rule
+    (:func:`crossing_hold_m`) lets it; held, it brakes to stop before the crossing, and after a
+    hold it catches up with the plan's timing at :data:`B_ACC_MPS2` until the next plan."""
+
+    def __init__(self, plan, start_xy):
+        self.path = np.vstack([start_xy, plan])
+        self.arc = arc_lengths(self.path)
+        self.s_m = 0.0
+        self.held_steps = 0
+
+    def step(self, traci, j, b_state, others):
+        due = self.arc[j + 1]
+        v_b = math.hypot(b_state[3], b_state[4])
+        speed = max(due - self.s_m, 0.0) / STEP_S
+        if self.s_m < self.arc[j] - 1e-6:  # behind the plan's timing after a hold
+            speed = min(speed, v_b + B_ACC_MPS2 * STEP_S)
+        hold = crossing_hold_m(self.path, self.arc, self.s_m, b_state, others)
+        if math.isfinite(hold):
+            limit = held_speed_mps(hold, self.s_m, STEP_S)
+            if speed > limit:
+                speed = limit
+                self.held_steps += 1
+        self.s_m += speed * STEP_S
+        xy = self.path[j + 1] if abs(self.s_m - due) < 1e-9 else point_at(self.path, self.arc, self.s_m)[0]
+        _put(traci, xy, speed, b_state)
 
 
 def episode(model, scenario: str, seed: int, arm: dict, net_folder: str | None = None,
@@ -543,18 +570,22 @@ def episode(model, scenario: str, seed: int, arm: dict, net_folder: str | None =
             traci.vehicle.setLaneChangeMode("B", 0)
         a_speeds, b_xy, plan_points, plan_on_road = [], [], 0, 0
         collided = False
-        plan, plan_k, plan_start = None, 0, None
+        plan, plan_k, follower, held_steps = None, 0, None, 0
         for k in range(FUTURE_STEPS):
             if scbg_arm:
                 if k % replan_every == 0:
                     scene, a_num, b_num = scene_from_history(scenario, history, "A", "B", rmap)
                     plan = np.asarray(model.generate(scene, a_num, b_num,
                                                      quantile=float(arm["quantile"]))["world_xy_m"])
-                    plan_k, plan_start = k, np.array(history[-1]["B"][:2])
+                    plan_k = k
+                    if follower is not None:
+                        held_steps += follower.held_steps
+                    follower = _PlanFollower(plan, np.array(history[-1]["B"][:2]))
                     within = plan[: FUTURE_STEPS - k]
                     plan_points += len(within)
                     plan_on_road += int(rmap.on_road(within).sum())
-                _follow(traci, plan, k - plan_k, plan_start, history[-1]["B"])
+                now = history[-1]
+                follower.step(traci, k - plan_k, now["B"], [st for v, st in now.items() if v != "B"])
             traci.simulationStep()
             frame = {v: vehicle_state(traci, v) for v in traci.vehicle.getIDList()}
             history.append(frame)
@@ -580,6 +611,7 @@ def episode(model, scenario: str, seed: int, arm: dict, net_folder: str | None =
             "a_id": "A",
             "b_id": "B",
             "t0_s": float(t0),
+            "b_held_steps": held_steps + (follower.held_steps if follower is not None else 0),
         }
     finally:
         traci.close()
