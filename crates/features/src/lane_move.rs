@@ -54,8 +54,10 @@ pub fn sample_lane_path(sample: &AgentSample) -> LanePath {
 /// curvature. `None` when the mode keeps its lane (drifts less than 1 m), turns off it
 /// (drifts more than 5 m: a turn at a junction is not a lane change), `path` has fewer than
 /// two points, or no lane runs beside the path on the mode's side from where the move is half
-/// done to where it is done (it would end on a gore, a shoulder or the verge). After that the
-/// copy keeps its offset from the path, as a driver keeps to the lane it changed into.
+/// done to the mode's last point (it would end on a gore, a shoulder or the verge, or on a lane
+/// that ends within the horizon, an acceleration lane or a lane drop, which the copy would
+/// leave off the road). After that the copy keeps its offset from the path, as a driver keeps
+/// to the lane it changed into.
 ///
 /// `mode`: `[T]` positions in B's frame; `lane`: the lane path in the same frame.
 pub fn lane_move(mode: &[[f32; 2]], lane: &LanePath, steps: usize) -> Option<Vec<[f32; 2]>> {
@@ -122,7 +124,7 @@ pub fn lane_move(mode: &[[f32; 2]], lane: &LanePath, steps: usize) -> Option<Vec
         lane.beside.get(k).is_some_and(|b| b[side])
     };
     let done = steps.min(along.len());
-    if !along[(steps / 2).min(done - 1)..done]
+    if !along[(steps / 2).min(done - 1)..]
         .iter()
         .all(|&(s, _)| lane_beside(s))
     {
@@ -373,7 +375,7 @@ mod tests {
     }
 
     /// A move ends on a lane: none toward a side without one, none where the lane beside ends
-    /// before the move is done, and one where the lane beside starts before it is half done.
+    /// within the horizon, and one where the lane beside starts before it is half done.
     #[test]
     fn a_lane_move_needs_a_lane_beside_it() {
         let (path, at) = curved_lane();
@@ -396,9 +398,15 @@ mod tests {
         // The lane on the right ends at 50 m (point 14): an acceleration lane, a lane drop.
         let ends = with_beside(&|k| [false, k <= 14]);
         assert_eq!(lane_move(&drifting(-1.0), &ends, 30), None);
-        // Ending at 100 m (point 24), after the move is done, it takes the move.
+        // Ending at 100 m (point 24), after the move is done but before the mode's last point
+        // (160 m, point 36): the copy would run on off its end.
         let ends_later = with_beside(&|k| [false, k <= 24]);
-        assert!(lane_move(&drifting(-1.0), &ends_later, 30).is_some());
+        assert_eq!(lane_move(&drifting(-1.0), &ends_later, 30), None);
+        // Running to the horizon, it takes the move.
+        let to_horizon = with_beside(&|k| [false, k <= 36]);
+        assert!(lane_move(&drifting(-1.0), &to_horizon, 30).is_some());
+        let short = with_beside(&|k| [false, k <= 35]);
+        assert_eq!(lane_move(&drifting(-1.0), &short, 30), None);
         // ... or starts at 25 m (point 9) beyond a gore: the move ends on it.
         let starts = with_beside(&|k| [false, k >= 9]);
         assert!(lane_move(&drifting(-1.0), &starts, 30).is_some());
