@@ -461,15 +461,14 @@ fn foot(a: [f64; 2], b: [f64; 2], p: [f64; 2], before_a_m: f64, past_b_m: f64) -
 /// line's way positive) and how far past the polyline's end it lies (m, 0 on the polyline);
 /// `None` for fewer than two points.
 fn project(line: &[[f64; 2]], p: [f64; 2]) -> Option<(usize, [f64; 2], f64, f64)> {
+    // (squared distance, segment, point, offset, past the end)
     let mut best: Option<(f64, usize, [f64; 2], f64, f64)> = None;
-    let mut best_d2 = f64::INFINITY;
     let last = line.len().saturating_sub(2);
     for (i, w) in line.windows(2).enumerate() {
         let (a, b) = (w[0], w[1]);
         let (along, q) = foot(a, b, p, 0.0, if i == last { PAST_END_M } else { 0.0 });
         let d2 = dist2(p, q);
-        if best.is_none() || d2 < best_d2 {
-            best_d2 = d2;
+        if best.is_none_or(|(bd2, ..)| d2 < bd2) {
             let d = dist(p, q);
             let side = ((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])).signum();
             let past_m = dist(a, q) - dist(a, b);
@@ -478,7 +477,7 @@ fn project(line: &[[f64; 2]], p: [f64; 2]) -> Option<(usize, [f64; 2], f64, f64)
             } else {
                 (q, 0.0)
             };
-            best = Some((d, i, on_line, side * d, past_m));
+            best = Some((d2, i, on_line, side * d, past_m));
         }
     }
     best.map(|(_, i, q, offset, past_m)| (i, q, offset, past_m))

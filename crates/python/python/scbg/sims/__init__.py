@@ -79,8 +79,9 @@ def crossing_hold_m(path, arc, s_m, b_state, others):
     if len(ahead) < 2:
         return math.inf
     pts = np.column_stack([np.interp(ahead, arc, path[:, 0]), np.interp(ahead, arc, path[:, 1])])
-    dirs = np.diff(pts, axis=0)
-    dirs = np.vstack([dirs, dirs[-1:]]) / np.maximum(np.hypot(*np.vstack([dirs, dirs[-1:]]).T), 1e-9)[:, None]
+    steps = np.diff(pts, axis=0)
+    steps = np.vstack([steps, steps[-1:]])
+    dirs = steps / np.maximum(np.hypot(*steps.T), 1e-9)[:, None]
     hold = math.inf
     for cx, cy, h, vx, vy, length_v, width_v in others:
         u = np.array([math.cos(h), math.sin(h)])
@@ -92,8 +93,9 @@ def crossing_hold_m(path, arc, s_m, b_state, others):
         if not inside.any():
             continue
         i = int(inside.argmax())
-        front_gap_m = along[i] - 0.5 * (length_v + width_b) - CROSS_MARGIN_M
-        if along[i] < -0.5 * (length_v + width_b) - CROSS_MARGIN_M:
+        clear_m = 0.5 * (length_v + width_b) + CROSS_MARGIN_M  # its centre to B's side, clear
+        front_gap_m = along[i] - clear_m
+        if along[i] < -clear_m:
             continue  # it has passed
         speed = math.hypot(vx, vy)
         stop_m = speed * CROSS_REACTION_S + speed * speed / (2.0 * CROSS_BRAKE_MPS2)

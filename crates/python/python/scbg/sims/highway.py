@@ -182,9 +182,9 @@ def _row(v):
 
 
 def _state_row(v):
-    x, y = _flip(v.position)
-    h = -float(v.heading)
-    return [x, y, h, v.speed * np.cos(h), v.speed * np.sin(h), LENGTH_M, WIDTH_M]
+    """:func:`_row` in scbg's frame (y and headings flipped)."""
+    x, y, h, vx, vy, length, width = _row(v)
+    return [x, -y, -h, vx, -vy, length, width]
 
 
 def on_road(road, xy_highway):
@@ -527,8 +527,9 @@ def _follow_plan(ep, model, quantile, stats):
         if here is None:  # where B's plan crosses another road, the crossing rule
             others = [_row(u) for u in ep.road.vehicles if u is not b]
             hold = crossing_hold_m(path, arc, state["s"], _row(b), others)
-            if np.isfinite(hold) and planned > held_speed_mps(hold, state["s"], dt):
-                planned = held_speed_mps(hold, state["s"], dt)
+            limit = held_speed_mps(hold, state["s"], dt) if np.isfinite(hold) else np.inf
+            if planned > limit:
+                planned = limit
                 stats["b_held_steps"] += 1
         state["s"] = min(state["s"] + planned * dt, arc[-1])
         # Pure pursuit of the path (a lane change is steered, not jumped): head for the path

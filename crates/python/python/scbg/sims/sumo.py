@@ -507,9 +507,10 @@ class _PlanFollower:
         self.path = np.vstack([start_xy, plan])
         self.arc = arc_lengths(self.path)
         self.s_m = 0.0
-        self.held_steps = 0
 
-    def step(self, traci, j, b_state, others):
+    def step(self, traci, j, b_state, others) -> bool:
+        """Puts B at its place on the plan's step ``j``; whether the crossing rule held it."""
+        held = False
         due = self.arc[j + 1]
         v_b = math.hypot(b_state[3], b_state[4])
         speed = max(due - self.s_m, 0.0) / STEP_S
@@ -519,11 +520,11 @@ class _PlanFollower:
         if math.isfinite(hold):
             limit = held_speed_mps(hold, self.s_m, STEP_S)
             if speed > limit:
-                speed = limit
-                self.held_steps += 1
+                speed, held = limit, True
         self.s_m += speed * STEP_S
         xy = self.path[j + 1] if abs(self.s_m - due) < 1e-9 else point_at(self.path, self.arc, self.s_m)[0]
         _put(traci, xy, speed, b_state)
+        return held
 
 
 def episode(model, scenario: str, seed: int, arm: dict, net_folder: str | None = None,
@@ -578,14 +579,13 @@ def episode(model, scenario: str, seed: int, arm: dict, net_folder: str | None =
                     plan = np.asarray(model.generate(scene, a_num, b_num,
                                                      quantile=float(arm["quantile"]))["world_xy_m"])
                     plan_k = k
-                    if follower is not None:
-                        held_steps += follower.held_steps
                     follower = _PlanFollower(plan, np.array(history[-1]["B"][:2]))
                     within = plan[: FUTURE_STEPS - k]
                     plan_points += len(within)
                     plan_on_road += int(rmap.on_road(within).sum())
                 now = history[-1]
-                follower.step(traci, k - plan_k, now["B"], [st for v, st in now.items() if v != "B"])
+                held_steps += follower.step(traci, k - plan_k, now["B"],
+                                            [st for v, st in now.items() if v != "B"])
             traci.simulationStep()
             frame = {v: vehicle_state(traci, v) for v in traci.vehicle.getIDList()}
             history.append(frame)
@@ -611,7 +611,7 @@ def episode(model, scenario: str, seed: int, arm: dict, net_folder: str | None =
             "a_id": "A",
             "b_id": "B",
             "t0_s": float(t0),
-            "b_held_steps": held_steps + (follower.held_steps if follower is not None else 0),
+            "b_held_steps": held_steps,
         }
     finally:
         traci.close()
