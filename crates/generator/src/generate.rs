@@ -33,6 +33,11 @@ impl PairContext {
     pub fn range(&self) -> (f32, f32) {
         (self.low, self.high)
     }
+
+    /// [`PlanBasis::drop_candidates`] on the context's basis.
+    pub fn drop_candidates(&mut self, leaves: impl Fn(&[[f64; 2]]) -> bool) -> usize {
+        self.basis.drop_candidates(leaves)
+    }
 }
 
 /// A change made to each chosen world-frame future before J_φ measures it

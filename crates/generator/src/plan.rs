@@ -54,6 +54,44 @@ impl PlanBasis {
             Basis::Ranked { .. } => None,
         }
     }
+
+    /// Takes sample and rank's candidates that `leaves` rejects (given each candidate's
+    /// world-frame future) out of the choice: their labels become NaN, which no request
+    /// chooses, and the ranks of a quantile count the rest. A front end that knows the road
+    /// passes "leaves the road" here. When `leaves` would reject every candidate, none is
+    /// taken out. Returns how many were; the generator's basis has no candidates to take
+    /// out (0).
+    pub fn drop_candidates(&mut self, leaves: impl Fn(&[[f64; 2]]) -> bool) -> usize {
+        let Basis::Ranked {
+            psi,
+            futures_in_a,
+            a_pose,
+            b_pose,
+        } = &mut self.0
+        else {
+            return 0;
+        };
+        // Each candidate as the choice gives it ([`Scbg::choose`], [`Scbg::plan_from`]).
+        let world =
+            |k: usize| world_xy(b_pose, &change_frame(&futures_in_a[1 + k], a_pose, b_pose));
+        let dropped: Vec<bool> = psi
+            .iter()
+            .enumerate()
+            .map(|(k, v)| !v.is_nan() && leaves(&world(k)))
+            .collect();
+        let left = psi
+            .iter()
+            .zip(&dropped)
+            .filter(|(v, d)| !v.is_nan() && !**d)
+            .count();
+        if left == 0 {
+            return 0;
+        }
+        for (v, _) in psi.iter_mut().zip(&dropped).filter(|(_, d)| **d) {
+            *v = f32::NAN;
+        }
+        dropped.iter().filter(|d| **d).count()
+    }
 }
 
 /// B's futures (B's frame) for requested courtesies, and the ψ each stands for

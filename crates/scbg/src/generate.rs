@@ -122,6 +122,39 @@ fn prepare(scene: &Scene) -> anyhow::Result<scbg_features::PreparedScene> {
     Ok(prepared)
 }
 
+/// Whether a world-frame future of B leaves `scene`'s road: a point beyond the map's road
+/// edge (WOSAC's off-road rule, which the closed loop counts), at B's height now. `None` for a
+/// map without road edges.
+fn road_leaver(scene: &Scene, b: i64) -> Option<impl Fn(&[[f64; 2]]) -> bool> {
+    let edges = scbg_metrics::wosac::RoadEdges::new(&scene.map)?;
+    let z = scene.track_index(b).map_or(0.0, |i| {
+        scene.tracks[i].states[scene.current_step].z_m as f32
+    });
+    let scratch = std::cell::RefCell::new(Vec::new());
+    Some(move |future: &[[f64; 2]]| {
+        future.iter().any(|p| {
+            edges.signed_distance([p[0] as f32, p[1] as f32, z], &mut scratch.borrow_mut()) > 0.0
+        })
+    })
+}
+
+/// With sample and rank, takes B's candidates that leave the road ([`road_leaver`]) out of
+/// its choice ([`scbg_generator::PlanBasis::drop_candidates`]). A predictor's sample now and
+/// then drifts across a gore or off a lane's end, and ranked by J_φ alone it can be the one a
+/// quantile takes. The learned generator chooses otherwise, and maps without road edges take
+/// nothing out.
+fn drop_off_road(
+    model: &LoadedScbg,
+    scene: &Scene,
+    b: i64,
+    drop: impl FnOnce(&dyn Fn(&[[f64; 2]]) -> bool) -> usize,
+) -> usize {
+    if model.scbg.policy != scbg_generator::Policy::Ranked {
+        return 0;
+    }
+    road_leaver(scene, b).map_or(0, |leaves| drop(&leaves))
+}
+
 /// The context every generation for (scene, A, B) shares: the generator's (samples, B's
 /// embedding, E[r(Y_A) | x], the predicted range) and the scene's lane segments that keep each
 /// future in lane. Keep it to generate at many courtesies cheaply ([`generate_in`]).
@@ -140,10 +173,11 @@ pub fn pair_context(
 ) -> anyhow::Result<PairContext> {
     let prepared = prepare(scene)?;
     let window = &prepared.windows[0];
-    let generator = model
+    let mut generator = model
         .scbg
         .pair_context(&prepared, window, a, b, &model.device)
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
+    drop_off_road(model, scene, b, |leaves| generator.drop_candidates(leaves));
     Ok(PairContext {
         generator,
         lanes: scbg_sim::lanes::LaneSegments::new(&scene.map),
@@ -206,12 +240,7 @@ pub fn plan(
     b: i64,
     courtesy: Courtesy,
 ) -> anyhow::Result<Vec<[f64; 2]>> {
-    let prepared = prepare(scene)?;
-    let window = &prepared.windows[0];
-    model
-        .scbg
-        .plan(&prepared, window, a, b, courtesy.get(), &model.device)
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+    plan_from(model, &plan_basis(model, scene, a, b)?, courtesy)
 }
 
 /// The courtesy-free part of [`plan`] (`scbg_generator::Scbg::plan_basis`).
@@ -223,10 +252,12 @@ pub fn plan_basis(
 ) -> anyhow::Result<scbg_generator::PlanBasis> {
     let prepared = prepare(scene)?;
     let window = &prepared.windows[0];
-    model
+    let mut basis = model
         .scbg
         .plan_basis(&prepared, window, a, b, &model.device)
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
+    drop_off_road(model, scene, b, |leaves| basis.drop_candidates(leaves));
+    Ok(basis)
 }
 
 /// [`plan`] from its [`plan_basis`]: the same future.
@@ -302,4 +333,43 @@ pub fn render_generation(scene: &Scene, generation: &Generation, png: &Path) -> 
         },
     )?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use scbg_scene::{Map, MapPoint, RoadEdge, RoadEdgeType};
+
+    #[test]
+    fn a_future_beyond_the_road_edge_leaves_the_road() {
+        let edge = |y_m: f64, forward: bool| RoadEdge {
+            id: 1,
+            edge_type: RoadEdgeType::Boundary,
+            polyline: (0..=10)
+                .map(|k| {
+                    let x_m = 10.0 * f64::from(if forward { k } else { 10 - k });
+                    MapPoint { x_m, y_m, z_m: 0.0 }
+                })
+                .collect(),
+        };
+        // A road between y = −4 and y = 4 (WOMD's side convention: the road on each edge's left).
+        let scene = Scene {
+            map: Map {
+                road_edges: vec![edge(-4.0, true), edge(4.0, false)],
+                ..Default::default()
+            },
+            ..Default::default()
+        };
+        let leaves = road_leaver(&scene, 2).unwrap();
+        let along =
+            |y: f64| -> Vec<[f64; 2]> { (0..8).map(|k| [10.0 * f64::from(k), y]).collect() };
+        assert!(!leaves(&along(0.0)));
+        assert!(!leaves(&along(3.5)));
+        assert!(leaves(&along(4.5)));
+        let mut drifting = along(0.0);
+        drifting[7][1] = -5.0;
+        assert!(leaves(&drifting));
+        // No road edges: nothing to leave.
+        assert!(road_leaver(&Scene::default(), 2).is_none());
+    }
 }

@@ -185,3 +185,52 @@ fn the_ranked_policy_picks_sampled_futures_by_their_labels() {
         Err(GenerateError::NoCandidates(0))
     ));
 }
+
+#[test]
+fn candidates_taken_out_are_never_chosen() {
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let device = Device::flex();
+    device.seed(14);
+    let scenes = scenes(2);
+    let scene = &scenes[0];
+    let (scbg, a_id, b_id) = untrained_scbg(&scenes, 6, crate::Policy::Ranked, &device);
+    let window = &scene.windows[0];
+    let basis = scbg.plan_basis(scene, window, a_id, b_id, &device).unwrap();
+    let quantiles = [0.0, 0.2, 0.4, 0.6, 0.8, 1.0];
+    let plans: Vec<Vec<[f64; 2]>> = quantiles
+        .iter()
+        .map(|&q| {
+            scbg.plan_from(&basis, Courtesy::Quantile(q), &device)
+                .unwrap()
+        })
+        .collect();
+    // Take out the most courteous candidate: the other five remain, in the same order, and the
+    // top quantile takes the next one.
+    let top = plans[5].clone();
+    let mut fewer = basis.clone();
+    assert_eq!(fewer.drop_candidates(|f| f == top.as_slice()), 1);
+    let after: Vec<Vec<[f64; 2]>> = quantiles
+        .iter()
+        .map(|&q| {
+            scbg.plan_from(&fewer, Courtesy::Quantile(q), &device)
+                .unwrap()
+        })
+        .collect();
+    assert!(after.iter().all(|p| *p != top));
+    assert_eq!(after[5], plans[4]);
+    assert_eq!(after[0], plans[0]);
+    // Taking out every candidate would leave nothing to choose: none is taken out.
+    let mut all = basis.clone();
+    assert_eq!(all.drop_candidates(|_| true), 0);
+    assert_eq!(
+        scbg.plan_from(&all, Courtesy::Quantile(1.0), &device)
+            .unwrap(),
+        top
+    );
+    // The generator's basis has no candidates to take out.
+    let (generator, _, _) = untrained_scbg(&scenes, 3, crate::Policy::Generator, &device);
+    let mut g = generator
+        .plan_basis(scene, window, a_id, b_id, &device)
+        .unwrap();
+    assert_eq!(g.drop_candidates(|_| true), 0);
+}
