@@ -14,25 +14,29 @@ pub(crate) fn ranked_policy_in_the_loop(
     use scbg::sim::{self, ControlledAgent, SimConfig};
     model.scbg.policy = scbg::choices::Policy::Ranked;
     let quantiles = [0.0, 1.0].map(|q| Courtesy::quantile(q).unwrap());
-    let out = generate::generate(&model, scene, t.a_id, t.b_id, &quantiles).unwrap();
+    // The tiny model's labels draw 2 futures of B: the two ends take one each. On a map without
+    // road edges both count (with them, an untrained sample that leaves the road would not:
+    // the runtime's own test covers that rule). Each comes kept in lane, and J_φ of the future
+    // returned is the ψ reported as achieved.
+    let mut open_map = scene.clone();
+    open_map.map.road_edges.clear();
+    let out = generate::generate(&model, &open_map, t.a_id, t.b_id, &quantiles).unwrap();
     let [low, high] = [&out.trajectories[0], &out.trajectories[1]];
-    // The tiny model's labels draw 2 futures of B: the two ends take one each. Each comes kept
-    // in lane, and J_φ of the future returned is the ψ reported as achieved.
     assert!(low.psi < high.psi, "{} vs {}", low.psi, high.psi);
     assert_ne!(low.world_xy_m, high.world_xy_m);
     for g in [low, high] {
-        let again = generate::courtesy(&model, scene, t.a_id, t.b_id, &g.world_xy_m).unwrap();
+        let again = generate::courtesy(&model, &open_map, t.a_id, t.b_id, &g.world_xy_m).unwrap();
         assert!((g.achieved_psi - again.psi).abs() < 1e-4);
     }
     let planned = generate::plan(
         &model,
-        scene,
+        &open_map,
         t.a_id,
         t.b_id,
         Courtesy::quantile(1.0).unwrap(),
     )
     .unwrap();
-    assert_eq!(kept_in_lane(scene, planned), high.world_xy_m);
+    assert_eq!(kept_in_lane(&open_map, planned), high.world_xy_m);
     let b = [ControlledAgent {
         id: t.b_id,
         courtesy: Courtesy::quantile(0.9).unwrap(),
