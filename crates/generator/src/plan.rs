@@ -74,23 +74,16 @@ impl PlanBasis {
         // Each candidate as the choice gives it ([`Scbg::choose`], [`Scbg::plan_from`]).
         let world =
             |k: usize| world_xy(b_pose, &change_frame(&futures_in_a[1 + k], a_pose, b_pose));
-        let dropped: Vec<bool> = psi
-            .iter()
-            .enumerate()
-            .map(|(k, v)| !v.is_nan() && leaves(&world(k)))
+        let dropped: Vec<usize> = (0..psi.len())
+            .filter(|&k| !psi[k].is_nan() && leaves(&world(k)))
             .collect();
-        let left = psi
-            .iter()
-            .zip(&dropped)
-            .filter(|(v, d)| !v.is_nan() && !**d)
-            .count();
-        if left == 0 {
+        if dropped.len() == psi.iter().filter(|v| !v.is_nan()).count() {
             return 0;
         }
-        for (v, _) in psi.iter_mut().zip(&dropped).filter(|(_, d)| **d) {
-            *v = f32::NAN;
+        for &k in &dropped {
+            psi[k] = f32::NAN;
         }
-        dropped.iter().filter(|d| **d).count()
+        dropped.len()
     }
 }
 

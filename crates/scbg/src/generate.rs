@@ -138,21 +138,19 @@ fn road_leaver(scene: &Scene, b: i64) -> Option<impl Fn(&[[f64; 2]]) -> bool> {
     })
 }
 
-/// With sample and rank, takes B's candidates that leave the road ([`road_leaver`]) out of
-/// its choice ([`scbg_generator::PlanBasis::drop_candidates`]). A predictor's sample now and
-/// then drifts across a gore or off a lane's end, and ranked by J_φ alone it can be the one a
-/// quantile takes. The learned generator chooses otherwise, and maps without road edges take
-/// nothing out.
-fn drop_off_road(
+/// With sample and rank, the rule that takes B's candidates out of its choice
+/// (`scbg_generator::PlanBasis::drop_candidates`): leaving the road ([`road_leaver`]). A
+/// predictor's sample now and then drifts across a gore or off a lane's end, and ranked by J_φ
+/// alone it can be the one a quantile takes. `None` for the learned generator (it chooses
+/// otherwise) and for maps without road edges.
+fn off_road_rule(
     model: &LoadedScbg,
     scene: &Scene,
     b: i64,
-    drop: impl FnOnce(&dyn Fn(&[[f64; 2]]) -> bool) -> usize,
-) -> usize {
-    if model.scbg.policy != scbg_generator::Policy::Ranked {
-        return 0;
-    }
-    road_leaver(scene, b).map_or(0, |leaves| drop(&leaves))
+) -> Option<impl Fn(&[[f64; 2]]) -> bool> {
+    (model.scbg.policy == scbg_generator::Policy::Ranked)
+        .then(|| road_leaver(scene, b))
+        .flatten()
 }
 
 /// The context every generation for (scene, A, B) shares: the generator's (samples, B's
@@ -177,7 +175,9 @@ pub fn pair_context(
         .scbg
         .pair_context(&prepared, window, a, b, &model.device)
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
-    drop_off_road(model, scene, b, |leaves| generator.drop_candidates(leaves));
+    if let Some(leaves) = off_road_rule(model, scene, b) {
+        generator.drop_candidates(leaves);
+    }
     Ok(PairContext {
         generator,
         lanes: scbg_sim::lanes::LaneSegments::new(&scene.map),
@@ -256,7 +256,9 @@ pub fn plan_basis(
         .scbg
         .plan_basis(&prepared, window, a, b, &model.device)
         .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
-    drop_off_road(model, scene, b, |leaves| basis.drop_candidates(leaves));
+    if let Some(leaves) = off_road_rule(model, scene, b) {
+        basis.drop_candidates(leaves);
+    }
     Ok(basis)
 }
 

@@ -197,25 +197,22 @@ fn candidates_taken_out_are_never_chosen() {
     let window = &scene.windows[0];
     let basis = scbg.plan_basis(scene, window, a_id, b_id, &device).unwrap();
     let quantiles = [0.0, 0.2, 0.4, 0.6, 0.8, 1.0];
-    let plans: Vec<Vec<[f64; 2]>> = quantiles
-        .iter()
-        .map(|&q| {
-            scbg.plan_from(&basis, Courtesy::Quantile(q), &device)
-                .unwrap()
-        })
-        .collect();
+    let plans_of = |basis: &crate::PlanBasis| -> Vec<Vec<[f64; 2]>> {
+        quantiles
+            .iter()
+            .map(|&q| {
+                scbg.plan_from(basis, Courtesy::Quantile(q), &device)
+                    .unwrap()
+            })
+            .collect()
+    };
+    let plans = plans_of(&basis);
     // Take out the most courteous candidate: the other five remain, in the same order, and the
     // top quantile takes the next one.
     let top = plans[5].clone();
     let mut fewer = basis.clone();
     assert_eq!(fewer.drop_candidates(|f| f == top.as_slice()), 1);
-    let after: Vec<Vec<[f64; 2]>> = quantiles
-        .iter()
-        .map(|&q| {
-            scbg.plan_from(&fewer, Courtesy::Quantile(q), &device)
-                .unwrap()
-        })
-        .collect();
+    let after = plans_of(&fewer);
     assert!(after.iter().all(|p| *p != top));
     assert_eq!(after[5], plans[4]);
     assert_eq!(after[0], plans[0]);
