@@ -41,7 +41,7 @@ fn synthetic(index: u64) -> (scbg_synth::Generated, PreparedScene) {
 }
 
 /// In every synthetic family A has a lane path starting on A (A drives its lane's centre),
-/// 5 m apart along the lane; in a cut-in scene, where B starts one lane to A's right or ahead
+/// 5 m apart along the lane for at least 150 m; in a cut-in scene, where B starts one lane to A's right or ahead
 /// in A's lane, B's offset from A's path is −1 or 0 lane widths although the road curves.
 #[test]
 fn synthetic_targets_have_their_lane_and_b_its_offset_from_it() {
@@ -50,7 +50,7 @@ fn synthetic_targets_have_their_lane_and_b_its_offset_from_it() {
         ..Default::default()
     };
     let mut cutin_offsets = Vec::new();
-    for index in 0..24 {
+    for index in 0..40 {
         let (g, p) = synthetic(index);
         let w = p.windows[0];
         let a = p.tracks.iter().position(|t| t.id == g.truth.a_id).unwrap();
@@ -60,22 +60,31 @@ fn synthetic_targets_have_their_lane_and_b_its_offset_from_it() {
             .unwrap();
         let (path, valid) = (&s.lane_path_xy_m, &s.lane_path_valid);
         let at_a = (LANE_PATH_BEHIND_M / LANE_PATH_SPACING_M) as usize;
+        // 150 m ahead at least: a roundabout's exit arm ends 120 m beyond its ring.
         assert!(
-            valid[at_a..at_a + 40].iter().all(|&v| v),
+            valid[at_a..at_a + 30].iter().all(|&v| v),
             "{}: {valid:?}",
             p.scenario_id
         );
         let (x, y) = (path[2 * at_a], path[2 * at_a + 1]);
+        // (Where an entry joins a roundabout's ring, the joining lane may be the nearest, up to
+        // 0.7 m beside the ring's.)
         assert!(
-            x.abs() < 0.5 && y.abs() < 0.6,
+            x.abs() < 0.5 && y.abs() < 0.7,
             "{}: A's path point {x}, {y}",
             p.scenario_id
         );
-        for k in at_a..at_a + 39 {
+        for k in at_a..at_a + 29 {
             let step = ((path[2 * k + 2] - path[2 * k]).powi(2)
                 + (path[2 * k + 3] - path[2 * k + 1]).powi(2))
             .sqrt();
-            assert!((step - LANE_PATH_SPACING_M).abs() < 0.05, "{step}");
+            // Chords of 5 m of lane: up to 0.15 m short on a roundabout's tight arcs.
+            let tolerance_m = if g.truth.family == Family::Roundabout {
+                0.15
+            } else {
+                0.05
+            };
+            assert!((step - LANE_PATH_SPACING_M).abs() < tolerance_m, "{step}");
         }
         if g.truth.family == Family::Cutin {
             // B at the current step (the first condition point is one step later).

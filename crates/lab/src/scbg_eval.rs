@@ -170,25 +170,25 @@ impl ScbgEval {
             ));
         }
         if !self.truth_control.is_empty() {
-            s.push_str("\nControl in truth — Spearman(input quantile, ψ_true of the generated future), oracle of the synthetic simulator; pooled over examples, and within an example (the mean over examples of the Spearman across its own futures, 0 where they all give A the same reward; the share of examples where they do not):\n\n| model | all | merge | crossing | cutin | following | letin | within an example: all | merge | crossing | cutin | following | letin | responsive | each example ordered by q: all | scored pair roles | Pearson(achieved ψ, ψ_true) |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+            let families = scbg_synth::Family::ALL.map(scbg_synth::Family::name);
+            s.push_str(&format!("\nControl in truth — Spearman(input quantile, ψ_true of the generated future), oracle of the synthetic simulator; pooled over examples, and within an example (the mean over examples of the Spearman across its own futures, 0 where they all give A the same reward; the share of examples where they do not):\n\n| model | all | {0} | within an example: all | {0} | responsive | each example ordered by q: all | scored pair roles | Pearson(achieved ψ, ψ_true) |\n|---|---|{1}---|{1}---|---|---|---|\n", families.join(" | "), "---|".repeat(families.len())));
             let row = |label: &str, w: &crate::fidelity::WorldKnob, pearson: Option<f64>| {
                 let c = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:.3}"));
                 let at = |k: &str| c(w.spearman_quantile_psi_true.get(k).copied().flatten());
                 let within = |k: &str| c(w.spearman_within_example.get(k).copied());
+                let each = |f: &dyn Fn(&str) -> String| {
+                    families
+                        .iter()
+                        .map(|k| f(k))
+                        .collect::<Vec<_>>()
+                        .join(" | ")
+                };
                 format!(
-                    "| {label} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                    "| {label} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                     at(crate::fidelity::POOLED),
-                    at("merge"),
-                    at("crossing"),
-                    at("cutin"),
-                    at("following"),
-                    at("letin"),
+                    each(&at),
                     within(crate::fidelity::POOLED),
-                    within("merge"),
-                    within("crossing"),
-                    within("cutin"),
-                    within("following"),
-                    within("letin"),
+                    each(&within),
                     c(w.responsive_fraction.get(crate::fidelity::POOLED).copied()),
                     c(w.spearman_quantile_psi_true_ordered
                         .get(crate::fidelity::POOLED)

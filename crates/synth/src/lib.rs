@@ -51,19 +51,22 @@ pub enum Family {
     Following,
     /// B on the main lane letting A in from an on-ramp.
     Letin,
+    /// A and B meeting at a roundabout's entry, one circulating, one entering.
+    Roundabout,
 }
 
 impl Family {
     /// Every family.
-    pub const ALL: [Family; 5] = [
+    pub const ALL: [Family; 6] = [
         Family::Merge,
         Family::Crossing,
         Family::Cutin,
         Family::Following,
         Family::Letin,
+        Family::Roundabout,
     ];
 
-    /// The family's name (`merge`, `crossing`, `cutin`, `following`, `letin`).
+    /// The family's name (`merge`, `crossing`, `cutin`, `following`, `letin`, `roundabout`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Merge => "merge",
@@ -71,6 +74,7 @@ impl Family {
             Self::Cutin => "cutin",
             Self::Following => "following",
             Self::Letin => "letin",
+            Self::Roundabout => "roundabout",
         }
     }
 
@@ -83,10 +87,12 @@ impl Family {
     }
 }
 
-/// A family name that is not `merge`, `crossing`, `cutin`, `following` or `letin` (holds the
-/// name given).
+/// A family name that is not `merge`, `crossing`, `cutin`, `following`, `letin` or
+/// `roundabout` (holds the name given).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error("unknown scene family {0:?} (expected merge, crossing, cutin, following or letin)")]
+#[error(
+    "unknown scene family {0:?} (expected merge, crossing, cutin, following, letin or roundabout)"
+)]
 pub struct UnknownFamily(pub String);
 
 /// What the generator knows about a scenario and a model has to discover: one line of the
@@ -148,6 +154,7 @@ enum Params {
     Cutin(families::CutinParams),
     Following(families::FollowingParams),
     Letin(families::LetinParams),
+    Roundabout(families::RoundaboutParams),
 }
 
 /// Draws of the courtesy prior `c' ∈ [0, 1]` behind ψ_true's expectation: stratified, the
@@ -222,6 +229,7 @@ impl Scenario {
             Family::Cutin => Params::Cutin(families::cutin_params(&mut rng)),
             Family::Following => Params::Following(families::following_params(&mut rng)),
             Family::Letin => Params::Letin(families::letin_params(&mut rng)),
+            Family::Roundabout => Params::Roundabout(families::roundabout_params(&mut rng)),
         };
         Self {
             seed,
@@ -283,6 +291,7 @@ impl Scenario {
             Params::Cutin(p) => families::cutin_paths(p),
             Params::Following(p) => families::following_paths(p),
             Params::Letin(p) => families::letin_paths(p),
+            Params::Roundabout(p) => families::roundabout_paths(p),
         }
     }
 
@@ -295,6 +304,7 @@ impl Scenario {
             Params::Cutin(p) => families::simulate_cutin(p, paths, b, with_map),
             Params::Following(p) => families::simulate_following(p, paths, b, with_map),
             Params::Letin(p) => families::simulate_letin(p, paths, b, with_map),
+            Params::Roundabout(p) => families::simulate_roundabout(p, paths, b, with_map),
         }
     }
 

@@ -38,6 +38,35 @@ impl RefPath {
         }
     }
 
+    /// A polyline `points` (in driving order, at most a few metres apart) resampled every
+    /// `ds_m` of its arclength.
+    ///
+    /// # Panics
+    /// If `points` has fewer than two points.
+    pub fn from_points(points: &[(f64, f64)], ds_m: f64) -> Self {
+        assert!(points.len() >= 2, "a path needs two points");
+        let mut cumulative = Vec::with_capacity(points.len());
+        let mut total = 0.0;
+        cumulative.push(0.0);
+        for w in points.windows(2) {
+            total += (w[1].0 - w[0].0).hypot(w[1].1 - w[0].1);
+            cumulative.push(total);
+        }
+        Self::from_fn(total, ds_m, |s| {
+            let i = cumulative
+                .partition_point(|&c| c <= s)
+                .clamp(1, points.len() - 1);
+            let (c0, c1) = (cumulative[i - 1], cumulative[i]);
+            let t = if c1 > c0 {
+                ((s - c0) / (c1 - c0)).min(1.0)
+            } else {
+                0.0
+            };
+            let (a, b) = (points[i - 1], points[i]);
+            (a.0 + t * (b.0 - a.0), a.1 + t * (b.1 - a.1))
+        })
+    }
+
     /// A straight path from `(x0, y0)` with heading `heading_rad`.
     pub fn straight(x0: f64, y0: f64, heading_rad: f64, length_m: f64) -> Self {
         let (s, c) = heading_rad.sin_cos();

@@ -101,7 +101,7 @@ pub struct SynthArgs {
         long,
         value_enum,
         value_delimiter = ',',
-        default_value = "merge,crossing,cutin,following"
+        default_value = "merge,crossing,cutin,following,letin,roundabout"
     )]
     pub families: Vec<Family>,
     /// Families held out of training (comma-separated): their scenes' ids end with `+unseen`,

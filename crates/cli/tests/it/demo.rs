@@ -64,8 +64,8 @@ fn demo_writes_a_report() {
     let families = report["spearman_latent"].as_object().unwrap();
     assert_eq!(
         families.len(),
-        5,
-        "merge, crossing, cut-in, following, let-in: {report}"
+        scbg_synth::Family::ALL.len(),
+        "every family of the synthetic world: {report}"
     );
     // The closed-loop stage ran on the held-out scenes.
     let cl = &report["closed_loop"];

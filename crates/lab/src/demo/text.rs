@@ -106,10 +106,13 @@ impl DemoReport {
                 _ => "-".into(),
             }
         };
+        let families = scbg_synth::Family::ALL.map(scbg_synth::Family::name);
         let mut out = format!(
-            "Mean ± standard deviation over {} generator seeds ({:?}):\n\n| model | CourtesyMSE *data* | CourtesyMSE *range* | CourtesyMSE *arbitrary* | TrajADE (m) | corr(q, ψ) all | corr(q, ψ) high | Spearman(q, ψ_true) all | merge | crossing | cutin | following | letin | within an example |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+            "Mean ± standard deviation over {} generator seeds ({:?}):\n\n| model | CourtesyMSE *data* | CourtesyMSE *range* | CourtesyMSE *arbitrary* | TrajADE (m) | corr(q, ψ) all | corr(q, ψ) high | Spearman(q, ψ_true) all | {} | within an example |\n|---|---|---|---|---|---|---|---|{}---|\n",
             self.generator_seeds.len(),
-            self.generator_seeds
+            self.generator_seeds,
+            families.join(" | "),
+            "---|".repeat(families.len()),
         );
         let names = self
             .variants
@@ -120,8 +123,9 @@ impl DemoReport {
                 continue;
             }
             let rho = |k: &str| cell(name, &["spearman_quantile_psi_true", k], true);
+            let per_family: Vec<String> = families.iter().map(|f| rho(f)).collect();
             out += &format!(
-                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
                 cell(name, &["courtesy_mse_data", "mean"], false),
                 cell(name, &["courtesy_mse_range", "mean"], false),
                 cell(name, &["courtesy_mse_arbitrary", "mean"], false),
@@ -129,11 +133,7 @@ impl DemoReport {
                 cell(name, &["corr_quantile"], false),
                 cell(name, &["corr_quantile_high"], false),
                 rho(crate::fidelity::POOLED),
-                rho("merge"),
-                rho("crossing"),
-                rho("cutin"),
-                rho("following"),
-                rho("letin"),
+                per_family.join(" | "),
                 cell(
                     name,
                     &["spearman_within_example", crate::fidelity::POOLED],
@@ -161,14 +161,11 @@ impl DemoReport {
                     .flatten()
                     .map_or("-".into(), |x| format!("{x:.3}"))
             };
+            let per_family: Vec<String> = families.iter().map(|f| rho(f)).collect();
             out += &format!(
-                "| {label} | | | | | | | {} | {} | {} | {} | {} | {} | {} |\n",
+                "| {label} | | | | | | | {} | {} | {} |\n",
                 rho(crate::fidelity::POOLED),
-                rho("merge"),
-                rho("crossing"),
-                rho("cutin"),
-                rho("following"),
-                rho("letin"),
+                per_family.join(" | "),
                 w.spearman_within_example
                     .get(crate::fidelity::POOLED)
                     .map_or("-".into(), |x| format!("{x:.3}")),

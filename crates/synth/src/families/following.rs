@@ -29,6 +29,10 @@ use crate::sim::{Agent, Idm, STEP_SECS, closer};
 const ROAD_M: f64 = 700.0;
 /// The tightest radius of the procedural road, metres.
 const MIN_RADIUS_M: f64 = 40.0;
+/// Beyond this heading (relative to the start) the road's next curve turns back, rad.
+const TURN_BACK_RAD: f64 = std::f64::consts::FRAC_PI_3;
+/// The most the road's heading turns from its start, rad (a curve stops there).
+const MAX_HEADING_RAD: f64 = 1.75;
 /// Lateral acceleration at the speed limit that bounds the road's curvature, m/s².
 const MAX_LATERAL_MPS2: f64 = 2.0;
 
@@ -72,18 +76,32 @@ pub fn following_params(rng: &mut Pcg64Mcg) -> FollowingParams {
     let mut curvature_knots = vec![(0.0, 0.0)];
     let mut s = rng.random_range(0.0..80.0);
     curvature_knots.push((s, 0.0));
+    // The road's heading relative to its start: curves turn back towards it beyond
+    // [`TURN_BACK_RAD`] and stop at [`MAX_HEADING_RAD`], so the road never crosses itself.
+    let (mut heading, mut k_prev) = (0.0f64, 0.0);
     while s < ROAD_M {
         let transition = rng.random_range(20.0..60.0);
         let k = if rng.random_bool(0.35) {
             0.0
         } else {
-            let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            let mut sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+            if heading.abs() > TURN_BACK_RAD {
+                sign = -heading.signum();
+            }
             sign * rng.random_range(0.3..1.0) * k_max
         };
         s += transition;
+        heading += 0.5 * (k_prev + k) * transition;
         curvature_knots.push((s, k));
-        s += rng.random_range(30.0..160.0);
+        let mut plateau_m = rng.random_range(30.0..160.0);
+        if k != 0.0 {
+            let room = (MAX_HEADING_RAD - (heading + k * plateau_m).abs()).min(0.0);
+            plateau_m = (plateau_m + room / k.abs()).max(0.0);
+        }
+        heading += k * plateau_m;
+        s += plateau_m;
         curvature_knots.push((s, k));
+        k_prev = k;
     }
     let b_base = rng.random_range(0.65..0.85);
     let taps = (0..rng.random_range(1..=3))

@@ -21,7 +21,14 @@
 //! - **following**: B leads A in A's lane on a procedural road (1–4 lanes, curves down to a
 //!   40 m radius, limits 8–33 m/s) and keeps a steady speed near the limit when courteous,
 //!   dawdles at `(base + 0.2c)` × the limit and brakes needlessly at `(1 − c)` × 1.5–3.5 m/s²
-//!   when not.
+//!   when not;
+//! - **roundabout**: a single-lane roundabout (radius 15–30 m, 3–4 arms 72–144° apart, joined to
+//!   the ring by tangent arcs of 0.6–0.9 × its radius) where A and B meet at one entry. Either B circulates and lets A in when A's
+//!   lead at the merge point exceeds `1.2 − 3.5c` s (keeping behind A at a 1.8 s headway; else
+//!   it presses on at 1.05 × its desired speed), or B enters ahead of a circulating A only when
+//!   its lead exceeds `0.3 + 2.7c` s (then `+15 % c` desired speed), and otherwise waits at the
+//!   yield line until A has passed. An entering vehicle yields to every circulating one it
+//!   would not be an accepted 0.8–1.6 s ahead of.
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
@@ -267,6 +274,7 @@ mod cutin;
 mod following;
 mod letin;
 mod merge;
+mod roundabout;
 
 pub use crossing::{CrossingParams, crossing_params, crossing_paths, simulate_crossing};
 pub use cutin::{
@@ -279,3 +287,7 @@ pub use letin::{
     simulate_letin,
 };
 pub use merge::{MergeParams, merge_params, merge_paths, simulate_merge};
+pub use roundabout::{
+    RoundaboutParams, roundabout_enters_first, roundabout_lets_in, roundabout_params,
+    roundabout_paths, simulate_roundabout,
+};
