@@ -4,7 +4,7 @@ use std::f64::consts::TAU;
 
 use scbg_scene::{Lane, LaneType, Map, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
 
-use super::{ARM_M, Ring, ccw_span};
+use super::ring::{ARM_M, Ring, ccw_span};
 
 /// How far inside the ring lane's inner side the island's edge lies, m.
 const APRON_M: f64 = 1.2;
