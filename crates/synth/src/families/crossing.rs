@@ -8,8 +8,8 @@ use scbg_scene::{
 };
 
 use super::{
-    BPlan, NUM_STEPS, PairSetup, Run, STOP_LINE_TO_ZONE_M, arc_path, committed_to_cross, idm, mp,
-    noise_track, pts, vehicle_size,
+    BPlan, Background, NUM_STEPS, PairSetup, Run, STOP_LINE_TO_ZONE_M, arc_path,
+    committed_to_cross, idm, mp, noise_track, pts, vehicle_size,
 };
 use crate::CURRENT_STEP;
 use crate::path::RefPath;
@@ -27,7 +27,7 @@ pub struct CrossingParams {
     a_conflict_s: f64,
     b_conflict_s: f64,
     pair: PairSetup,
-    follower: Option<(f64, f64, (f64, f64), Idm)>,
+    follower: Option<Background>,
     pedestrians: Vec<(f64, f64, f64)>,
     noise: Vec<Vec<f64>>,
 }

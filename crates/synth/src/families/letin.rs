@@ -6,10 +6,12 @@ use rand_pcg::Pcg64Mcg;
 use scbg_scene::{Map, ObjectType};
 
 use super::merge::{Ramp, main_lane_traffic};
-use super::{BPlan, NUM_STEPS, PairSetup, Run, idm, merging_into_lane, noise_track, vehicle_size};
+use super::{
+    BPlan, Background, NUM_STEPS, PairSetup, Run, idm, merging_into_lane, noise_track, vehicle_size,
+};
 use crate::CURRENT_STEP;
 use crate::RefPath;
-use crate::sim::{Agent, Idm, STEP_SECS, closer};
+use crate::sim::{Agent, STEP_SECS, closer};
 
 /// How far behind B (m) a merging A still makes a B adjust its speed: an A farther back merges
 /// behind B whatever B does.
@@ -23,7 +25,7 @@ pub struct LetinParams {
     /// to merge ahead of it.
     accepted_lag_s: f64,
     pair: PairSetup,
-    background: Vec<(f64, f64, (f64, f64), Idm)>,
+    background: Vec<Background>,
     noise: Vec<Vec<f64>>,
 }
 
@@ -136,18 +138,7 @@ pub fn simulate_letin(p: &LetinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
             p.pair.b_v0,
         ));
     }
-    for (k, &(s, v, size, m)) in p.background.iter().enumerate() {
-        agents.push(Agent::new(
-            300 + k as i64,
-            ObjectType::Vehicle,
-            0,
-            size,
-            m,
-            s,
-            0.0,
-            v,
-        ));
-    }
+    agents.extend(super::background_agents(&p.background, 0));
     // Whether A may merge: it has decided to go ahead of B, or B has passed it (latched once
     // A is in the taper).
     let mut a_may_merge = !with_b;

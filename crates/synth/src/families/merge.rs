@@ -2,15 +2,15 @@
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
-use scbg_scene::{Lane, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
+use scbg_scene::{Lane, LaneType, Map, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
 
 use super::{
-    BPlan, NUM_STEPS, PairSetup, Run, arc_path, idm, merging_into_lane, noise_track, pts,
-    vehicle_size,
+    BPlan, Background, NUM_STEPS, PairSetup, Run, arc_path, idm, merging_into_lane, noise_track,
+    pts, vehicle_size,
 };
 use crate::CURRENT_STEP;
 use crate::RefPath;
-use crate::sim::{Agent, Idm, STEP_SECS, closer};
+use crate::sim::{STEP_SECS, closer};
 
 /// Length over which the on-ramp's approach angle eases into the parallel lane.
 const RAMP_BLEND_M: f64 = 90.0;
@@ -22,7 +22,7 @@ const RAMP_BLEND_M: f64 = 90.0;
 pub struct MergeParams {
     ramp: Ramp,
     pair: PairSetup,
-    background: Vec<(f64, f64, (f64, f64), Idm)>,
+    background: Vec<Background>,
     noise: Vec<Vec<f64>>,
 }
 
@@ -61,7 +61,7 @@ fn gore_island(path: &crate::RefPath, p: &Ramp, ramp_start: f64) -> Vec<(f64, f6
 
 /// Main-lane traffic around the main-lane vehicle at `s0`: a faster car 60–110 m ahead (60 %)
 /// and one 25–45 m behind (50 %), as `(s, v, size, idm)`.
-pub(super) fn main_lane_traffic(rng: &mut Pcg64Mcg, s0: f64) -> Vec<(f64, f64, (f64, f64), Idm)> {
+pub(super) fn main_lane_traffic(rng: &mut Pcg64Mcg, s0: f64) -> Vec<Background> {
     let mut background = Vec::new();
     if rng.random_bool(0.6) {
         let size = vehicle_size(rng);
@@ -248,18 +248,7 @@ pub fn simulate_merge(p: &MergeParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
     let mut b_idm = p.pair.b_idm;
     let mut agents = p.pair.agents(0, p.ramp.ramp_d(p.pair.b_s0), with_b);
     let bg0 = agents.len();
-    for (k, &(s, v, size, m)) in p.background.iter().enumerate() {
-        agents.push(Agent::new(
-            300 + k as i64,
-            ObjectType::Vehicle,
-            0,
-            size,
-            m,
-            s,
-            0.0,
-            v,
-        ));
-    }
+    agents.extend(super::background_agents(&p.background, 0));
     let w = p.ramp.lane_width_m;
     let taper_start = p.ramp.merge_end_s - p.ramp.taper_m;
     let mut decision: Option<bool> = None; // Some(true) = B goes first

@@ -225,6 +225,31 @@ pub(crate) fn orient_road_edges(map: &mut Map) {
     }
 }
 
+/// Background traffic as the families draw it: `(s, v, size, idm)` per vehicle.
+pub(super) type Background = (f64, f64, (f64, f64), Idm);
+
+/// The background vehicles (ids 300, 301, …) on reference path `path`, at lateral offset 0.
+pub(super) fn background_agents(
+    background: &[Background],
+    path: usize,
+) -> impl Iterator<Item = Agent> + '_ {
+    background
+        .iter()
+        .enumerate()
+        .map(move |(k, &(s, v, size, m))| {
+            Agent::new(
+                300 + k as i64,
+                ObjectType::Vehicle,
+                path,
+                size,
+                m,
+                s,
+                0.0,
+                v,
+            )
+        })
+}
+
 /// Vehicles A and B as every family sets them up (values drawn by the family, in its order).
 #[derive(Debug, Clone)]
 pub(super) struct PairSetup {

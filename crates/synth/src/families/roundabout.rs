@@ -7,10 +7,13 @@ use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::Map;
 
-use super::{BPlan, NUM_STEPS, PairSetup, Run, committed_to_cross, idm, noise_track, vehicle_size};
+use super::{
+    BPlan, Background, NUM_STEPS, PairSetup, Run, committed_to_cross, idm, noise_track,
+    vehicle_size,
+};
 use crate::CURRENT_STEP;
 use crate::RefPath;
-use crate::sim::{Agent, Idm, closer};
+use crate::sim::{Agent, closer};
 
 mod map;
 mod ring;
@@ -63,16 +66,15 @@ fn time_to_cover(d: f64, v: f64, accel: f64, v_max: f64) -> f64 {
 }
 
 /// Where (arclength) and how fast to start on `path` so as to reach arclength `to_s` after
-/// `secs` at speed `v` where the curves allow it ([`curve_speeds`]).
-fn start_before(path: &RefPath, to_s: f64, secs: f64, v: f64) -> (f64, f64) {
-    let speeds = curve_speeds(path);
+/// `secs` at speed `v` where its curves (`speeds`, [`curve_speeds`]) allow it.
+fn start_before(speeds: &[f64], to_s: f64, secs: f64, v: f64) -> (f64, f64) {
     let (mut s, mut left) = (to_s, secs);
     while left > 0.0 && s > 1.0 {
-        let step_v = v.min(curve_limit(&speeds, s - 1.0, v)).max(1.0);
+        let step_v = v.min(curve_limit(speeds, s - 1.0, v)).max(1.0);
         left -= 1.0 / step_v;
         s -= 1.0;
     }
-    (s, v.min(curve_limit(&speeds, s, v)))
+    (s, v.min(curve_limit(speeds, s, v)))
 }
 
 /// The speed the curves ahead of arclength `s` allow at speed `v` ([`curve_speeds`]).
@@ -91,6 +93,8 @@ pub struct RoundaboutParams {
     ring: Ring,
     /// A's route and B's.
     paths: Vec<RefPath>,
+    /// The speed each metre of each route is driven at for its curves ([`curve_speeds`]).
+    curves: [Vec<f64>; 2],
     /// B circulates and A enters at arm 0; else B enters there and A circulates.
     b_circulates: bool,
     /// Arclength of the merge point at arm 0 along paths 0 (A's) and 1 (B's).
@@ -105,7 +109,7 @@ pub struct RoundaboutParams {
     accepted_lag_s: f64,
     pair: PairSetup,
     /// Other vehicles circulating on the circulating vehicle's route: `(s, v, size, idm)`.
-    background: Vec<(f64, f64, (f64, f64), Idm)>,
+    background: Vec<Background>,
     noise: Vec<Vec<f64>>,
 }
 
@@ -165,8 +169,9 @@ pub fn roundabout_params(rng: &mut Pcg64Mcg) -> RoundaboutParams {
         (tau_circulating, tau_entering)
     };
     let paths = [a_route, b_route].map(|(i, o)| RefPath::from_points(&ring.route(i, o), 1.0));
-    let (a_s0, a_v0) = start_before(&paths[0], merge_s[0], a_tau + history_s, a_v0);
-    let (b_s0, b_v0) = start_before(&paths[1], merge_s[1], b_tau + history_s, b_v0);
+    let curves = paths.each_ref().map(curve_speeds);
+    let (a_s0, a_v0) = start_before(&curves[0], merge_s[0], a_tau + history_s, a_v0);
+    let (b_s0, b_v0) = start_before(&curves[1], merge_s[1], b_tau + history_s, b_v0);
     let circ_s0 = if b_circulates { b_s0 } else { a_s0 };
     let mut background = Vec::new();
     if rng.random_bool(0.4) {
@@ -186,6 +191,7 @@ pub fn roundabout_params(rng: &mut Pcg64Mcg) -> RoundaboutParams {
     RoundaboutParams {
         ring,
         paths: paths.to_vec(),
+        curves,
         b_circulates,
         merge_s,
         common_m,
@@ -255,10 +261,9 @@ pub fn roundabout_enters_first(lead_s: f64, courtesy: f64) -> bool {
 /// each vehicle's own path). The entering vehicle yields at its yield line to every
 /// circulating vehicle that has not passed the merge point unless that one's front (at its
 /// speed now) will reach the merge point an accepted 0.8–1.6 s after the entering vehicle's rear
-/// has passed it (speeding up as it may); circulating vehicles
-/// treat it as a vehicle ahead once it is committed to enter ([`committed_to_cross`] at the
-/// yield line), seeing B with a reaction delay; on the shared ring everyone follows whoever is
-/// ahead. Only B's observable motion counts, so a replayed B gets the same reactions.
+/// has passed it (speeding up as it may); circulating vehicles treat it as a vehicle ahead once
+/// it is committed to enter ([`committed_to_cross`] at the yield line), seeing B with a reaction
+/// delay; on the shared ring everyone follows whoever is ahead. Only B's observable motion counts, so a replayed B gets the same reactions.
 pub fn simulate_roundabout(
     p: &RoundaboutParams,
     paths: Vec<RefPath>,
@@ -268,18 +273,7 @@ pub fn simulate_roundabout(
     let with_b = b.present();
     let mut agents = p.pair.agents(1, 0.0, with_b);
     let circ_path = usize::from(p.b_circulates);
-    for (k, &(s, v, size, m)) in p.background.iter().enumerate() {
-        agents.push(Agent::new(
-            300 + k as i64,
-            scbg_scene::ObjectType::Vehicle,
-            circ_path,
-            size,
-            m,
-            s,
-            0.0,
-            v,
-        ));
-    }
+    agents.extend(super::background_agents(&p.background, circ_path));
     let noise_of = |i: usize| if with_b || i == 0 { i } else { i + 1 };
     // The entering vehicle's index (none when it is an absent B).
     let entering = match (p.b_circulates, with_b) {
@@ -297,7 +291,6 @@ pub fn simulate_roundabout(
         }
     };
     let (common, yield_m) = (p.common_m, p.yield_m);
-    let curves: Vec<Vec<f64>> = paths.iter().map(curve_speeds).collect();
     let mut may_enter = false;
     let mut b_choice: Option<bool> = None;
     for t in 0..b.steps() - 1 {
@@ -385,7 +378,7 @@ pub fn simulate_roundabout(
             let mut idm = me.idm;
             idm.desired_speed_mps =
                 idm.desired_speed_mps
-                    .min(curve_limit(&curves[me.path], me.s, me.v));
+                    .min(curve_limit(&p.curves[me.path], me.s, me.v));
             if i == entering && !may_enter {
                 // Waits at the yield line: keeps going until it must brake for it.
                 // (The line as a standing obstacle, at IDM's standstill gap beyond it.)
