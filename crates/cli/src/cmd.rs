@@ -441,6 +441,7 @@ fn print_sim_eval(e: &scbg_lab::sim_eval::SimEval) {
         );
     }
     println!("{}", e.curve.collision_line());
+    println!("{}", e.curve.offroad_line());
     for (name, b) in &e.baselines {
         println!(
             "{name:>18}: A speed {} m/s, B collision {}, B off-road {}, WOSAC meta {}",

@@ -13,7 +13,7 @@ mod realism;
 mod scenes;
 
 pub(crate) use curve::fmt_or_na;
-pub use curve::{BCollision, KnobCurve, RESPONSIVE_SPEED_MPS};
+pub use curve::{BCollision, BOffroad, KnobCurve, RESPONSIVE_SPEED_MPS};
 use curve::{kept_counting_skips, world_scene};
 pub use figures::write_figures;
 pub use realism::{BaselineSim, PairedDifference, WosacSummary};

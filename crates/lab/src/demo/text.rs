@@ -288,6 +288,7 @@ fn closed_loop_markdown(c: &crate::sim_eval::SimEval, figures: &str) -> String {
     );
     out += &format!("\n{}.\n", c.realism_line());
     out += &format!("\n{}.\n", c.curve.collision_line());
+    out += &format!("\n{}.\n", c.curve.offroad_line());
     if !c.skipped.is_empty() {
         out += &format!("\n{}.\n", c.skipped_line());
     }

@@ -45,6 +45,22 @@ pub struct KnobCurve {
     /// Every rollout in which B collides: the scene, the quantile and B's first contact
     /// (with whom, at which step, both speeds, the geometry) — what a diagnosis needs.
     pub b_collisions: Vec<BCollision>,
+    /// Share of B's rollouts (every scene at every quantile) in which B leaves the road (the
+    /// WOSAC off-road rule), per family and pooled; a family without road edges is left out.
+    pub b_offroad_rate_per_family: PerFamily,
+    /// Every rollout in which B leaves the road: the scene, its family and the quantile.
+    pub b_offroads: Vec<BOffroad>,
+}
+
+/// One rollout of the curve in which B left the road.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct BOffroad {
+    /// The scene.
+    pub scenario_id: String,
+    /// Its family (synthetic) or `womd`.
+    pub family: String,
+    /// The quantile asked of B.
+    pub quantile: f32,
 }
 
 /// One rollout of the curve in which B collided.
@@ -74,6 +90,22 @@ impl KnobCurve {
             fmt_or_na(self.max_b_collision_rate, 3),
             fmt_or_na(self.max_b_collision_rate_clear_start, 3),
             scenes.len()
+        )
+    }
+
+    /// One line on B leaving the road: the share of its rollouts, pooled and per family.
+    pub fn offroad_line(&self) -> String {
+        let pct = |x: &Option<f64>| fmt_or_na(x.map(|x| 100.0 * x), 1);
+        let families: Vec<String> = self
+            .b_offroad_rate_per_family
+            .iter()
+            .filter(|(f, _)| f.as_str() != "all")
+            .map(|(f, x)| format!("{f} {} %", pct(x)))
+            .collect();
+        format!(
+            "B off the road in {} % of its rollouts ({})",
+            pct(self.b_offroad_rate_per_family.get("all").unwrap_or(&None)),
+            families.join(", ")
         )
     }
 
@@ -136,9 +168,37 @@ impl KnobCurve {
                 })
             })
             .collect();
+        let offroad: Vec<(&SceneResult, f32, bool)> = quantiles
+            .iter()
+            .enumerate()
+            .flat_map(|(k, &q)| {
+                done.iter()
+                    .filter_map(move |r| r.curve[k].1.offroad.map(|off| (r, q, off)))
+            })
+            .collect();
+        let mut b_offroad_rate_per_family = PerFamily::new();
+        b_offroad_rate_per_family.insert("all".into(), rate(offroad.iter().map(|o| o.2)));
+        for (r, ..) in &offroad {
+            b_offroad_rate_per_family
+                .entry(r.family.clone())
+                .or_insert_with(|| {
+                    rate(offroad.iter().filter(|o| o.0.family == r.family).map(|o| o.2))
+                });
+        }
+        let b_offroads = offroad
+            .iter()
+            .filter(|o| o.2)
+            .map(|(r, q, _)| BOffroad {
+                scenario_id: r.scenario_id.clone(),
+                family: r.family.clone(),
+                quantile: *q,
+            })
+            .collect();
         let (spearman_within_scene_a_speed, responsive_fraction, spearman_quantile_a_speed_ordered) =
             within_scene(done, quantiles);
         Self {
+            b_offroad_rate_per_family,
+            b_offroads,
             scenes: done.len(),
             spearman_within_scene_a_speed,
             responsive_fraction,
@@ -274,4 +334,64 @@ fn spearman_per_family(points: &[(String, f64, f64)]) -> PerFamily {
         out.insert(f.to_string(), corr(Some(f)));
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn metrics(speed_mps: f64, offroad: Option<bool>) -> AgentRolloutMetrics {
+        AgentRolloutMetrics {
+            id: 0,
+            collision: false,
+            first_contact: None,
+            starts_in_contact: false,
+            offroad,
+            progress_m: 10.0,
+            avg_speed_mps: speed_mps,
+            max_abs_jerk_mps3: 0.0,
+            mean_abs_jerk_mps3: 0.0,
+            valid_steps: 80,
+        }
+    }
+
+    fn scene(id: &str, family: &str, b_offroad: [Option<bool>; 3]) -> SceneResult {
+        SceneResult {
+            scenario_id: id.into(),
+            family: family.into(),
+            curve: b_offroad
+                .iter()
+                .enumerate()
+                .map(|(k, &off)| (metrics(10.0 + k as f64, Some(false)), metrics(8.0, off)))
+                .collect(),
+            base_a_speed: 11.0,
+        }
+    }
+
+    #[test]
+    fn off_road_rollouts_are_counted_per_family_and_listed() {
+        let done = [
+            scene("a", "crossing", [Some(false), Some(true), Some(false)]),
+            scene("b", "crossing", [Some(false); 3]),
+            scene("c", "merge", [Some(true), Some(true), Some(false)]),
+            // A map without road edges: not counted either way.
+            scene("d", "following", [None; 3]),
+        ];
+        let curve = KnobCurve::of(&done, &[0.1, 0.5, 0.9]);
+        let rate = |f: &str| curve.b_offroad_rate_per_family[f];
+        assert_eq!(rate("crossing"), Some(1.0 / 6.0));
+        assert_eq!(rate("merge"), Some(2.0 / 3.0));
+        assert_eq!(rate("all"), Some(3.0 / 9.0));
+        assert!(!curve.b_offroad_rate_per_family.contains_key("following"));
+        let listed: Vec<(&str, f32)> = curve
+            .b_offroads
+            .iter()
+            .map(|o| (o.scenario_id.as_str(), o.quantile))
+            .collect();
+        assert_eq!(listed, [("c", 0.1), ("a", 0.5), ("c", 0.5)]);
+        assert_eq!(
+            curve.offroad_line(),
+            "B off the road in 33.3 % of its rollouts (crossing 16.7 %, merge 66.7 %)"
+        );
+    }
 }
