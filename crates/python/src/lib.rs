@@ -146,17 +146,19 @@ impl Scene {
 
     /// `points [n, 2]` (world metres) kept in lane as scbg's closed loop keeps a plan: each
     /// point pulled to within `max_offset_m` of the nearest lane heading its way, and the rest
-    /// of a plan that leaves every lane carried on along its lane's route.
-    #[pyo3(signature = (points, max_offset_m=scbg::DEFAULT_LANE_KEEPING_M))]
+    /// of a plan that leaves every lane carried on along its lane's route. `agent_id`, the
+    /// track whose plan it is, starts the plan on the lane under it.
+    #[pyo3(signature = (points, max_offset_m=scbg::DEFAULT_LANE_KEEPING_M, agent_id=None))]
     fn keep_in_lane<'py>(
         &self,
         py: Python<'py>,
         points: PyReadonlyArray2<'_, f64>,
         max_offset_m: f64,
+        agent_id: Option<i64>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let mut plan = polylines(vec![points], "points")?.remove(0);
         let scene = Arc::clone(&self.inner);
-        py.detach(|| scbg::keep_in_lane(&scene, &mut plan, max_offset_m))
+        py.detach(|| scbg::keep_in_lane(&scene, agent_id, &mut plan, max_offset_m))
             .map_err(py_err)?;
         let mut out = Array2::<f64>::zeros((plan.len(), 2));
         for (k, p) in plan.iter().enumerate() {

@@ -160,6 +160,8 @@ fn off_road_rule(
 pub struct PairContext {
     generator: scbg_generator::PairContext,
     lanes: scbg_sim::lanes::LaneSegments,
+    /// B's heading at the current step (world frame), where its futures start.
+    b_heading_rad: Option<f64>,
 }
 
 /// The context of the pair (A = `a`, B = `b`) of `scene` ([`PairContext`]).
@@ -181,6 +183,7 @@ pub fn pair_context(
     Ok(PairContext {
         generator,
         lanes: scbg_sim::lanes::LaneSegments::new(&scene.map),
+        b_heading_rad: scene.current_state(b).map(|s| f64::from(s.heading_rad)),
     })
 }
 
@@ -197,9 +200,11 @@ pub fn generate_in(
 ) -> anyhow::Result<Vec<Generated>> {
     let courtesy: Vec<scbg_generator::Courtesy> = courtesy.iter().map(|c| c.get()).collect();
     let keep = |future: &mut [[f64; 2]]| {
-        context
-            .lanes
-            .keep_near(future, crate::DEFAULT_LANE_KEEPING_M);
+        context.lanes.keep_near_from(
+            future,
+            crate::DEFAULT_LANE_KEEPING_M,
+            context.b_heading_rad,
+        );
     };
     model
         .scbg

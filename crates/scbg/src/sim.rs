@@ -38,9 +38,14 @@ pub use scbg_sim::{
 /// end, off a highway's outer lane) the rest goes on along its lane's route at the plan's own
 /// progress; returns how many points moved. A simulator that drives B from [`crate::Model::generate`]'s
 /// futures should follow the kept plan (with [`DEFAULT_LANE_KEEPING_M`]): B then drives as in
-/// scbg's own closed loop. A negative or non-finite offset is an [`InvalidRequest`].
+/// scbg's own closed loop. `agent`, the track whose plan it is, starts the plan on the lane
+/// under it heading its way at the current step (else on the lane the plan's own first move
+/// heads along): a plan that turns where its lane goes straight on then keeps to its lane.
+/// A negative or non-finite offset, or an agent the scene does not hold, is an
+/// [`InvalidRequest`].
 pub fn keep_in_lane(
     scene: &Scene,
+    agent: Option<i64>,
     plan_world_m: &mut [[f64; 2]],
     max_offset_m: f64,
 ) -> anyhow::Result<usize> {
@@ -52,7 +57,20 @@ pub fn keep_in_lane(
         plan_world_m.iter().flatten().all(|v| v.is_finite()),
         "the plan has a non-finite coordinate"
     );
-    Ok(scbg_sim::lanes::LaneSegments::new(&scene.map).keep_near(plan_world_m, max_offset_m))
+    if let Some(id) = agent {
+        ensure_request!(
+            scene.track_index(id).is_some(),
+            "the scene has no track {id}"
+        );
+    }
+    let heading = agent
+        .and_then(|id| scene.current_state(id))
+        .map(|s| f64::from(s.heading_rad));
+    Ok(scbg_sim::lanes::LaneSegments::new(&scene.map).keep_near_from(
+        plan_world_m,
+        max_offset_m,
+        heading,
+    ))
 }
 
 /// Steps between the generator's plans by default (2 s). The generator commits to one of B's
@@ -459,7 +477,7 @@ mod tests {
         // the lane is kept.
         let mut plan: Vec<[f64; 2]> = (0..5).map(|k| [10.0 * f64::from(k), 3.0]).collect();
         assert_eq!(
-            keep_in_lane(&scene, &mut plan, DEFAULT_LANE_KEEPING_M).unwrap(),
+            keep_in_lane(&scene, None, &mut plan, DEFAULT_LANE_KEEPING_M).unwrap(),
             5
         );
         for (k, p) in plan.iter().enumerate() {
@@ -468,11 +486,11 @@ mod tests {
                 "{p:?}"
             );
         }
-        let err = keep_in_lane(&scene, &mut plan, -1.0).unwrap_err();
+        let err = keep_in_lane(&scene, None, &mut plan, -1.0).unwrap_err();
         assert!(crate::is_invalid_request(&err) && err.to_string().contains("-1"));
         plan[2][0] = f64::NAN;
         assert!(crate::is_invalid_request(
-            &keep_in_lane(&scene, &mut plan, 0.25).unwrap_err()
+            &keep_in_lane(&scene, None, &mut plan, 0.25).unwrap_err()
         ));
     }
 }

@@ -297,6 +297,12 @@ impl Scene {
         self.tracks.iter().position(|t| t.id == id)
     }
 
+    /// The valid state of track `id` at the current step, if any.
+    pub fn current_state(&self, id: i64) -> Option<&AgentState> {
+        let track = &self.tracks[self.track_index(id)?];
+        track.states.get(self.current_step).filter(|s| s.valid)
+    }
+
     /// Checks the invariants every consumer relies on: consistent lengths, indices in range,
     /// timestamps in order, unique track ids, finite numbers within [`MAX_ABS_VALUE`] wherever
     /// `valid` is set and in the map. Readers call this before returning a scene.

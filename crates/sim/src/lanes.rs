@@ -20,7 +20,16 @@
 //! drifting half a lane sideways (the generator's futures do, 1–2 m in 8 s on a straight road)
 //! is not split between two lanes. Where the kept lane does change, the correction is ramped
 //! over [`SWITCH_STEPS`] instead of jumping a lane width from one point to the next: a lane
-//! change B can drive.
+//! change B can drive. A lane the map links on from the kept one (through a junction, into or
+//! out of a roundabout) takes over without a ramp: the plan keeps to the road through the
+//! joint, where a ramp left points between two lanes at an angle, off both.
+//!
+//! Once on a lane, a plan moves only along the map's lane graph: to a lane beside it (heading
+//! within 45° of it) or one its route goes on to within [`ONWARD_LANES`]. A plan that turns
+//! where the map has no lane for the turn (a junction of straight lanes) has left its lane and
+//! goes on along it (below), rather than being kept on the crossing road's lane around the
+//! corner it cuts. The plan starts on the lane under the agent ([`ON_LANE_M`]) heading the
+//! agent's way where the caller knows it ([`LaneSegments::keep_near_from`]), else the plan's.
 //!
 //! A plan that leaves every lane heading its way after keeping to one (it cuts across a
 //! roundabout's island, runs on past the end of an on-ramp, drifts off the outermost lane of
@@ -31,6 +40,8 @@
 use std::collections::HashMap;
 
 use scbg_scene::{LaneType, Map};
+
+use geometry::{dist, dist2, foot, plan_directions, point_at, polyline_length, project, unit};
 
 /// Lane segments farther than this from a plan point are not considered for it (m).
 pub const REACH_M: f64 = 6.0;
@@ -69,6 +80,16 @@ pub const PAST_END_M: f64 = 2.0;
 pub const JOIN_ANGLE_COS: f64 = 0.5;
 /// A plan's route runs over at most this many lanes past the one it leaves from.
 pub const MAX_ROUTE_LANES: usize = 32;
+/// A plan's first point lies on a lane whose centre line is within this (m): about half a
+/// lane.
+pub const ON_LANE_M: f64 = 1.5;
+/// At a plan's first point, a lane within [`ON_LANE_M`] heading within 120° of the plan's way
+/// (the cosine) is the lane the agent is on: a sampled plan may start with a sharp turn, but
+/// not back along the road's other carriageway.
+pub const START_ANGLE_COS: f64 = -0.5;
+/// A plan on a lane may be kept to the lanes up to this many successors on (besides lanes
+/// heading its lane's way): the connectors through a junction and the lanes after them.
+pub const ONWARD_LANES: usize = 4;
 
 /// The car-lane centre-line segments of a map (every lane but bike lanes), listed once per
 /// simulation: the map does not change while plans are made.
@@ -156,6 +177,23 @@ impl LaneSegments {
     /// car-lane centre line within [`REACH_M`] that heads the plan's way; returns how many
     /// points moved.
     pub fn keep_near(&self, plan: &mut [[f64; 2]], max_offset_m: f64) -> usize {
+        self.keep_near_from(plan, max_offset_m, None)
+    }
+
+    /// [`Self::keep_near`] for an agent heading `start_heading_rad` (world frame) where the
+    /// plan starts: the plan starts on the lane under the agent that heads its way (within
+    /// [`ON_LANE_M`] and 45°), whatever way the plan itself turns from there. A plan turning
+    /// inside a junction, where the crossing road's lane also lies under the agent, then stays
+    /// with the agent's lane.
+    pub fn keep_near_from(
+        &self,
+        plan: &mut [[f64; 2]],
+        max_offset_m: f64,
+        start_heading_rad: Option<f64>,
+    ) -> usize {
+        let start_dir = start_heading_rad
+            .filter(|h| h.is_finite())
+            .map(|h| [h.cos(), h.sin()]);
         if plan.is_empty() {
             return 0;
         }
@@ -186,17 +224,42 @@ impl LaneSegments {
         // Per point: the correction that keeps it, and the lane it was kept to.
         let mut corrections = vec![[0.0f64; 2]; plan.len()];
         let mut kept_lane: Option<usize> = None;
+        // The direction of the kept lane's segment at the previous point, and the lanes its
+        // route may go on to (linked or joining at its end, transitively).
+        let mut kept_dir: Option<[f64; 2]> = None;
+        let mut onward: Vec<(usize, bool)> = Vec::new();
         let mut switches = Vec::new();
         // Where the plan leaves every lane after keeping to one: its route takes over there.
         let mut left_at: Option<(usize, usize)> = None;
         for (t, (p, heading)) in plan.iter().zip(heading).enumerate() {
-            // The nearest point overall and on the lane the previous point was kept to.
-            let (mut best, mut on_kept) = ((REACH_M * REACH_M, None), (f64::INFINITY, None));
+            // The nearest point overall and on the lane the previous point was kept to, each
+            // with its rank (the squared distance, but at the first point see `tier`).
+            let (mut best, mut on_kept) = ((f64::INFINITY, None), (f64::INFINITY, None));
             for &&(a, b, lane, first, last) in &segments {
                 let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
                 let len2 = dx * dx + dy * dy;
-                if let Some(h) = heading
-                    && (dx * h[0] + dy * h[1]) < MAX_ANGLE_COS * len2.sqrt()
+                // Only lanes heading the plan's way count; at the plan's first point, also the
+                // lane the agent is on (within [`ON_LANE_M`], not against the plan's way, see
+                // [`START_ANGLE_COS`]): a plan that starts by turning where its lane goes
+                // straight on starts on its lane, not on the crossing road's.
+                let along_plan = heading.map(|h| (dx * h[0] + dy * h[1]) / len2.sqrt());
+                let heads_along = along_plan.is_none_or(|c| c >= MAX_ANGLE_COS);
+                let may_start_on = t == 0 && along_plan.is_some_and(|c| c > START_ANGLE_COS);
+                let agent_along = t == 0
+                    && start_dir
+                        .is_some_and(|h| dx * h[0] + dy * h[1] >= MAX_ANGLE_COS * len2.sqrt());
+                if !heads_along && !may_start_on && !agent_along {
+                    continue;
+                }
+                // Once on a lane, the plan moves only along the map's lane graph: to a lane
+                // beside its own (heading within 45° of it) or one its route goes on to. A
+                // plan turning where the map has no lane for the turn (a junction without
+                // turn lanes) is not kept on the crossing road's lane: it has left its lane
+                // and goes on along its route.
+                if let (Some(k), Some(d)) = (kept_lane, kept_dir)
+                    && lane != k
+                    && !onward.iter().any(|o| o.0 == lane)
+                    && (dx * d[0] + dy * d[1]) < MAX_ANGLE_COS * len2.sqrt()
                 {
                     continue;
                 }
@@ -216,31 +279,51 @@ impl LaneSegments {
                 }
                 let u = along.clamp(0.0, 1.0);
                 let d2 = dist2(q, *p);
-                if d2 < best.0 {
-                    best = (d2, Some((q, lane)));
+                let on_lane = d2 <= ON_LANE_M * ON_LANE_M;
+                if d2 > REACH_M * REACH_M || (!heads_along && !on_lane) {
+                    continue;
+                }
+                // At the first point: the lane under the agent heading the agent's way (when
+                // known), then one under it heading the plan's way, then one under it heading
+                // otherwise, then one within reach heading the plan's way.
+                let tier = match (t, on_lane, agent_along, heads_along) {
+                    (0, true, true, _) => 0.0,
+                    (0, true, false, true) => 1.0,
+                    (0, true, false, false) => 2.0,
+                    (0, false, ..) => 3.0,
+                    _ => 0.0,
+                };
+                let rank = d2 + tier * REACH_M * REACH_M;
+                let dir = [dx / len, dy / len];
+                if rank < best.0 {
+                    best = (rank, Some((d2, q, lane, dir)));
                 }
                 // A point beyond either end of the kept lane has left it (for its successor).
                 let beyond = (first && u <= 0.0) || (last && u >= 1.0);
                 if Some(lane) == kept_lane && !beyond && d2 < on_kept.0 {
-                    on_kept = (d2, Some((q, lane)));
+                    on_kept = (d2, Some((d2, q, lane, dir)));
                 }
             }
             let chosen = match (best.1, on_kept.1) {
-                (Some(_), Some(k)) if on_kept.0.sqrt() <= best.0.sqrt() + SWITCH_MARGIN_M => {
-                    Some((on_kept.0, k))
-                }
-                (Some(b), _) => Some((best.0, b)),
-                (None, _) => None,
+                (Some(b), Some(k)) if k.0.sqrt() <= b.0.sqrt() + SWITCH_MARGIN_M => Some(k),
+                (b, _) => b,
             };
             if let (None, Some(lane)) = (chosen, kept_lane) {
                 left_at = Some((t, lane));
                 break;
             }
-            if let Some((d2, (q, lane))) = chosen {
-                if kept_lane.is_some_and(|k| k != lane) {
+            if let Some((d2, q, lane, dir)) = chosen {
+                // A lane change (to a lane beside) is ramped; a lane linked on from the kept
+                // one (through a junction, into or out of a roundabout) is not: the plan keeps
+                // to the road through the joint.
+                if kept_lane.is_some_and(|k| k != lane) && !onward.contains(&(lane, true)) {
                     switches.push(t);
                 }
+                if kept_lane != Some(lane) {
+                    onward = self.onward(lane);
+                }
                 kept_lane = Some(lane);
+                kept_dir = Some(dir);
                 let d = d2.sqrt();
                 if d > max_offset_m {
                     let k = max_offset_m / d;
@@ -370,13 +453,51 @@ impl LaneSegments {
         (from..plan.len()).filter(|&t| plan[t] != raw[t]).count()
     }
 
-    /// The lane that continues `lane`, and where on it (segment, point): the lanes linked as
+    /// The lane that continues `lane`, and where on it (segment, point): of its
+    /// [`Self::successors`], the one whose centre line comes nearest `goal`.
+    fn successor_toward(&self, lane: usize, goal: [f64; 2]) -> Option<(usize, usize, [f64; 2])> {
+        self.successors(lane)
+            .0
+            .into_iter()
+            .map(|(k, seg, q)| {
+                let near = project(&self.centre_lines[k][seg..], goal)
+                    .map_or(f64::INFINITY, |(_, g, ..)| dist(g, goal));
+                (near, k, seg, q)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
+            .map(|(_, k, seg, q)| (k, seg, q))
+    }
+
+    /// The lanes a route may take from `lane` within [`ONWARD_LANES`] successors
+    /// ([`Self::successors`]), in the order found, each with whether it is reached through
+    /// lanes linked or joining end to start alone (not a lane met side-on, which may be one
+    /// running alongside).
+    fn onward(&self, lane: usize) -> Vec<(usize, bool)> {
+        let mut found = vec![(lane, true)];
+        let mut from = 0;
+        for _ in 0..ONWARD_LANES {
+            let to = found.len();
+            for k in from..to {
+                let (at, joined) = found[k];
+                let (next, side_on) = self.successors(at);
+                for (n, ..) in next {
+                    if !found.iter().any(|f| f.0 == n) {
+                        found.push((n, joined && !side_on));
+                    }
+                }
+            }
+            from = to;
+        }
+        found.remove(0);
+        found
+    }
+
+    /// The lanes that continue `lane`, and where on each (segment, point): the lanes linked as
     /// its exits and those starting within [`JOIN_M`] of its end heading its way, from their
     /// start; where there are none, the lanes passing within [`REACH_M`] of its end heading
     /// within [`JOIN_ANGLE_COS`] of its way (a roundabout's entry that meets the ring side-on),
-    /// from their point nearest its end. Of these, the one whose centre line comes nearest
-    /// `goal`.
-    fn successor_toward(&self, lane: usize, goal: [f64; 2]) -> Option<(usize, usize, [f64; 2])> {
+    /// from their point nearest its end.
+    fn successors(&self, lane: usize) -> (Vec<(usize, usize, [f64; 2])>, bool) {
         let line = &self.centre_lines[lane];
         let (end, before) = (line[line.len() - 1], line[line.len().saturating_sub(2)]);
         let heading = unit(before, end);
@@ -411,126 +532,13 @@ impl LaneSegments {
                         .then_some((k, seg, q))
                 })
                 .collect();
+            return (next, true);
         }
-        next.into_iter()
-            .map(|(k, seg, q)| {
-                let near = project(&self.centre_lines[k][seg..], goal)
-                    .map_or(f64::INFINITY, |(_, g, ..)| dist(g, goal));
-                (near, k, seg, q)
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)))
-            .map(|(_, k, seg, q)| (k, seg, q))
+        (next, false)
     }
 }
 
-fn dist(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (b[0] - a[0]).hypot(b[1] - a[1])
-}
-
-/// The squared distance: what ranks many candidates (hypot is slow).
-fn dist2(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)
-}
-
-fn unit(a: [f64; 2], b: [f64; 2]) -> Option<[f64; 2]> {
-    let len = dist(a, b);
-    (len > 1e-9).then(|| [(b[0] - a[0]) / len, (b[1] - a[1]) / len])
-}
-
-fn polyline_length(line: &[[f64; 2]]) -> f64 {
-    line.windows(2).map(|w| dist(w[0], w[1])).sum()
-}
-
-/// Where `p` projects onto the line through segment `a`–`b`: the fraction along it (0 at `a`,
-/// 1 at `b`, outside [0, 1] past either end; 0 for a segment of no length) and the nearest
-/// point of the segment carried on `before_a_m` before `a` and `past_b_m` beyond `b`.
-fn foot(a: [f64; 2], b: [f64; 2], p: [f64; 2], before_a_m: f64, past_b_m: f64) -> (f64, [f64; 2]) {
-    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
-    let len2 = dx * dx + dy * dy;
-    if len2 <= 0.0 {
-        return (0.0, a);
-    }
-    let along = ((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2;
-    let len = len2.sqrt();
-    let u = along.clamp(-before_a_m / len, 1.0 + past_b_m / len);
-    (along, [a[0] + u * dx, a[1] + u * dy])
-}
-
-/// The nearest point of a polyline to `p`, its last segment carried on [`PAST_END_M`]: the
-/// segment, the point (on the polyline itself), `p`'s signed offset from it (m, left of the
-/// line's way positive) and how far past the polyline's end it lies (m, 0 on the polyline);
-/// `None` for fewer than two points.
-fn project(line: &[[f64; 2]], p: [f64; 2]) -> Option<(usize, [f64; 2], f64, f64)> {
-    // (squared distance, segment, point, offset, past the end)
-    let mut best: Option<(f64, usize, [f64; 2], f64, f64)> = None;
-    let last = line.len().saturating_sub(2);
-    for (i, w) in line.windows(2).enumerate() {
-        let (a, b) = (w[0], w[1]);
-        let (along, q) = foot(a, b, p, 0.0, if i == last { PAST_END_M } else { 0.0 });
-        let d2 = dist2(p, q);
-        if best.is_none_or(|(bd2, ..)| d2 < bd2) {
-            let d = dist(p, q);
-            let side = ((b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])).signum();
-            let past_m = dist(a, q) - dist(a, b);
-            let (on_line, past_m) = if along > 1.0 && past_m > 0.0 {
-                (b, past_m)
-            } else {
-                (q, 0.0)
-            };
-            best = Some((d2, i, on_line, side * d, past_m));
-        }
-    }
-    best.map(|(_, i, q, offset, past_m)| (i, q, offset, past_m))
-}
-
-/// The point at arc length `s_m` along a polyline (clamped to its ends) and the unit direction
-/// of the segment it lies on (+x where the polyline has no length).
-fn point_at(line: &[[f64; 2]], s_m: f64) -> ([f64; 2], [f64; 2]) {
-    let mut dir = [1.0, 0.0];
-    let mut left = s_m.max(0.0);
-    for w in line.windows(2) {
-        let len = dist(w[0], w[1]);
-        if len <= 1e-9 {
-            continue;
-        }
-        dir = [(w[1][0] - w[0][0]) / len, (w[1][1] - w[0][1]) / len];
-        if left <= len {
-            return ([w[0][0] + dir[0] * left, w[0][1] + dir[1] * left], dir);
-        }
-        left -= len;
-    }
-    (*line.last().unwrap_or(&[0.0, 0.0]), dir)
-}
-
-/// The plan's direction at each point: the chord over [`CHORD_M`] on either side
-/// ([`CHORD_M`]'s docs); where the plan spans less than that on both sides, the central
-/// difference over two steps, or where that stands (under [`MOVING_M`]) the last direction the
-/// plan had, or none before it first moves.
-fn plan_directions(plan: &[[f64; 2]]) -> Vec<Option<[f64; 2]>> {
-    let n = plan.len();
-    let unit = |a: [f64; 2], b: [f64; 2]| {
-        let len = dist(a, b);
-        (len >= MOVING_M).then(|| [(b[0] - a[0]) / len, (b[1] - a[1]) / len])
-    };
-    let mut out = Vec::with_capacity(n);
-    let mut last = None;
-    for k in 0..n {
-        let p = plan[k];
-        let behind = (0..k)
-            .rev()
-            .find(|&j| dist2(plan[j], p) >= CHORD_M * CHORD_M);
-        let ahead = (k + 1..n).find(|&j| dist2(p, plan[j]) >= CHORD_M * CHORD_M);
-        let direction = match (behind, ahead) {
-            (None, None) => unit(plan[k.saturating_sub(1)], plan[(k + 1).min(n - 1)]),
-            (b, a) => unit(plan[b.unwrap_or(k)], plan[a.unwrap_or(k)]),
-        };
-        if direction.is_some() {
-            last = direction;
-        }
-        out.push(last);
-    }
-    out
-}
+mod geometry;
 
 #[cfg(test)]
 mod tests;

@@ -333,6 +333,6 @@ pub(crate) fn closed_loop_through_the_library(
 
 /// A plan kept in lane as `generate` and the closed loop keep it.
 fn kept_in_lane(scene: &scbg_scene::Scene, mut plan: Vec<[f64; 2]>) -> Vec<[f64; 2]> {
-    scbg::keep_in_lane(scene, &mut plan, scbg::DEFAULT_LANE_KEEPING_M).unwrap();
+    scbg::keep_in_lane(scene, None, &mut plan, scbg::DEFAULT_LANE_KEEPING_M).unwrap();
     plan
 }

@@ -54,12 +54,17 @@ class Scene:
     @property
     def objects_of_interest(self) -> list[int]: ...
     def keep_in_lane(
-        self, points: npt.NDArray[np.float64], max_offset_m: float = 0.25
+        self,
+        points: npt.NDArray[np.float64],
+        max_offset_m: float = 0.25,
+        agent_id: Optional[int] = None,
     ) -> npt.NDArray[np.float64]:
         """``points [n, 2]`` (world metres, e.g. ``generate(...)["world_xy_m"]``) kept in lane
         as scbg's closed loop keeps a plan before following it: every point pulled to within
-        ``max_offset_m`` of the nearest car-lane centre line heading the plan's way. A
-        simulator driving B from generated plans should follow the kept plan."""
+        ``max_offset_m`` of the nearest car-lane centre line heading the plan's way, moving
+        only along the map's lanes. ``agent_id``, the track whose plan it is, starts the plan
+        on the lane under it (as the closed loop does). A simulator driving B from generated
+        plans should follow the kept plan."""
     def states(self) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.bool_]]:
         """``([agents, steps, 7], [agents, steps])`` as in :meth:`from_arrays`."""
 

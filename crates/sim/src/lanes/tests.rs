@@ -375,3 +375,79 @@ fn a_lane_met_side_on_continues_the_route_and_a_far_lane_is_kept_to_afresh() {
         }
     }
 }
+
+#[test]
+fn a_plan_turning_where_the_map_has_no_turn_lane_goes_on_along_its_lane() {
+    // A four-way junction of two straight two-lane roads meeting at the origin, lanes running
+    // through it with no turn lanes: B's lane heads +y along x = 1.75, the crossing road's
+    // eastbound lane runs along y = -1.75.
+    let map = Map {
+        lanes: vec![
+            lane_through((0..=10).map(|i| [1.75, -50.0 + 10.0 * f64::from(i)])),
+            lane_through((0..=10).map(|i| [-50.0 + 10.0 * f64::from(i), -1.75])),
+            lane_through((0..=10).map(|i| [50.0 - 10.0 * f64::from(i), 1.75])),
+        ],
+        ..Map::default()
+    };
+    let lanes = LaneSegments::new(&map);
+    // B stands at its stop line (y = -8) and its plan turns right onto the eastbound lane,
+    // cutting the corner: 40 points to (2.5, -3), then east along y = -2.5.
+    let turn: Vec<[f64; 2]> = (0..80)
+        .map(|t| {
+            let t = f64::from(t);
+            if t < 40.0 {
+                [1.75 + 0.75 * t / 40.0, -8.0 + 5.0 * t / 40.0]
+            } else {
+                [2.5 + 0.5 * (t - 40.0), -3.0 + 0.5 * ((t - 40.0) / 39.0)]
+            }
+        })
+        .collect();
+    let travelled: f64 = turn.windows(2).map(|w| dist(w[0], w[1])).sum();
+    let mut plan = turn.clone();
+    lanes.keep_near(&mut plan, 0.25);
+    // It keeps to its own lane, straight on through the junction at the plan's own progress.
+    for p in &plan {
+        assert!((p[0] - 1.75).abs() <= 0.25 + 1e-6, "{p:?} left B's lane");
+    }
+    assert!((plan[79][1] - (-8.0 + travelled)).abs() < 0.5, "{:?}", plan[79]);
+    // Inside the junction box both roads' lanes lie under B. A plan starting there and heading
+    // east starts on the eastbound lane unless B's own heading (+y) is known: then it starts on
+    // B's lane and goes on along it.
+    let east: Vec<[f64; 2]> = (0..80).map(|t| [1.0 + 0.5 * f64::from(t), -1.6]).collect();
+    let mut free = east.clone();
+    lanes.keep_near(&mut free, 0.25);
+    assert!((free[79][1] + 1.75).abs() <= 0.25 + 1e-6, "{:?}", free[79]);
+    let mut from_b = east.clone();
+    lanes.keep_near_from(&mut from_b, 0.25, Some(std::f64::consts::FRAC_PI_2));
+    for p in &from_b {
+        assert!((p[0] - 1.75).abs() <= 0.25 + 1e-6, "{p:?} left B's lane");
+    }
+}
+
+#[test]
+fn a_plan_into_a_linked_lane_keeps_to_the_road_through_the_joint() {
+    // A lane along x to the origin, linked to an exit leaving it 40° to the right (a kink a
+    // roundabout's exit or a junction's connector makes with its lanes sampled coarsely). The
+    // plan goes straight on: kept, each point lies within the offset of a centre line (a lane
+    // change there would have been ramped over 3 s, off both lanes).
+    let mut approach = lane_through((0..=5).map(|i| [-50.0 + 10.0 * f64::from(i), 0.0]));
+    approach.id = 1;
+    approach.exit_lanes = vec![2];
+    let (c, s) = (40f64.to_radians().cos(), 40f64.to_radians().sin());
+    let mut exit = lane_through((0..=10).map(|i| [5.0 * c * f64::from(i), -5.0 * s * f64::from(i)]));
+    exit.id = 2;
+    let map = Map {
+        lanes: vec![approach, exit],
+        ..Map::default()
+    };
+    let mut plan: Vec<[f64; 2]> = (0..80).map(|t| [-20.0 + 0.5 * f64::from(t), 0.0]).collect();
+    LaneSegments::new(&map).keep_near(&mut plan, 0.25);
+    for p in &plan {
+        // (Up to PAST_END_M past its end, a point is kept beside the approach carried on.)
+        let beside_approach = p[0] <= PAST_END_M && p[1].abs() <= 0.25 + 1e-6;
+        assert!(
+            beside_approach || off_centre_m(&map, *p) <= 0.25 + 1e-6,
+            "{p:?} off the road"
+        );
+    }
+}

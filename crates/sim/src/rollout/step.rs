@@ -222,7 +222,8 @@ impl Simulation {
             return Err(PlanError(format!("point {k} is not finite")));
         }
         if let (Some(lanes), Some(max_offset_m)) = (&self.lanes, self.config.lane_keeping_m) {
-            lanes.keep_near(&mut plan, max_offset_m);
+            let heading = view.current_state(id).map(|s| f64::from(s.heading_rad));
+            lanes.keep_near_from(&mut plan, max_offset_m, heading);
         }
         Ok(plan)
     }

@@ -485,7 +485,7 @@ def _follow_plan(ep, model, quantile, stats):
     def replan():
         scene, a_id, b_id = ep.scene(len(ep.history))
         raw = np.asarray(model.generate(scene, a_id, b_id, quantile=quantile)["world_xy_m"], float)
-        kept = scene.keep_in_lane(raw, LANE_KEEPING_M)
+        kept = scene.keep_in_lane(raw, LANE_KEEPING_M, agent_id=b_id)
         flip = np.array([1.0, -1.0])  # back to highway-env's frame
         path = np.vstack([b.position, kept * flip])
         arc = _arc(path)
