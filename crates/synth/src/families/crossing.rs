@@ -66,21 +66,8 @@ pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
     let lane_width_m = rng.random_range(3.3..3.8);
     let crossing_angle_rad = rng.random_range(70f64..110.0).to_radians();
     let from_right = rng.random_bool(0.5);
-    let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
-    let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
     let a_s0 = (a_conflict_s - (tau_a + history_s) * a_v0).max(5.0);
-    let reaction_steps = rng.random_range(3..8);
-    let pair = PairSetup {
-        a_size,
-        b_size,
-        a_idm,
-        b_idm,
-        a_s0,
-        a_v0,
-        b_s0,
-        b_v0,
-        reaction_steps,
-    };
+    let pair = PairSetup::draw(rng, (a_v_des, a_s0, a_v0), (b_v_des, b_s0, b_v0));
     CrossingParams {
         curvature,
         lane_width_m,

@@ -6,9 +6,7 @@ use rand_pcg::Pcg64Mcg;
 use scbg_scene::{Map, ObjectType};
 
 use super::merge::{Ramp, main_lane_traffic};
-use super::{
-    BPlan, Background, NUM_STEPS, PairSetup, Run, idm, merging_into_lane, noise_track, vehicle_size,
-};
+use super::{BPlan, Background, NUM_STEPS, PairSetup, Run, merging_into_lane, noise_track};
 use crate::CURRENT_STEP;
 use crate::RefPath;
 use crate::sim::{Agent, STEP_SECS, closer};
@@ -57,23 +55,11 @@ pub fn letin_params(rng: &mut Pcg64Mcg) -> LetinParams {
         accel_lane_m: rng.random_range(20.0..60.0),
         ramp_angle_rad: rng.random_range(5f64..15.0).to_radians(),
     };
-    let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
-    let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
-    let reaction_steps = rng.random_range(3..8);
+    let pair = PairSetup::draw(rng, (a_v_des, a_s0, a_v0), (b_v_des, b_s0, b_v0));
     LetinParams {
         ramp,
         accepted_lag_s,
-        pair: PairSetup {
-            a_size,
-            b_size,
-            a_idm,
-            b_idm,
-            a_s0,
-            a_v0,
-            b_s0,
-            b_v0,
-            reaction_steps,
-        },
+        pair,
         background,
         noise: (0..n_agents).map(|_| noise_track(rng, NUM_STEPS)).collect(),
     }

@@ -102,20 +102,7 @@ pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
     let curvature = rng.random_range(-1.0 / 900.0..1.0 / 900.0);
     let accel_lane_m = rng.random_range(20.0..60.0);
     let ramp_angle_rad = rng.random_range(5f64..15.0).to_radians();
-    let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
-    let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
-    let reaction_steps = rng.random_range(3..8);
-    let pair = PairSetup {
-        a_size,
-        b_size,
-        a_idm,
-        b_idm,
-        a_s0,
-        a_v0,
-        b_s0,
-        b_v0,
-        reaction_steps,
-    };
+    let pair = PairSetup::draw(rng, (a_v_des, a_s0, a_v0), (b_v_des, b_s0, b_v0));
     MergeParams {
         ramp: Ramp {
             curvature,

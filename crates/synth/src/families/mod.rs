@@ -266,6 +266,29 @@ pub(super) struct PairSetup {
 }
 
 impl PairSetup {
+    /// A and B starting at `(s0, v0)` on their paths, with drawn sizes, IDM parameters for
+    /// their desired speeds `v_des`, and A's reaction delay (drawn in that order: the draw
+    /// order is part of the data).
+    pub(super) fn draw(
+        rng: &mut Pcg64Mcg,
+        (a_v_des, a_s0, a_v0): (f64, f64, f64),
+        (b_v_des, b_s0, b_v0): (f64, f64, f64),
+    ) -> Self {
+        let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
+        let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
+        Self {
+            a_size,
+            b_size,
+            a_idm,
+            b_idm,
+            a_s0,
+            a_v0,
+            b_s0,
+            b_v0,
+            reaction_steps: rng.random_range(3..8),
+        }
+    }
+
     /// A on path 0 at lateral offset 0, then (with B) B on `b_path` at offset `b_d0`.
     pub(super) fn agents(&self, b_path: usize, b_d0: f64, with_b: bool) -> Vec<Agent> {
         let mut agents = vec![Agent::new(

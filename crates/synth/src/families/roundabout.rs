@@ -152,9 +152,6 @@ pub fn roundabout_params(rng: &mut Pcg64Mcg) -> RoundaboutParams {
     };
     let tau_circulating = (tau_entering + lead_s).max(1.5);
     let accepted_lag_s = rng.random_range(0.8..1.6);
-    let (a_size, b_size) = (vehicle_size(rng), vehicle_size(rng));
-    let (a_idm, b_idm) = (idm(rng, a_v_des), idm(rng, b_v_des));
-    let reaction_steps = rng.random_range(3..8);
     let [a_route, b_route] = routes(b_circulates, n_arms, entering_exit, circulating_exit);
     let merge_s = [a_route.0, b_route.0].map(|i| ring.s_at(i, ring.join(0)));
     let entry = ring.entry_points(0);
@@ -172,6 +169,8 @@ pub fn roundabout_params(rng: &mut Pcg64Mcg) -> RoundaboutParams {
     let curves = paths.each_ref().map(curve_speeds);
     let (a_s0, a_v0) = start_before(&curves[0], merge_s[0], a_tau + history_s, a_v0);
     let (b_s0, b_v0) = start_before(&curves[1], merge_s[1], b_tau + history_s, b_v0);
+    // (The draws in between take nothing from `rng`, so the pair's draws keep their place.)
+    let pair = PairSetup::draw(rng, (a_v_des, a_s0, a_v0), (b_v_des, b_s0, b_v0));
     let circ_s0 = if b_circulates { b_s0 } else { a_s0 };
     let mut background = Vec::new();
     if rng.random_bool(0.4) {
@@ -197,17 +196,7 @@ pub fn roundabout_params(rng: &mut Pcg64Mcg) -> RoundaboutParams {
         common_m,
         yield_m,
         accepted_lag_s,
-        pair: PairSetup {
-            a_size,
-            b_size,
-            a_idm,
-            b_idm,
-            a_s0,
-            a_v0,
-            b_s0,
-            b_v0,
-            reaction_steps,
-        },
+        pair,
         background,
         noise: (0..n_agents).map(|_| noise_track(rng, NUM_STEPS)).collect(),
     }
