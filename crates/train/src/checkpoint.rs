@@ -192,7 +192,7 @@ pub fn save_record(
 impl Checkpoint {
     /// Saves the model, the optimizer and this description into `dir` (as
     /// `model-NNNN.bpk`, `optimizer-NNNN.bpk` for NNNN = `state.epoch`, then
-    /// `checkpoint.json`), and removes the previous checkpoint's record files.
+    /// `checkpoint.json`), and removes every other checkpoint's record files.
     pub fn save(
         mut self,
         dir: &Path,
@@ -205,7 +205,6 @@ impl Checkpoint {
             });
         }
         std::fs::create_dir_all(dir).map_err(io(dir))?;
-        let previous = Self::read(dir).ok();
         self.model_file = format!("model-{:04}.bpk", self.state.epoch);
         self.optimizer_file = format!("optimizer-{:04}.bpk", self.state.epoch);
         save_record(dir, &self.model_file, |p| {
@@ -220,10 +219,19 @@ impl Checkpoint {
             message: e.to_string(),
         })?;
         scbg_base::atomic::write(&path, json).map_err(|e| io(&path)(e.into()))?;
-        if let Some(prev) = previous {
-            for f in [prev.model_file, prev.optimizer_file] {
-                if f != self.model_file && f != self.optimizer_file {
-                    let _ = std::fs::remove_file(dir.join(f));
+        // Every other checkpoint's record files go, not only the previous one's: a run killed
+        // between writing `checkpoint.json` and this sweep left the one before, and the resumed
+        // run's previous checkpoint is the newer one.
+        let stale = |name: &str| {
+            name != self.model_file
+                && name != self.optimizer_file
+                && (name.starts_with("model-") || name.starts_with("optimizer-"))
+                && name.ends_with(".bpk")
+        };
+        if let Ok(entries) = std::fs::read_dir(dir) {
+            for entry in entries.flatten() {
+                if entry.file_name().to_str().is_some_and(stale) {
+                    let _ = std::fs::remove_file(entry.path());
                 }
             }
         }

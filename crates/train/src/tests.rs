@@ -119,11 +119,19 @@ fn resume_gives_the_same_weights_as_an_uninterrupted_run() {
     let resumed = dir.path().join("resumed");
     let first = train(&data, &resumed, &tiny_config(2), false, &StopAfterOne).unwrap();
     assert_eq!(first.state.epoch, 1);
+    // A run killed after writing `checkpoint.json` but before removing the checkpoint before
+    // it leaves that one's record files too.
+    for (from, to) in [
+        (&first.model_file, "model-0000.bpk"),
+        (&first.optimizer_file, "optimizer-0000.bpk"),
+    ] {
+        std::fs::copy(resumed.join(from), resumed.join(to)).unwrap();
+    }
     train(&data, &resumed, &tiny_config(2), true, &NoProgress).unwrap();
     let (a, b) = (weights(&straight), weights(&resumed));
     assert_eq!(a.len(), b.len());
     assert!(a == b, "weights differ after resume");
-    // Only the latest model and optimizer files remain.
+    // Only the latest model and optimizer files remain, the killed run's leftovers swept too.
     let files: Vec<String> = std::fs::read_dir(&resumed)
         .unwrap()
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
