@@ -250,7 +250,14 @@ pub fn evaluate_scbg(
     ensure_request!(!models.is_empty(), "no generator folder given");
     let mut loaded = Vec::new();
     for dir in models {
-        loaded.push(load_scbg(dir, predictor)?);
+        let model = load_scbg(dir, predictor)?;
+        ensure_request!(
+            model.others.is_empty(),
+            "{} is an ensemble ({}): this evaluation measures one generator, so pass its members",
+            dir.display(),
+            scbg::model::ENSEMBLE_JSON
+        );
+        loaded.push(model);
     }
     let first = &loaded[0];
     for (dir, l) in models.iter().zip(&loaded).skip(1) {

@@ -409,7 +409,7 @@ pub fn eval_sim_files(
     progress: &dyn crate::Progress,
 ) -> anyhow::Result<SimEval> {
     let mut model = crate::generator::load_scbg(model, predictor)?;
-    model.scbg.policy = options.policy;
+    model.set_policy(options.policy);
     let truth = ground_truth
         .map(crate::synth::read_ground_truth)
         .transpose()?;

@@ -257,6 +257,12 @@ impl Model {
         self.inner.audience()
     }
 
+    /// How many generators plan together: 1, or an ensemble folder's members.
+    #[getter]
+    fn members(&self) -> usize {
+        self.inner.members()
+    }
+
     #[pyo3(signature = (scene, a, b, quantile=None, psi=None))]
     fn generate<'py>(
         &self,

@@ -35,10 +35,17 @@ def trained(trained_dirs):
     return scbg.Model(gen), file
 
 
-RELEASE_MODEL = os.path.join(os.path.dirname(__file__), "..", "..", "..", "models", "courtesy", "generator")
+RELEASE_MODEL = os.path.join(os.path.dirname(__file__), "..", "..", "..", "models", "courtesy")
 
 
 @pytest.fixture(scope="session")
 def release():
-    """The release model of the repository (models/courtesy): the default demo's generator."""
+    """The release model of the repository (models/courtesy): four trained generators planning as one."""
     return scbg.Model(RELEASE_MODEL)
+
+
+@pytest.fixture(scope="session")
+def release_member():
+    """One member of the release model alone (its data seed 0), for situations that one model's
+    plans make."""
+    return scbg.Model(os.path.join(RELEASE_MODEL, "seed0", "generator"))

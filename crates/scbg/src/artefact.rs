@@ -1,5 +1,6 @@
 //! A trained SCBG model folder (`generator.json` beside `generator.bpk` and `range.bpk`, and the
-//! predictor it names): its description and loading.
+//! predictor it names, or `ensemble.json` naming several such folders): its description and
+//! loading.
 
 use std::path::{Path, PathBuf};
 
@@ -23,6 +24,59 @@ pub const RANGE_WEIGHTS: &str = "range.bpk";
 pub const GENERATOR_KIND: &str = "scbg-generator";
 /// The format of `generator.json` this build reads and writes.
 pub const GENERATOR_FORMAT_VERSION: u32 = 3;
+
+/// The description file of an ensemble folder: generator folders planning together.
+pub const ENSEMBLE_JSON: &str = "ensemble.json";
+/// `kind` of an ensemble folder's `ensemble.json`.
+pub const ENSEMBLE_KIND: &str = "scbg-ensemble";
+/// The format of `ensemble.json` this build reads.
+pub const ENSEMBLE_FORMAT_VERSION: u32 = 1;
+
+/// An ensemble folder's description (`ensemble.json`): generator folders trained by one recipe
+/// with different seeds, whose plans the runtime chooses among by their medoid
+/// (`crate::generate`; docs/reference.md, *Ensembles*).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnsembleManifest {
+    /// Always [`ENSEMBLE_KIND`].
+    pub kind: String,
+    /// [`ENSEMBLE_FORMAT_VERSION`].
+    pub format_version: u32,
+    /// The member generator folders, each relative to the ensemble folder (or absolute).
+    pub members: Vec<String>,
+}
+
+impl EnsembleManifest {
+    /// Reads `dir/ensemble.json`, `None` when there is none; a foreign or malformed file is an
+    /// error naming it and the field.
+    pub fn read(dir: &Path) -> anyhow::Result<Option<Self>> {
+        let json = dir.join(ENSEMBLE_JSON);
+        if !json.is_file() {
+            return Ok(None);
+        }
+        let text = std::fs::read_to_string(&json)
+            .with_context(|| format!("reading {}", json.display()))?;
+        let manifest: Self =
+            serde_json::from_str(&text).with_context(|| format!("parsing {}", json.display()))?;
+        ensure_request!(
+            manifest.kind == ENSEMBLE_KIND,
+            "{}: kind {:?}, expected {ENSEMBLE_KIND:?}",
+            json.display(),
+            manifest.kind
+        );
+        ensure_request!(
+            manifest.format_version == ENSEMBLE_FORMAT_VERSION,
+            "{}: ensemble format {}, this build reads format {ENSEMBLE_FORMAT_VERSION}",
+            json.display(),
+            manifest.format_version
+        );
+        ensure_request!(
+            !manifest.members.is_empty(),
+            "{}: members: an ensemble needs at least one generator folder",
+            json.display()
+        );
+        Ok(Some(manifest))
+    }
+}
 
 /// Weights of the generator and the range predictor, and what they were trained with
 /// (`generator.json`).
@@ -129,7 +183,8 @@ impl GeneratorCheckpoint {
     }
 }
 
-/// A trained SCBG model folder, loaded on the plain device.
+/// A trained SCBG model folder, loaded on the plain device: one generator with its predictor,
+/// and for an ensemble folder the other members beside it.
 #[derive(Debug)]
 pub struct LoadedScbg {
     /// Predictor, generator and range predictor with their feature settings.
@@ -140,10 +195,27 @@ pub struct LoadedScbg {
     pub predictor: Checkpoint,
     /// The device everything is on.
     pub device: Device,
+    /// An ensemble's other members, in `ensemble.json`'s order (empty for one generator).
+    pub others: Vec<LoadedScbg>,
 }
 
-/// The predictor folder a generator folder `dir` records: an absolute path as it is, a
-/// relative one joined to `dir`.
+impl LoadedScbg {
+    /// Every member: this one first, then [`Self::others`].
+    pub fn members(&self) -> impl Iterator<Item = &LoadedScbg> {
+        std::iter::once(self).chain(&self.others)
+    }
+
+    /// Sets how a courtesy becomes B's future, for every member.
+    pub fn set_policy(&mut self, policy: scbg_generator::Policy) {
+        self.scbg.policy = policy;
+        for other in &mut self.others {
+            other.scbg.policy = policy;
+        }
+    }
+}
+
+/// A folder recorded in `dir`'s description (a generator's predictor, an ensemble's member): an
+/// absolute path as it is, a relative one joined to `dir`.
 fn recorded_predictor(dir: &Path, recorded: &str) -> PathBuf {
     let path = PathBuf::from(recorded);
     if path.is_absolute() {
@@ -154,8 +226,41 @@ fn recorded_predictor(dir: &Path, recorded: &str) -> PathBuf {
 }
 
 /// Loads `dir` (from `scbg train generator`) and its predictor (`predictor` overrides the
-/// folder recorded in generator.json).
+/// folder recorded in generator.json), or, where `dir` holds an `ensemble.json`, each of its
+/// members (`predictor` overriding every member's). Members must agree on the variant and on
+/// how their labels were made, so that their courtesies mean the same.
 pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedScbg> {
+    let Some(manifest) = EnsembleManifest::read(dir)? else {
+        return load_generator(dir, predictor);
+    };
+    let json = dir.join(ENSEMBLE_JSON);
+    let mut members = Vec::with_capacity(manifest.members.len());
+    for (k, member) in manifest.members.iter().enumerate() {
+        let member_dir = recorded_predictor(dir, member);
+        let loaded = load_generator(&member_dir, predictor).with_context(|| {
+            format!("{}: members[{k}] ({})", json.display(), member_dir.display())
+        })?;
+        members.push(loaded);
+    }
+    let mut first = members.remove(0);
+    for (k, other) in members.iter().enumerate() {
+        ensure_request!(
+            other.checkpoint.variant == first.checkpoint.variant
+                && other.checkpoint.labels == first.checkpoint.labels,
+            "{}: members[{}] was trained as variant {:?} with other labels than members[0] \
+             ({:?}): an ensemble's members share one recipe",
+            json.display(),
+            k + 1,
+            other.checkpoint.variant,
+            first.checkpoint.variant
+        );
+    }
+    first.others = members;
+    Ok(first)
+}
+
+/// Loads one generator folder and its predictor ([`load_scbg`]).
+fn load_generator(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedScbg> {
     let checkpoint = GeneratorCheckpoint::read(dir)?;
     let predictor_dir = predictor.map_or_else(
         || recorded_predictor(dir, &checkpoint.predictor),
@@ -199,6 +304,7 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
         checkpoint,
         predictor: ckpt,
         device,
+        others: Vec::new(),
     })
 }
 
@@ -208,10 +314,10 @@ mod tests {
 
     #[test]
     fn a_relative_predictor_is_beside_the_generator() {
-        let dir = Path::new("models/courtesy/generator");
+        let dir = Path::new("models/courtesy/seed0/generator");
         assert_eq!(
             recorded_predictor(dir, "../predictor"),
-            Path::new("models/courtesy/generator/../predictor")
+            Path::new("models/courtesy/seed0/generator/../predictor")
         );
         assert_eq!(
             recorded_predictor(dir, "/data/run/predictor"),

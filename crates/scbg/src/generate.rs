@@ -153,12 +153,14 @@ fn off_road_rule(
         .flatten()
 }
 
-/// The context every generation for (scene, A, B) shares: the generator's (samples, B's
-/// embedding, E[r(Y_A) | x], the predicted range) and the scene's lane segments that keep each
-/// future in lane. Keep it to generate at many courtesies cheaply ([`generate_in`]).
+/// The context every generation for (scene, A, B) shares: each member's generator context
+/// (samples, B's embedding, E[r(Y_A) | x], the predicted range) and the scene's lane segments
+/// that keep each future in lane. Keep it to generate at many courtesies cheaply
+/// ([`generate_in`]).
 #[derive(Debug)]
 pub struct PairContext {
-    generator: scbg_generator::PairContext,
+    /// One per member of the model ([`LoadedScbg::members`]), in order.
+    members: Vec<scbg_generator::PairContext>,
     lanes: scbg_sim::lanes::LaneSegments,
     /// B's heading at the current step (world frame), where its futures start.
     b_heading_rad: Option<f64>,
@@ -173,18 +175,57 @@ pub fn pair_context(
 ) -> anyhow::Result<PairContext> {
     let prepared = prepare(scene)?;
     let window = &prepared.windows[0];
-    let mut generator = model
-        .scbg
-        .pair_context(&prepared, window, a, b, &model.device)
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
-    if let Some(leaves) = off_road_rule(model, scene, b) {
-        generator.drop_candidates(leaves);
-    }
+    let members = model
+        .members()
+        .map(|m| {
+            let mut generator = m
+                .scbg
+                .pair_context(&prepared, window, a, b, &m.device)
+                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
+            if let Some(leaves) = off_road_rule(m, scene, b) {
+                generator.drop_candidates(leaves);
+            }
+            Ok(generator)
+        })
+        .collect::<anyhow::Result<_>>()?;
     Ok(PairContext {
-        generator,
+        members,
         lanes: scbg_sim::lanes::LaneSegments::new(&scene.map),
         b_heading_rad: scene.current_state(b).map(|s| f64::from(s.heading_rad)),
     })
+}
+
+/// Which of an ensemble's futures for one courtesy is B's: the medoid, the future whose mean
+/// distance to the others' (point by point, over the points all share) is least, the earlier
+/// member on a tie. Averaging the futures instead blends a member that yields with one that
+/// goes into a B that does neither (docs/findings.md, *A seed ensemble*). One future is its
+/// own medoid.
+pub fn medoid(futures: &[&[[f64; 2]]]) -> usize {
+    let distance = |p: &[[f64; 2]], q: &[[f64; 2]]| {
+        let n = p.len().min(q.len());
+        if n == 0 {
+            return 0.0;
+        }
+        let sum: f64 = p
+            .iter()
+            .zip(q)
+            .map(|(u, v)| (u[0] - v[0]).hypot(u[1] - v[1]))
+            .sum();
+        sum / n as f64
+    };
+    let spread = |k: usize| -> f64 {
+        futures
+            .iter()
+            .map(|other| distance(futures[k], other))
+            .sum()
+    };
+    (0..futures.len())
+        .map(|k| (k, spread(k)))
+        .fold(None, |best: Option<(usize, f64)>, (k, d)| match best {
+            Some((_, best_d)) if best_d <= d => best,
+            _ => Some((k, d)),
+        })
+        .map_or(0, |(k, _)| k)
 }
 
 /// B's futures at each courtesy for a pair whose context is known ([`pair_context`]), each
@@ -192,7 +233,8 @@ pub fn pair_context(
 /// [`crate::DEFAULT_LANE_KEEPING_M`]) before J_φ measures it. The generator is trained open
 /// loop and its futures drift sideways (1–2 m in 8 s on a straight road, inside curves on
 /// bends; docs/findings.md, *Map detail*), so what a front end receives is the future B can
-/// drive, and the ψ reported is that future's.
+/// drive, and the ψ reported is that future's. An ensemble returns, per courtesy, the
+/// [`medoid`] of its members' kept futures with that member's numbers.
 pub fn generate_in(
     model: &LoadedScbg,
     context: &PairContext,
@@ -206,11 +248,28 @@ pub fn generate_in(
             context.b_heading_rad,
         );
     };
-    model
-        .scbg
-        .generate_in_adjusted(&context.generator, &courtesy, Some(&keep), &model.device)
-        .map(|g| g.into_iter().map(Generated::from).collect())
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+    let mut per_member = model
+        .members()
+        .zip(&context.members)
+        .map(|(m, generator)| {
+            m.scbg
+                .generate_in_adjusted(generator, &courtesy, Some(&keep), &m.device)
+                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    if per_member.len() == 1 {
+        let only = per_member.pop().unwrap_or_default();
+        return Ok(only.into_iter().map(Generated::from).collect());
+    }
+    Ok((0..courtesy.len())
+        .map(|k| {
+            let futures: Vec<&[[f64; 2]]> = per_member
+                .iter()
+                .map(|g| g[k].world_xy_m.as_slice())
+                .collect();
+            Generated::from(per_member[medoid(&futures)][k].clone())
+        })
+        .collect())
 }
 
 /// B's futures for each requested courtesy (a quantile in [0, 1] of the predicted range, or
@@ -237,7 +296,8 @@ pub fn generate(
 /// B's future only (80 world-frame points after the scene's current step) at one courtesy:
 /// what a closed-loop planner needs, without measuring the achieved ψ (see
 /// `scbg_generator::Scbg::plan`), and before lane keeping: the closed loop keeps it in lane as
-/// it keeps every plan, which makes it the future [`generate`] returns.
+/// it keeps every plan, which makes it the future [`generate`] returns. An ensemble plans with
+/// every member and follows their [`medoid`].
 pub fn plan(
     model: &LoadedScbg,
     scene: &Scene,
@@ -248,35 +308,48 @@ pub fn plan(
     plan_from(model, &plan_basis(model, scene, a, b)?, courtesy)
 }
 
-/// The courtesy-free part of [`plan`] (`scbg_generator::Scbg::plan_basis`).
-pub fn plan_basis(
-    model: &LoadedScbg,
-    scene: &Scene,
-    a: i64,
-    b: i64,
-) -> anyhow::Result<scbg_generator::PlanBasis> {
+/// The courtesy-free part of [`plan`] (`scbg_generator::Scbg::plan_basis`), one per member.
+#[derive(Debug)]
+pub struct PlanBasis(Vec<scbg_generator::PlanBasis>);
+
+/// The courtesy-free part of [`plan`].
+pub fn plan_basis(model: &LoadedScbg, scene: &Scene, a: i64, b: i64) -> anyhow::Result<PlanBasis> {
     let prepared = prepare(scene)?;
     let window = &prepared.windows[0];
-    let mut basis = model
-        .scbg
-        .plan_basis(&prepared, window, a, b, &model.device)
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
-    if let Some(leaves) = off_road_rule(model, scene, b) {
-        basis.drop_candidates(leaves);
-    }
-    Ok(basis)
+    model
+        .members()
+        .map(|m| {
+            let mut basis = m
+                .scbg
+                .plan_basis(&prepared, window, a, b, &m.device)
+                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
+            if let Some(leaves) = off_road_rule(m, scene, b) {
+                basis.drop_candidates(leaves);
+            }
+            Ok(basis)
+        })
+        .collect::<anyhow::Result<_>>()
+        .map(PlanBasis)
 }
 
 /// [`plan`] from its [`plan_basis`]: the same future.
 pub fn plan_from(
     model: &LoadedScbg,
-    basis: &scbg_generator::PlanBasis,
+    basis: &PlanBasis,
     courtesy: Courtesy,
 ) -> anyhow::Result<Vec<[f64; 2]>> {
-    model
-        .scbg
-        .plan_from(basis, courtesy.get(), &model.device)
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+    let mut plans = model
+        .members()
+        .zip(&basis.0)
+        .map(|(m, basis)| {
+            m.scbg
+                .plan_from(basis, courtesy.get(), &m.device)
+                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let futures: Vec<&[[f64; 2]]> = plans.iter().map(Vec::as_slice).collect();
+    let chosen = medoid(&futures);
+    Ok(plans.swap_remove(chosen))
 }
 
 /// ψ of a given world-frame future of B (80 points after the scene's current step) toward A,
@@ -291,21 +364,29 @@ pub fn courtesy(
     courtesy_in(model, &pair_context(model, scene, a, b)?, future_world)
 }
 
-/// [`courtesy`] for a pair whose context is known ([`pair_context`]).
+/// [`courtesy`] for a pair whose context is known ([`pair_context`]); an ensemble's is the
+/// mean of its members' (each J_φ measures with its own predictor).
 pub fn courtesy_in(
     model: &LoadedScbg,
     context: &PairContext,
     future_world: &[[f64; 2]],
 ) -> anyhow::Result<CourtesyOf> {
-    model
-        .scbg
-        .courtesy_in(&context.generator, future_world, &model.device)
-        .map(|c| CourtesyOf {
-            psi: c.psi,
-            a_expected_reward_conditional: c.a_expected_reward_conditional,
-            a_expected_reward_marginal: c.a_expected_reward_marginal,
-        })
-        .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+    let mut sum = [0.0f32; 3];
+    for (m, generator) in model.members().zip(&context.members) {
+        let c = m
+            .scbg
+            .courtesy_in(generator, future_world, &m.device)
+            .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
+        sum[0] += c.psi;
+        sum[1] += c.a_expected_reward_conditional;
+        sum[2] += c.a_expected_reward_marginal;
+    }
+    let n = context.members.len().max(1) as f32;
+    Ok(CourtesyOf {
+        psi: sum[0] / n,
+        a_expected_reward_conditional: sum[1] / n,
+        a_expected_reward_marginal: sum[2] / n,
+    })
 }
 
 /// Draws the scene with B's generated futures (A and B highlighted) as a PNG.
@@ -346,6 +427,19 @@ pub fn render_generation(scene: &Scene, generation: &Generation, png: &Path) -> 
 mod tests {
     use super::*;
     use scbg_scene::{Map, MapPoint, RoadEdge, RoadEdgeType};
+
+    #[test]
+    fn the_medoid_is_the_future_nearest_the_others() {
+        let line = |y_m: f64| -> Vec<[f64; 2]> { (0..5).map(|k| [f64::from(k), y_m]).collect() };
+        let (a, b, c) = (line(0.0), line(1.0), line(5.0));
+        assert_eq!(medoid(&[&a]), 0);
+        // Summed mean distances: a 6 m, b 5 m, c 9 m.
+        assert_eq!(medoid(&[&a, &b, &c]), 1);
+        assert_eq!(medoid(&[&c, &a, &b]), 2);
+        // Two futures tie: the earlier member's.
+        assert_eq!(medoid(&[&b, &a]), 0);
+        assert_eq!(medoid(&[]), 0);
+    }
 
     #[test]
     fn a_future_beyond_the_road_edge_leaves_the_road() {

@@ -56,10 +56,11 @@ type PairContexts = (
 );
 
 impl Model {
-    /// Loads a generator folder (from `scbg train generator`) and its predictor.
+    /// Loads a generator folder (from `scbg train generator`) and its predictor, or an ensemble
+    /// folder's members (`ensemble.json`).
     pub fn load(dir: &Path, options: &LoadOptions) -> anyhow::Result<Self> {
         let mut loaded = load_scbg(dir, options.predictor.as_deref())?;
-        loaded.scbg.policy = options.policy;
+        loaded.set_policy(options.policy);
         Ok(Self {
             loaded,
             contexts: Mutex::new((HashMap::new(), VecDeque::new())),
@@ -83,7 +84,13 @@ impl Model {
         self.loaded.checkpoint.labels.audience.describe()
     }
 
-    /// The model folder's description.
+    /// How many generators plan together: 1, or an ensemble folder's members (B's future at
+    /// a courtesy is their medoid, `crate::generate::medoid`).
+    pub fn members(&self) -> usize {
+        self.loaded.members().count()
+    }
+
+    /// The model folder's description (an ensemble's first member's).
     pub fn checkpoint(&self) -> &GeneratorCheckpoint {
         &self.loaded.checkpoint
     }

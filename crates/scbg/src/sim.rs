@@ -168,7 +168,7 @@ impl ControlledAgent {
 #[derive(Debug, Default)]
 pub struct FirstPlans {
     bases: std::cell::RefCell<
-        std::collections::HashMap<(u64, i64, i64), std::rc::Rc<scbg_generator::PlanBasis>>,
+        std::collections::HashMap<(u64, i64, i64), std::rc::Rc<crate::generate::PlanBasis>>,
     >,
 }
 

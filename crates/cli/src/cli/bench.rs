@@ -29,7 +29,7 @@ pub enum BenchCommand {
 
 #[derive(Debug, Clone, Args)]
 pub struct BenchSoakArgs {
-    /// Generator folder (e.g. models/courtesy/generator, the release model).
+    /// Generator or ensemble folder (the release model: models/courtesy).
     #[arg(long)]
     pub model: PathBuf,
     /// Requests per second of the mix.
@@ -90,7 +90,7 @@ fn parse_kill_stage(name: &str) -> Result<scbg_lab::bench::KillStage, String> {
 
 #[derive(Debug, Clone, Args)]
 pub struct BenchServeArgs {
-    /// Generator folder (e.g. out/demo/generator_full).
+    /// Generator folder (a demo's out/demo/generator_full).
     #[arg(long)]
     pub model: PathBuf,
     /// Requests per second.

@@ -8,10 +8,11 @@ use std::path::PathBuf;
 /// The model a command runs (shared by `generate`, `sim`, `serve`, `eval sim`, `bench sim`).
 #[derive(Debug, Clone, Args)]
 pub struct ModelArgs {
-    /// Generator folder (`scbg train generator --out`, or a demo's `generator_full_s0`).
+    /// Generator folder (`scbg train generator --out`, or a demo's `generator_full`), or an
+    /// ensemble folder whose `ensemble.json` lists generator folders (`models/courtesy`).
     #[arg(long)]
     pub model: PathBuf,
-    /// Predictor folder, overriding the one recorded in generator.json.
+    /// Predictor folder, overriding the one recorded in generator.json (every member's).
     #[arg(long)]
     pub predictor: Option<PathBuf>,
     /// How a courtesy becomes B's future: the learned generator, or sample and rank.

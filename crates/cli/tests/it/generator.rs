@@ -189,18 +189,15 @@ fn train_generator_saves_generator_and_range_predictor() {
         .display()
         .to_string()
     };
-    scbg_ok(&[
-        "train",
-        "generator",
-        "--predictor",
-        &p("model"),
-        "--data",
-        &p("cache"),
-        "--out",
-        &p("gen"),
-        "--config",
-        &tiny(2),
-    ]);
+    // `scbg train generator` into `out` with `epochs` and the remaining arguments.
+    let train = |out: &str, epochs: usize, rest: &[&str]| {
+        let (model, cache, out, config) = (p("model"), p("cache"), p(out), tiny(epochs));
+        let mut args = vec!["train", "generator", "--predictor", &model, "--data", &cache];
+        args.extend(["--out", &out, "--config", &config]);
+        args.extend(rest);
+        scbg_ok(&args);
+    };
+    train("gen", 2, &[]);
     let saved: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("gen/generator.json")).unwrap(),
     )
@@ -218,20 +215,7 @@ fn train_generator_saves_generator_and_range_predictor() {
         dir.path().join("gen/generator.bpk").is_file()
             && dir.path().join("gen/range.bpk").is_file()
     );
-    scbg_ok(&[
-        "train",
-        "generator",
-        "--predictor",
-        &p("model"),
-        "--data",
-        &p("cache"),
-        "--out",
-        &p("gen_base"),
-        "--variant",
-        "baseline",
-        "--config",
-        &tiny(1),
-    ]);
+    train("gen_base", 1, &["--variant", "baseline"]);
     let base: Value = serde_json::from_str(
         &std::fs::read_to_string(dir.path().join("gen_base/generator.json")).unwrap(),
     )
@@ -319,6 +303,43 @@ fn train_generator_saves_generator_and_range_predictor() {
     let bad = generate(&b, &["--quantile", "1.5"]);
     assert_eq!(bad.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&bad.stderr).contains("quantile"));
+
+    // An ensemble folder: its future at each quantile is the medoid of its members'. With two
+    // copies of `gen` and one other generator listed first, that is `gen`'s future.
+    train("gen2", 2, &["--seed", "1"]);
+    let ensemble = |members: &[&str]| {
+        let dir = dir.path().join("ens");
+        std::fs::create_dir_all(&dir).unwrap();
+        let manifest = serde_json::json!({
+            "kind": "scbg-ensemble", "format_version": 1, "members": members,
+        });
+        std::fs::write(dir.join("ensemble.json"), manifest.to_string()).unwrap();
+        dir.display().to_string()
+    };
+    let ens_dir = ensemble(&["../gen2", "../gen", &gen_dir]);
+    let mut args = pair_args("generate", &b, &["--quantile", "0.1", "0.5", "0.9"]);
+    args[2] = ens_dir.clone();
+    let ens: Value = serde_json::from_str(&scbg_ok(
+        &args.iter().map(String::as_str).collect::<Vec<_>>(),
+    ))
+    .unwrap();
+    assert_eq!(ens["trajectories"], traj["trajectories"]);
+    let solo = |model: &str| {
+        let mut args = pair_args("generate", &b, &["--quantile", "0.9"]);
+        args[2] = model.to_string();
+        let out = scbg_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        serde_json::from_str::<Value>(&out).unwrap()["trajectories"][0]["world_xy_m"].clone()
+    };
+    assert_ne!(solo(&p("gen2")), solo(&gen_dir), "the members differ");
+    // Members of different variants, or none, are refused, naming the file.
+    for members in [&["../gen", "../gen_base"][..], &[]] {
+        ensemble(members);
+        let mut args = pair_args("generate", &b, &["--quantile", "0.5"]);
+        args[2] = ens_dir.clone();
+        let bad = scbg(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        assert_eq!(bad.status.code(), Some(2), "{members:?}");
+        assert!(String::from_utf8_lossy(&bad.stderr).contains("ensemble.json"));
+    }
 
     // `scbg eval scbg` over both variants, with figures.
     let out = scbg_ok(&[

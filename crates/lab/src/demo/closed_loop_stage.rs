@@ -39,7 +39,7 @@ pub(super) fn closed_loop_stage(
         }
         Ok((mut model, scenes, skipped)) => {
             let mut run = |policy: crate::choices::Policy| {
-                model.scbg.policy = policy;
+                model.set_policy(policy);
                 let eval_options = crate::sim_eval::SimEvalOptions {
                     scenes: options.config.closed_loop.scenes,
                     wosac_scenes: options.config.closed_loop.scenes.min(match policy {

@@ -105,6 +105,10 @@ class Model:
     def audience(self) -> str:
         """Whose reward the courtesy counts: ``pair`` (A alone) or ``neighbours <r> m <sum|proximity>``."""
         ...
+    @property
+    def members(self) -> int:
+        """How many generators plan together: 1, or an ensemble folder's members (their medoid)."""
+        ...
     def generate(
         self,
         scene: Scene,

@@ -93,7 +93,7 @@ pub fn run_sim(run: &SimRun, progress: &dyn crate::Progress) -> anyhow::Result<S
         run.rollouts
     );
     let mut model = crate::artefact::load_scbg(&run.model, run.predictor.as_deref())?;
-    model.scbg.policy = run.policy;
+    model.set_policy(run.policy);
     let config = run.options.config(run.policy);
     let (_, scene) = crate::generate::find_scene(
         &run.scenario,
