@@ -205,10 +205,14 @@ def test_the_release_models_knob_moves_a_behind_b_on_the_highway(release):
     assert on_road >= 0.85, on_road
 
 
-def test_the_ramp_car_waits_for_room_instead_of_side_swiping_a(release_member):
+def test_the_ramp_car_waits_for_room_instead_of_side_swiping_a(release_member, release):
     """merge-v0 seeds where one model's plan moves B into A alongside (seed 0 at q 0.9, seed 1 at
-    q 0.1): B waits in its lane until it has room, and merges without a collision."""
+    q 0.1): B waits in its lane until it has room, and merges without a collision; the release
+    ensemble merges there without one too."""
     highway = _highway()
     for seed, quantile in ((0, 0.9), (1, 0.1)):
-        r = highway.episode(release_member, "merge-v0", seed, {"kind": "scbg", "quantile": quantile})
+        arm = {"kind": "scbg", "quantile": quantile}
+        r = highway.episode(release_member, "merge-v0", seed, arm)
         assert r["b_held_steps"] > 0 and not r["b_collided"] and r["b_reached_goal"], (seed, r)
+        r = highway.episode(release, "merge-v0", seed, arm)
+        assert not r["b_collided"] and r["b_reached_goal"], (seed, r)

@@ -226,9 +226,10 @@ fn recorded_predictor(dir: &Path, recorded: &str) -> PathBuf {
 }
 
 /// Loads `dir` (from `scbg train generator`) and its predictor (`predictor` overrides the
-/// folder recorded in generator.json), or, where `dir` holds an `ensemble.json`, each of its
-/// members (`predictor` overriding every member's). Members must agree on the variant and on
-/// how their labels were made, so that their courtesies mean the same.
+/// folder recorded in generator.json), or, where `dir` holds an `ensemble.json` (read first),
+/// each of its members (`predictor` overriding every member's). Members must agree on the
+/// variant, on how their labels were made and on the horizon, so that their courtesies mean
+/// the same.
 pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedScbg> {
     let Some(manifest) = EnsembleManifest::read(dir)? else {
         return load_generator(dir, predictor);
@@ -244,16 +245,23 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
     }
     let mut first = members.remove(0);
     for (k, other) in members.iter().enumerate() {
-        ensure_request!(
-            other.checkpoint.variant == first.checkpoint.variant
-                && other.checkpoint.labels == first.checkpoint.labels,
-            "{}: members[{}] was trained as variant {:?} with other labels than members[0] \
-             ({:?}): an ensemble's members share one recipe",
-            json.display(),
-            k + 1,
-            other.checkpoint.variant,
-            first.checkpoint.variant
-        );
+        let (a, b) = (&first.checkpoint, &other.checkpoint);
+        let differs = [
+            ("variant", a.variant != b.variant),
+            ("labels", a.labels != b.labels),
+            (
+                "generator.future_steps",
+                a.generator.future_steps != b.generator.future_steps,
+            ),
+        ];
+        if let Some((field, _)) = differs.iter().find(|(_, d)| *d) {
+            return Err(anyhow::Error::new(crate::InvalidRequest(format!(
+                "{}: members[{}] differs from members[0] in {field}: an ensemble's members \
+                 share one recipe",
+                json.display(),
+                k + 1
+            ))));
+        }
     }
     first.others = members;
     Ok(first)

@@ -199,7 +199,8 @@ pub fn pair_context(
 /// distance to the others' (point by point, over the points all share) is least, the earlier
 /// member on a tie. Averaging the futures instead blends a member that yields with one that
 /// goes into a B that does neither (docs/findings.md, *A seed ensemble*). One future is its
-/// own medoid.
+/// own medoid; a future with a non-finite point counts for none, and is chosen only if all
+/// have one.
 pub fn medoid(futures: &[&[[f64; 2]]]) -> usize {
     let distance = |p: &[[f64; 2]], q: &[[f64; 2]]| {
         let n = p.len().min(q.len());
@@ -213,10 +214,18 @@ pub fn medoid(futures: &[&[[f64; 2]]]) -> usize {
             .sum();
         sum / n as f64
     };
+    // A future with a non-finite point is nobody's medoid and no one's neighbour.
+    let finite: Vec<bool> = futures
+        .iter()
+        .map(|f| f.iter().all(|p| p[0].is_finite() && p[1].is_finite()))
+        .collect();
     let spread = |k: usize| -> f64 {
-        futures
-            .iter()
-            .map(|other| distance(futures[k], other))
+        if !finite[k] {
+            return f64::INFINITY;
+        }
+        (0..futures.len())
+            .filter(|&j| finite[j])
+            .map(|j| distance(futures[k], futures[j]))
             .sum()
     };
     (0..futures.len())
@@ -234,12 +243,14 @@ pub fn medoid(futures: &[&[[f64; 2]]]) -> usize {
 /// loop and its futures drift sideways (1–2 m in 8 s on a straight road, inside curves on
 /// bends; docs/findings.md, *Map detail*), so what a front end receives is the future B can
 /// drive, and the ψ reported is that future's. An ensemble returns, per courtesy, the
-/// [`medoid`] of its members' kept futures with that member's numbers.
+/// [`medoid`] of its members' kept futures with that member's `psi` and range; its
+/// `achieved_psi` and expected rewards are the ensemble's measure of it ([`courtesy_in`]).
 pub fn generate_in(
     model: &LoadedScbg,
     context: &PairContext,
     courtesy: &[Courtesy],
 ) -> anyhow::Result<Vec<Generated>> {
+    same_members(model, context.members.len())?;
     let courtesy: Vec<scbg_generator::Courtesy> = courtesy.iter().map(|c| c.get()).collect();
     let keep = |future: &mut [[f64; 2]]| {
         context.lanes.keep_near_from(
@@ -261,15 +272,31 @@ pub fn generate_in(
         let only = per_member.pop().unwrap_or_default();
         return Ok(only.into_iter().map(Generated::from).collect());
     }
-    Ok((0..courtesy.len())
+    (0..courtesy.len())
         .map(|k| {
             let futures: Vec<&[[f64; 2]]> = per_member
                 .iter()
                 .map(|g| g[k].world_xy_m.as_slice())
                 .collect();
-            Generated::from(per_member[medoid(&futures)][k].clone())
+            let mut chosen = Generated::from(per_member[medoid(&futures)][k].clone());
+            let measured = courtesy_in(model, context, &chosen.world_xy_m)?;
+            chosen.achieved_psi = measured.psi;
+            chosen.a_expected_reward_conditional = measured.a_expected_reward_conditional;
+            chosen.a_expected_reward_marginal = measured.a_expected_reward_marginal;
+            Ok(chosen)
         })
-        .collect())
+        .collect()
+}
+
+/// Checks that a context or basis of `members` members was made for `model` (the caches that
+/// hold them are keyed without the model).
+fn same_members(model: &LoadedScbg, members: usize) -> anyhow::Result<()> {
+    let expected = model.members().count();
+    anyhow::ensure!(
+        members == expected,
+        "a pair context of {members} member(s) used with a model of {expected}"
+    );
+    Ok(())
 }
 
 /// B's futures for each requested courtesy (a quantile in [0, 1] of the predicted range, or
@@ -297,7 +324,8 @@ pub fn generate(
 /// what a closed-loop planner needs, without measuring the achieved ψ (see
 /// `scbg_generator::Scbg::plan`), and before lane keeping: the closed loop keeps it in lane as
 /// it keeps every plan, which makes it the future [`generate`] returns. An ensemble plans with
-/// every member and follows their [`medoid`].
+/// every member and follows the [`medoid`] of their raw plans ([`generate`] takes that of the
+/// kept futures, so the two may choose different members).
 pub fn plan(
     model: &LoadedScbg,
     scene: &Scene,
@@ -338,6 +366,7 @@ pub fn plan_from(
     basis: &PlanBasis,
     courtesy: Courtesy,
 ) -> anyhow::Result<Vec<[f64; 2]>> {
+    same_members(model, basis.0.len())?;
     let mut plans = model
         .members()
         .zip(&basis.0)
@@ -371,21 +400,30 @@ pub fn courtesy_in(
     context: &PairContext,
     future_world: &[[f64; 2]],
 ) -> anyhow::Result<CourtesyOf> {
-    let mut sum = [0.0f32; 3];
-    for (m, generator) in model.members().zip(&context.members) {
-        let c = m
-            .scbg
-            .courtesy_in(generator, future_world, &m.device)
-            .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
-        sum[0] += c.psi;
-        sum[1] += c.a_expected_reward_conditional;
-        sum[2] += c.a_expected_reward_marginal;
+    same_members(model, context.members.len())?;
+    let measured = model
+        .members()
+        .zip(&context.members)
+        .map(|(m, generator)| {
+            m.scbg
+                .courtesy_in(generator, future_world, &m.device)
+                .map(|c| CourtesyOf {
+                    psi: c.psi,
+                    a_expected_reward_conditional: c.a_expected_reward_conditional,
+                    a_expected_reward_marginal: c.a_expected_reward_marginal,
+                })
+                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+        })
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    if let [only] = measured[..] {
+        return Ok(only);
     }
-    let n = context.members.len().max(1) as f32;
+    let n = measured.len() as f32;
+    let mean = |f: fn(&CourtesyOf) -> f32| measured.iter().map(f).sum::<f32>() / n;
     Ok(CourtesyOf {
-        psi: sum[0] / n,
-        a_expected_reward_conditional: sum[1] / n,
-        a_expected_reward_marginal: sum[2] / n,
+        psi: mean(|c| c.psi),
+        a_expected_reward_conditional: mean(|c| c.a_expected_reward_conditional),
+        a_expected_reward_marginal: mean(|c| c.a_expected_reward_marginal),
     })
 }
 
@@ -439,6 +477,10 @@ mod tests {
         // Two futures tie: the earlier member's.
         assert_eq!(medoid(&[&b, &a]), 0);
         assert_eq!(medoid(&[]), 0);
+        // A future with a NaN point counts for none, though it lies between the others.
+        let mut broken = line(2.5);
+        broken[2][0] = f64::NAN;
+        assert_eq!(medoid(&[&c, &b, &broken, &a]), 1);
     }
 
     #[test]

@@ -316,14 +316,23 @@ fn train_generator_saves_generator_and_range_predictor() {
         std::fs::write(dir.join("ensemble.json"), manifest.to_string()).unwrap();
         dir.display().to_string()
     };
-    let ens_dir = ensemble(&["../gen2", "../gen", &gen_dir]);
-    let mut args = pair_args("generate", &b, &["--quantile", "0.1", "0.5", "0.9"]);
-    args[2] = ens_dir.clone();
-    let ens: Value = serde_json::from_str(&scbg_ok(
-        &args.iter().map(String::as_str).collect::<Vec<_>>(),
-    ))
-    .unwrap();
-    assert_eq!(ens["trajectories"], traj["trajectories"]);
+    let ens_dir = dir.path().join("ens").display().to_string();
+    let ensemble_futures = |members: &[&str]| {
+        ensemble(members);
+        let mut args = pair_args("generate", &b, &["--quantile", "0.1", "0.5", "0.9"]);
+        args[2] = ens_dir.clone();
+        let out = scbg_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let ens: Value = serde_json::from_str(&out).unwrap();
+        ens["trajectories"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|t| t["world_xy_m"].clone())
+            .collect::<Vec<_>>()
+    };
+    let gen_futures: Vec<Value> = trajs.iter().map(|t| t["world_xy_m"].clone()).collect();
+    assert_eq!(ensemble_futures(&["../gen2", "../gen", &gen_dir]), gen_futures);
+    assert_eq!(ensemble_futures(&["../gen", &gen_dir, "../gen2"]), gen_futures);
     let solo = |model: &str| {
         let mut args = pair_args("generate", &b, &["--quantile", "0.9"]);
         args[2] = model.to_string();

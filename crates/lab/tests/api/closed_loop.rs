@@ -12,7 +12,7 @@ pub(crate) fn ranked_policy_in_the_loop(
     t: &scbg_synth::GroundTruth,
 ) {
     use scbg::sim::{self, ControlledAgent, SimConfig};
-    model.scbg.policy = scbg::choices::Policy::Ranked;
+    model.set_policy(scbg::choices::Policy::Ranked);
     let quantiles = [0.0, 1.0].map(|q| Courtesy::quantile(q).unwrap());
     // The tiny model's labels draw 2 futures of B: the two ends take one each. On a map without
     // road edges both count (with them, an untrained sample that leaves the road would not:

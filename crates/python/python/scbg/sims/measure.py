@@ -270,7 +270,7 @@ def yardsticks_of(names):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("model", help="an scbg generator folder (e.g. out/demo/generator_full)")
+    ap.add_argument("model", help="an scbg generator folder (out/demo/generator_full) or ensemble folder (models/courtesy)")
     ap.add_argument("--scenarios", nargs="+", help="default: every scenario of every simulator")
     ap.add_argument("--episodes", type=int, default=30, help="seeds per scenario")
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
