@@ -69,3 +69,13 @@ def test_release_plans_keep_to_a_lane_on_any_map_detail(release, b_lane_y):
                 failures.append(f"{lane_type} lines={lines} edges={edges} q={q}: "
                                 f"{worst:.2f} m off, {runs} runs, lane change {changes_lane}")
     assert not failures, "\n".join(failures)
+
+
+def test_the_release_model_plans_as_an_ensemble_whose_courtesy_is_its_own(release, release_member):
+    """The release model is four generators planning together, and the ψ it reports for its
+    future is its own measure of that future, as ``courtesy`` gives it."""
+    assert release.members == 4 and release_member.members == 1
+    scene = pair_scene(straight_road("freeway", True, True), LANE_WIDTH_M)
+    out = release.generate(scene, 1, 2, quantile=0.9)
+    again = release.courtesy(scene, 1, 2, out["world_xy_m"])
+    assert abs(out["achieved_psi"] - again["psi"]) < 1e-5, (out["achieved_psi"], again)

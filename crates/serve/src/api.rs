@@ -23,6 +23,9 @@ pub struct Health {
     /// Whose reward the loaded model's courtesy counts: `pair` (A alone, the paper) or
     /// `neighbours <radius> m <sum|proximity>` (A and the vehicles near B).
     pub audience: String,
+    /// Generators planning together: 1, or an ensemble folder's members (each request runs
+    /// every one).
+    pub members: usize,
     /// Scenarios held.
     pub scenarios: usize,
     /// Open closed-loop sessions.

@@ -109,6 +109,7 @@ pub(crate) async fn healthz(State(state): State<Arc<AppState>>) -> Json<Health> 
         variant: state.model.variant().name().to_string(),
         policy: state.model.policy().name().to_string(),
         audience: state.model.audience(),
+        members: state.model.members(),
         scenarios: state.scenarios.lock().expect("scenarios lock").0.len(),
         sessions: state.expire_sessions(),
     })

@@ -214,6 +214,7 @@ async fn generate_courtesy_and_descriptions() {
     assert_eq!(status, StatusCode::OK);
     assert_eq!(health["status"], "ok");
     assert_eq!(health["audience"], "pair");
+    assert_eq!(health["members"], 1);
     assert_eq!(health["policy"], "generator");
     let (status, doc) = json_call(&app, "GET", "/openapi.json", Value::Null).await;
     assert_eq!(status, StatusCode::OK);
