@@ -139,6 +139,52 @@ impl Scbg {
         adjust: Option<AdjustFuture<'_>>,
         device: &Device,
     ) -> Result<Vec<Generated>, GenerateError> {
+        let (chosen, futures_b) = self.chosen_in_adjusted(ctx, courtesy, adjust, device)?;
+        let measured = measure_futures(
+            &self.predictor,
+            &[&ctx.example],
+            std::slice::from_ref(&futures_b),
+            self.labels.reward,
+            device,
+        );
+        Ok(chosen
+            .into_iter()
+            .enumerate()
+            .map(|(j, c)| Generated {
+                quantile: c.quantile,
+                psi: c.psi,
+                psi_low: c.psi_low,
+                psi_high: c.psi_high,
+                achieved_psi: measured.psi[0][j],
+                a_expected_reward_conditional: measured.e_cond[0][j],
+                a_expected_reward_marginal: measured.e_marg[0],
+                world_xy_m: c.world_xy_m,
+                step_secs: c.step_secs,
+            })
+            .collect())
+    }
+
+    /// The futures [`Scbg::generate_in_adjusted`] returns, without J_φ's measure of them: for
+    /// a caller that measures them otherwise (an ensemble measures only the future it keeps).
+    pub fn choose_in_adjusted(
+        &self,
+        ctx: &PairContext,
+        courtesy: &[Courtesy],
+        adjust: Option<AdjustFuture<'_>>,
+        device: &Device,
+    ) -> Result<Vec<ChosenFuture>, GenerateError> {
+        self.chosen_in_adjusted(ctx, courtesy, adjust, device)
+            .map(|(chosen, _)| chosen)
+    }
+
+    /// The chosen futures, adjusted, and the same in B's frame (what J_φ measures).
+    fn chosen_in_adjusted(
+        &self,
+        ctx: &PairContext,
+        courtesy: &[Courtesy],
+        adjust: Option<AdjustFuture<'_>>,
+        device: &Device,
+    ) -> Result<(Vec<ChosenFuture>, Vec<Vec<[f32; 2]>>), GenerateError> {
         let (low, high) = (ctx.low, ctx.high);
         let mut choices = self.choose(&ctx.basis, courtesy, device)?;
         // The futures as returned (world frame); with `adjust`, J_φ measures them in B's frame.
@@ -160,18 +206,11 @@ impl Scbg {
                     .collect();
             }
         }
-        let measured = measure_futures(
-            &self.predictor,
-            &[&ctx.example],
-            std::slice::from_ref(&choices.futures_b),
-            self.labels.reward,
-            device,
-        );
-        Ok(courtesy
+        let chosen = courtesy
             .iter()
             .zip(world)
             .enumerate()
-            .map(|(j, (c, world_xy_m))| Generated {
+            .map(|(j, (c, world_xy_m))| ChosenFuture {
                 quantile: match *c {
                     Courtesy::Quantile(q) => q,
                     Courtesy::Psi(p) => quantile_for_psi(p, low, high),
@@ -179,14 +218,30 @@ impl Scbg {
                 psi: choices.psi[j],
                 psi_low: low,
                 psi_high: high,
-                achieved_psi: measured.psi[0][j],
-                a_expected_reward_conditional: measured.e_cond[0][j],
-                a_expected_reward_marginal: measured.e_marg[0],
                 world_xy_m,
                 step_secs: STEP_SECS,
             })
-            .collect())
+            .collect();
+        Ok((chosen, choices.futures_b))
     }
+}
+
+/// One future of B chosen for a courtesy, before J_φ measures it
+/// ([`Scbg::choose_in_adjusted`]); the fields mean what [`Generated`]'s do.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChosenFuture {
+    /// The quantile asked for, or the one an explicit ψ corresponds to.
+    pub quantile: f32,
+    /// The ψ the quantile maps to; with [`Policy::Ranked`] and a quantile, the chosen label.
+    pub psi: f32,
+    /// The predicted 0.1 quantile of ψ.
+    pub psi_low: f32,
+    /// The predicted 0.9 quantile.
+    pub psi_high: f32,
+    /// B's future, world frame, metres, at `step_secs` intervals after the current step.
+    pub world_xy_m: Vec<[f64; 2]>,
+    /// Time between points, seconds.
+    pub step_secs: f32,
 }
 
 /// ψ of a given future of B (paper eq. 2), as `scbg generate` reports it for its own futures.

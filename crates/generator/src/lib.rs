@@ -38,7 +38,7 @@ pub use candidates::{
 };
 pub use courtesy::{Courtesy, Policy};
 pub use data::{Example, a_from_b, build_examples, marginal_embedding};
-pub use generate::{CourtesyOf, Generated, PairContext};
+pub use generate::{ChosenFuture, CourtesyOf, Generated, PairContext};
 pub use infer::{GenerateError, Scbg};
 pub use model::{
     CandidateFutures, DEFAULT_MODE_SLOWDOWNS, Generator, GeneratorConfig, RELATIVE_COURTESY_FLOOR,

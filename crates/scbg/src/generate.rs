@@ -259,31 +259,43 @@ pub fn generate_in(
             context.b_heading_rad,
         );
     };
-    let mut per_member = model
+    let err = |e: scbg_generator::GenerateError| anyhow::Error::new(InvalidRequest(e.to_string()));
+    if model.others.is_empty() {
+        return model
+            .scbg
+            .generate_in_adjusted(&context.members[0], &courtesy, Some(&keep), &model.device)
+            .map(|g| g.into_iter().map(Generated::from).collect())
+            .map_err(err);
+    }
+    // Each member's kept futures, unmeasured: only the one kept is measured, by all of them.
+    let per_member = model
         .members()
         .zip(&context.members)
         .map(|(m, generator)| {
             m.scbg
-                .generate_in_adjusted(generator, &courtesy, Some(&keep), &m.device)
-                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+                .choose_in_adjusted(generator, &courtesy, Some(&keep), &m.device)
+                .map_err(err)
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
-    if per_member.len() == 1 {
-        let only = per_member.pop().unwrap_or_default();
-        return Ok(only.into_iter().map(Generated::from).collect());
-    }
     (0..courtesy.len())
         .map(|k| {
             let futures: Vec<&[[f64; 2]]> = per_member
                 .iter()
                 .map(|g| g[k].world_xy_m.as_slice())
                 .collect();
-            let mut chosen = Generated::from(per_member[medoid(&futures)][k].clone());
+            let chosen = per_member[medoid(&futures)][k].clone();
             let measured = courtesy_in(model, context, &chosen.world_xy_m)?;
-            chosen.achieved_psi = measured.psi;
-            chosen.a_expected_reward_conditional = measured.a_expected_reward_conditional;
-            chosen.a_expected_reward_marginal = measured.a_expected_reward_marginal;
-            Ok(chosen)
+            Ok(Generated {
+                quantile: chosen.quantile,
+                psi: chosen.psi,
+                psi_low: chosen.psi_low,
+                psi_high: chosen.psi_high,
+                achieved_psi: measured.psi,
+                a_expected_reward_conditional: measured.a_expected_reward_conditional,
+                a_expected_reward_marginal: measured.a_expected_reward_marginal,
+                world_xy_m: chosen.world_xy_m,
+                step_secs: chosen.step_secs,
+            })
         })
         .collect()
 }
