@@ -216,7 +216,7 @@ impl LoadedScbg {
 
 /// A folder recorded in `dir`'s description (a generator's predictor, an ensemble's member): an
 /// absolute path as it is, a relative one joined to `dir`.
-fn recorded_predictor(dir: &Path, recorded: &str) -> PathBuf {
+fn recorded_folder(dir: &Path, recorded: &str) -> PathBuf {
     let path = PathBuf::from(recorded);
     if path.is_absolute() {
         path
@@ -237,7 +237,7 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
     let json = dir.join(ENSEMBLE_JSON);
     let mut members = Vec::with_capacity(manifest.members.len());
     for (k, member) in manifest.members.iter().enumerate() {
-        let member_dir = recorded_predictor(dir, member);
+        let member_dir = recorded_folder(dir, member);
         let loaded = load_generator(&member_dir, predictor).with_context(|| {
             format!("{}: members[{k}] ({})", json.display(), member_dir.display())
         })?;
@@ -271,7 +271,7 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
 fn load_generator(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedScbg> {
     let checkpoint = GeneratorCheckpoint::read(dir)?;
     let predictor_dir = predictor.map_or_else(
-        || recorded_predictor(dir, &checkpoint.predictor),
+        || recorded_folder(dir, &checkpoint.predictor),
         Path::to_path_buf,
     );
     let ckpt = Checkpoint::read(&predictor_dir)
@@ -324,11 +324,11 @@ mod tests {
     fn a_relative_predictor_is_beside_the_generator() {
         let dir = Path::new("models/courtesy/seed0/generator");
         assert_eq!(
-            recorded_predictor(dir, "../predictor"),
+            recorded_folder(dir, "../predictor"),
             Path::new("models/courtesy/seed0/generator/../predictor")
         );
         assert_eq!(
-            recorded_predictor(dir, "/data/run/predictor"),
+            recorded_folder(dir, "/data/run/predictor"),
             Path::new("/data/run/predictor")
         );
     }
