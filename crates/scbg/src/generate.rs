@@ -173,26 +173,53 @@ pub fn pair_context(
     a: i64,
     b: i64,
 ) -> anyhow::Result<PairContext> {
-    let prepared = prepare(scene)?;
-    let window = &prepared.windows[0];
-    let members = model
-        .members()
-        .map(|m| {
-            let mut generator = m
-                .scbg
-                .pair_context(&prepared, window, a, b, &m.device)
-                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
-            if let Some(leaves) = off_road_rule(m, scene, b) {
-                generator.drop_candidates(leaves);
-            }
-            Ok(generator)
-        })
-        .collect::<anyhow::Result<_>>()?;
+    let members = per_member(
+        model,
+        scene,
+        b,
+        |m, prepared, window| m.scbg.pair_context(prepared, window, a, b, &m.device),
+        |generator, leaves| generator.drop_candidates(leaves),
+    )?;
     Ok(PairContext {
         members,
         lanes: scbg_sim::lanes::LaneSegments::new(&scene.map),
         b_heading_rad: scene.current_state(b).map(|s| f64::from(s.heading_rad)),
     })
+}
+
+/// One value per member of `model` for (scene, B): `build` from the scene's features, then,
+/// with sample and rank, `drop` applied with the off-road rule ([`off_road_rule`]). Requests
+/// the scene cannot answer are [`InvalidRequest`]s.
+fn per_member<T>(
+    model: &LoadedScbg,
+    scene: &Scene,
+    b: i64,
+    build: impl Fn(
+        &LoadedScbg,
+        &scbg_features::PreparedScene,
+        &scbg_features::Window,
+    ) -> Result<T, scbg_generator::GenerateError>,
+    drop: impl Fn(&mut T, &dyn Fn(&[[f64; 2]]) -> bool) -> usize,
+) -> anyhow::Result<Vec<T>> {
+    let prepared = prepare(scene)?;
+    let window = &prepared.windows[0];
+    // Members share their policy (`LoadedScbg::set_policy`), so one rule serves them all.
+    let leaves = off_road_rule(model, scene, b);
+    model
+        .members()
+        .map(|m| {
+            let mut value = build(m, &prepared, window).map_err(invalid)?;
+            if let Some(leaves) = &leaves {
+                drop(&mut value, leaves);
+            }
+            Ok(value)
+        })
+        .collect()
+}
+
+/// A generator error caused by the request, as an [`InvalidRequest`].
+fn invalid(e: scbg_generator::GenerateError) -> anyhow::Error {
+    anyhow::Error::new(InvalidRequest(e.to_string()))
 }
 
 /// Which of an ensemble's futures for one courtesy is B's: the medoid, the future whose mean
@@ -259,13 +286,12 @@ pub fn generate_in(
             context.b_heading_rad,
         );
     };
-    let err = |e: scbg_generator::GenerateError| anyhow::Error::new(InvalidRequest(e.to_string()));
     if model.others.is_empty() {
         return model
             .scbg
             .generate_in_adjusted(&context.members[0], &courtesy, Some(&keep), &model.device)
             .map(|g| g.into_iter().map(Generated::from).collect())
-            .map_err(err);
+            .map_err(invalid);
     }
     // Each member's kept futures, unmeasured: only the one kept is measured, by all of them.
     let per_member = model
@@ -274,7 +300,7 @@ pub fn generate_in(
         .map(|(m, generator)| {
             m.scbg
                 .choose_in_adjusted(generator, &courtesy, Some(&keep), &m.device)
-                .map_err(err)
+                .map_err(invalid)
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     (0..courtesy.len())
@@ -354,22 +380,14 @@ pub struct PlanBasis(Vec<scbg_generator::PlanBasis>);
 
 /// The courtesy-free part of [`plan`].
 pub fn plan_basis(model: &LoadedScbg, scene: &Scene, a: i64, b: i64) -> anyhow::Result<PlanBasis> {
-    let prepared = prepare(scene)?;
-    let window = &prepared.windows[0];
-    model
-        .members()
-        .map(|m| {
-            let mut basis = m
-                .scbg
-                .plan_basis(&prepared, window, a, b, &m.device)
-                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))?;
-            if let Some(leaves) = off_road_rule(m, scene, b) {
-                basis.drop_candidates(leaves);
-            }
-            Ok(basis)
-        })
-        .collect::<anyhow::Result<_>>()
-        .map(PlanBasis)
+    per_member(
+        model,
+        scene,
+        b,
+        |m, prepared, window| m.scbg.plan_basis(prepared, window, a, b, &m.device),
+        |basis, leaves| basis.drop_candidates(leaves),
+    )
+    .map(PlanBasis)
 }
 
 /// [`plan`] from its [`plan_basis`]: the same future.
@@ -385,7 +403,7 @@ pub fn plan_from(
         .map(|(m, basis)| {
             m.scbg
                 .plan_from(basis, courtesy.get(), &m.device)
-                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+                .map_err(invalid)
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let futures: Vec<&[[f64; 2]]> = plans.iter().map(Vec::as_slice).collect();
@@ -424,7 +442,7 @@ pub fn courtesy_in(
                     a_expected_reward_conditional: c.a_expected_reward_conditional,
                     a_expected_reward_marginal: c.a_expected_reward_marginal,
                 })
-                .map_err(|e| anyhow::Error::new(InvalidRequest(e.to_string())))
+                .map_err(invalid)
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     if let [only] = measured[..] {

@@ -307,45 +307,44 @@ fn train_generator_saves_generator_and_range_predictor() {
     // An ensemble folder: its future at each quantile is the medoid of its members'. With two
     // copies of `gen` and one other generator listed first, that is `gen`'s future.
     train("gen2", 2, &["--seed", "1"]);
+    let ens_dir = dir.path().join("ens");
+    std::fs::create_dir_all(&ens_dir).unwrap();
     let ensemble = |members: &[&str]| {
-        let dir = dir.path().join("ens");
-        std::fs::create_dir_all(&dir).unwrap();
         let manifest = serde_json::json!({
             "kind": "scbg-ensemble", "format_version": 1, "members": members,
         });
-        std::fs::write(dir.join("ensemble.json"), manifest.to_string()).unwrap();
-        dir.display().to_string()
+        std::fs::write(ens_dir.join("ensemble.json"), manifest.to_string()).unwrap();
     };
-    let ens_dir = dir.path().join("ens").display().to_string();
-    let ensemble_futures = |members: &[&str]| {
-        ensemble(members);
-        let mut args = pair_args("generate", &b, &["--quantile", "0.1", "0.5", "0.9"]);
-        args[2] = ens_dir.clone();
-        let out = scbg_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
-        let ens: Value = serde_json::from_str(&out).unwrap();
-        ens["trajectories"]
-            .as_array()
-            .unwrap()
-            .iter()
-            .map(|t| t["world_xy_m"].clone())
-            .collect::<Vec<_>>()
+    let ens_dir = ens_dir.display().to_string();
+    // `scbg generate` of the pair with another model.
+    let generate_with = |model: &str, quantiles: &[&str]| {
+        let mut args = pair_args("generate", &b, &["--quantile"]);
+        args[2] = model.to_string();
+        args.extend(quantiles.iter().map(|q| q.to_string()));
+        scbg(&args.iter().map(String::as_str).collect::<Vec<_>>())
+    };
+    let futures = |model: &str, quantiles: &[&str]| -> Vec<Value> {
+        let out = generate_with(model, quantiles);
+        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        let json: Value = serde_json::from_slice(&out.stdout).unwrap();
+        let trajectories = json["trajectories"].as_array().unwrap();
+        trajectories.iter().map(|t| t["world_xy_m"].clone()).collect()
     };
     let gen_futures: Vec<Value> = trajs.iter().map(|t| t["world_xy_m"].clone()).collect();
-    assert_eq!(ensemble_futures(&["../gen2", "../gen", &gen_dir]), gen_futures);
-    assert_eq!(ensemble_futures(&["../gen", &gen_dir, "../gen2"]), gen_futures);
-    let solo = |model: &str| {
-        let mut args = pair_args("generate", &b, &["--quantile", "0.9"]);
-        args[2] = model.to_string();
-        let out = scbg_ok(&args.iter().map(String::as_str).collect::<Vec<_>>());
-        serde_json::from_str::<Value>(&out).unwrap()["trajectories"][0]["world_xy_m"].clone()
-    };
-    assert_ne!(solo(&p("gen2")), solo(&gen_dir), "the members differ");
+    let gen_path = gen_dir.as_str();
+    for members in [["../gen2", "../gen", gen_path], ["../gen", gen_path, "../gen2"]] {
+        ensemble(&members);
+        assert_eq!(futures(&ens_dir, &["0.1", "0.5", "0.9"]), gen_futures, "{members:?}");
+    }
+    assert_ne!(
+        futures(&p("gen2"), &["0.9"]),
+        futures(&gen_dir, &["0.9"]),
+        "the members differ"
+    );
     // Members of different variants, or none, are refused, naming the file.
     for members in [&["../gen", "../gen_base"][..], &[]] {
         ensemble(members);
-        let mut args = pair_args("generate", &b, &["--quantile", "0.5"]);
-        args[2] = ens_dir.clone();
-        let bad = scbg(&args.iter().map(String::as_str).collect::<Vec<_>>());
+        let bad = generate_with(&ens_dir, &["0.5"]);
         assert_eq!(bad.status.code(), Some(2), "{members:?}");
         assert!(String::from_utf8_lossy(&bad.stderr).contains("ensemble.json"));
     }
