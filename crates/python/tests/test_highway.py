@@ -151,6 +151,9 @@ def test_the_summary_is_paired_within_episodes():
     assert s["episodes"] == 2 and s["skipped"] == [{"seed": 2, "reason": "never met"}]
     assert s["effect_mps"] == pytest.approx(0.4)
     assert s["yardstick_effect_mps"] == pytest.approx(0.5)
+    # The yardstick's high arm collided in both: no collision-free episode is left to it.
+    assert s["effect_collision_free_mps"] == pytest.approx(0.4)
+    assert math.isnan(s["yardstick_effect_collision_free_mps"])
     assert s["responsive_share"] == 0.5 and s["yardstick_responsive_share"] == 1.0
     assert s["spearman_responsive"] == pytest.approx(1.0)
     assert s["b_collision_rate"] == 0.0 and s["yardstick_b_collision_rate"] == 0.5

@@ -109,6 +109,45 @@ def test_crossing_rule_holds_b_only_for_a_car_that_cannot_stop():
     assert sims.crossing_hold_m(path, arc, hold - 3.0, b, [near]) == math.inf
 
 
+def test_crossing_rule_follows_a_turning_car_along_its_way():
+    """A car beside B's path, heading the same way, that turns left across it: along its
+    heading it never crosses B's path, along the way its simulator says it drives it does, and
+    B is held short of where that way crosses."""
+    path = np.column_stack([np.zeros(61), np.arange(61.0)])
+    arc = sims.arc_lengths(path)
+    b = _row(0.0, 0.0, math.pi / 2, 8.0)
+    turner = _row(10.0, 25.0, math.pi / 2, 13.0)
+    assert sims.crossing_hold_m(path, arc, 0.0, b, [turner]) == math.inf
+    angle = np.linspace(0.0, math.pi / 2, 20)  # a quarter circle of 10 m about (0, 25), then west
+    way = np.vstack([np.column_stack([10.0 * np.cos(angle), 25.0 + 10.0 * np.sin(angle)]),
+                     np.column_stack([-np.arange(2.0, 40.0, 2.0), np.full(19, 35.0)])])
+    hold = sims.crossing_hold_m(path, arc, 0.0, b, [turner], ways=[way])
+    # B's box clears the way's half width (plus margins) before y = 35, where the way crosses.
+    assert 35.0 - 0.5 * (1.9 + 4.8) - 3.0 < hold < 35.0 - 0.5 * (1.9 + 4.8)
+    # A car given no way is taken along its heading.
+    assert sims.crossing_hold_m(path, arc, 0.0, b, [turner], ways=[None]) == math.inf
+
+
+def test_the_follow_guard_eases_behind_a_faster_car_and_stops_for_a_standing_one():
+    """B at 26 m/s with a car cutting in 4 m ahead: plain IDM would brake at about 245 m/s²; the
+    guard brakes briefly (a faster car pulls away) and never past B's hardest braking. Behind a
+    standing car it brakes its hardest; with the road clear, or far behind a car, B keeps its
+    plan."""
+    step = 0.1
+    faster = sims.guarded_speed_mps(30.0, 26.0, 4.0, 26.9, step)
+    assert 26.0 - sims.GUARD_MAX_BRAKE_MPS2 * step <= faster < 26.0
+    assert (26.0 - faster) / step < 8.0
+    standing = sims.guarded_speed_mps(30.0, 26.0, 4.0, 0.0, step)
+    assert standing == pytest.approx(26.0 - sims.GUARD_MAX_BRAKE_MPS2 * step)
+    assert sims.guarded_speed_mps(27.0, 26.0, math.inf, 0.0, step) == 27.0
+    assert sims.guarded_speed_mps(26.3, 26.0, 200.0, 26.0, step) == 26.3
+    # The leader is the first car near B's path ahead (bumper to bumper); one 5 m aside is not.
+    path = np.column_stack([np.arange(0.0, 40.0), np.zeros(40)])
+    samples = sims.path_samples(path, sims.arc_lengths(path))
+    gap, v = sims.leader_on_path(samples, 0.0, [[25.0, 1.0], [10.0, 5.0]], [12.0, 3.0], [4.8, 4.8])
+    assert gap == pytest.approx(25.0 - 4.8, abs=1.5) and v == 12.0
+
+
 def test_scbg_b_waits_for_a_priority_car_it_would_hit(release):
     """At the junction, the release model's least courteous B plans to drive into A's path at
     seeds 9, 11 and 24: the crossing rule holds it, and it does not collide."""

@@ -32,7 +32,8 @@ import numpy as np
 
 import scbg
 
-from . import arc_lengths as _arc, check_arm, crossing_hold_m, held_speed_mps, point_at as _at, yardstick_value
+from . import (CROSS_LOOKAHEAD_M, CROSS_REACH_M, GUARD_LOOKAHEAD_M, arc_lengths as _arc, check_arm, crossing_hold_m,
+               guarded_speed_mps, held_speed_mps, leader_on_path, path_samples, point_at as _at, yardstick_value)
 
 STEP_SECS = 0.1
 HISTORY_STEPS = 11  # 1.1 s, the current step included
@@ -393,15 +394,6 @@ def _make_b_wait_for_a(ep):
     b.act = act_waiting
 
 
-# B's follow-distance guard (IDM, Treiber et al. 2000): B never drives along its plan faster
-# than IDM allows behind the nearest car in its way, as scbg's own closed loop follows a plan
-# that runs into another agent at a safe distance instead.
-GUARD_ACC_MPS2 = 6.0  # highway-env's ACC_MAX
-GUARD_BRAKE_MPS2 = 5.0  # comfortable braking
-GUARD_GAP_M = 2.0  # jam distance
-GUARD_HEADWAY_S = 1.0
-GUARD_CORRIDOR_M = 2.2  # a car whose centre is this close to B's path ahead is in its way
-GUARD_LOOKAHEAD_M = 60.0
 # B's gap acceptance, the rule of scbg's own closed loop (and of the synthetic world's least
 # courteous B): B changes into a lane only when no car there is alongside it and the car behind
 # it there can stay behind braking at most GAP_BRAKE_MPS2 after GAP_REACTION_S; until then it
@@ -410,6 +402,7 @@ GUARD_LOOKAHEAD_M = 60.0
 GAP_BRAKE_MPS2 = 7.0
 GAP_REACTION_S = 0.5
 GAP_REACH_M = 60.0  # cars farther than this from B are never in the way of its lane change
+CATCH_UP_MPS2 = 3.0  # after a hold B catches up with its plan's timing at IDM's acceleration
 # B's path tracker: pure pursuit of a point this far ahead along the plan, yaw rate bounded.
 TRACK_LOOKAHEAD_M = 4.0
 TRACK_LOOKAHEAD_S = 0.6
@@ -417,22 +410,11 @@ TRACK_YAW_RATE = 0.8  # rad/s
 
 
 def _leader_gap(ep, samples, s):
-    """Bumper-to-bumper gap (m) and speed of the nearest car or obstacle (merge-v0's wall at
-    the end of the acceleration lane) in B's way along its path from arc length ``s``, or
-    (inf, 0). ``samples``: the path's points every metre of arc length."""
-    i0 = int(np.floor(s))
-    pts = samples[i0:i0 + int(GUARD_LOOKAHEAD_M) + 1]
+    """:func:`scbg.sims.leader_on_path` among highway-env's cars and obstacles (merge-v0's wall
+    at the end of the acceleration lane)."""
     others = [v for v in list(ep.road.vehicles) + list(ep.road.objects) if v is not ep.b]
-    if len(pts) == 0 or not others:
-        return np.inf, 0.0
-    xy = np.array([v.position for v in others])
-    near = np.hypot(*(xy[:, None, :] - pts[None, :, :]).transpose(2, 0, 1)) < GUARD_CORRIDOR_M
-    hit = near.any(axis=1)
-    if not hit.any():
-        return np.inf, 0.0
-    first = np.where(hit, near.argmax(axis=1), np.iinfo(np.int64).max)
-    j = int(first.argmin())
-    return float(i0 + first[j] - s - LENGTH_M), float(others[j].speed)
+    return leader_on_path(samples, s, [v.position for v in others], [float(v.speed) for v in others],
+                          [LENGTH_M] * len(others))
 
 
 def _lane_change(ep, target):
@@ -470,6 +452,25 @@ def _room_to_enter(ep, lane_index):
     return True
 
 
+def _way(v):
+    """The path (highway-env's frame) car ``v`` will drive from where it is, along its route as
+    highway-env itself predicts it, every 2 m up to :data:`scbg.sims.CROSS_REACH_M` (cut where
+    the route leaves the network); None for a car without a lane."""
+    lane = getattr(v, "lane", None)
+    if lane is None:
+        return None
+    s_m, _ = lane.local_coordinates(v.position)
+    route = getattr(v, "route", None) or [v.lane_index]
+    network = v.road.network
+    way = []
+    for d in np.arange(0.0, CROSS_REACH_M + 1e-9, 2.0):
+        try:
+            way.append(network.position_heading_along_route(route, s_m + d, 0.0, v.lane_index)[0])
+        except (IndexError, KeyError):  # highway-env guesses a lane its route's next road lacks
+            break
+    return np.array(way) if len(way) >= 2 else None
+
+
 def _lookahead(speed_mps):
     """How far ahead of B's progress its path tracker aims, metres."""
     return max(TRACK_LOOKAHEAD_M, speed_mps * TRACK_LOOKAHEAD_S)
@@ -489,9 +490,7 @@ def _follow_plan(ep, model, quantile, stats):
         flip = np.array([1.0, -1.0])  # back to highway-env's frame
         path = np.vstack([b.position, kept * flip])
         arc = _arc(path)
-        every_m = np.arange(0.0, arc[-1] + 1e-9, 1.0)
-        samples = np.column_stack([np.interp(every_m, arc, path[:, 0]), np.interp(every_m, arc, path[:, 1])])
-        state.update(path=path, arc=arc, samples=samples, s=0.0, k=0)
+        state.update(path=path, arc=arc, samples=path_samples(path, arc), s=0.0, k=0)
         stats["b_plan_points"] += len(kept)
         stats["b_plan_points_on_road"] += sum(on_road(ep.road, p) for p in kept * flip)
         stats["b_raw_plan_points_on_road"] += sum(on_road(ep.road, p) for p in raw * flip)
@@ -506,6 +505,8 @@ def _follow_plan(ep, model, quantile, stats):
         k = min(state["k"] + 1, len(arc) - 1)
         planned = max(arc[k] - state["s"], 0.0) / dt  # the speed that keeps the plan's timing
         v = float(b.speed)
+        if state["s"] < arc[k - 1] - 1e-6:  # behind the plan's timing after a hold: catch up
+            planned = min(planned, v + CATCH_UP_MPS2 * dt)
         def aim(speed_mps):  # the path point the tracker heads for from B's progress
             return _at(path, arc, min(state["s"] + _lookahead(speed_mps), arc[-1]))[0]
 
@@ -519,14 +520,12 @@ def _follow_plan(ep, model, quantile, stats):
             s_guard = 0.0
             stats["b_held_steps"] += 1
         gap, v_lead = _leader_gap(ep, samples, s_guard)
-        if np.isfinite(gap):
-            want = GUARD_GAP_M + v * GUARD_HEADWAY_S + v * (v - v_lead) / (
-                2.0 * np.sqrt(GUARD_ACC_MPS2 * GUARD_BRAKE_MPS2))
-            acc = GUARD_ACC_MPS2 * (1.0 - (max(want, 0.0) / max(gap, 0.1)) ** 2)
-            planned = min(planned, max(v + acc * dt, 0.0))
+        planned = guarded_speed_mps(planned, v, gap, v_lead, dt)
         if here is None:  # where B's plan crosses another road, the crossing rule
-            others = [_row(u) for u in ep.road.vehicles if u is not b]
-            hold = crossing_hold_m(path, arc, state["s"], _row(b), others)
+            cars = [u for u in ep.road.vehicles if u is not b
+                    and np.hypot(*(u.position - b.position)) < CROSS_REACH_M + CROSS_LOOKAHEAD_M]
+            hold = crossing_hold_m(path, arc, state["s"], _row(b), [_row(u) for u in cars],
+                                   ways=[_way(u) for u in cars])
             limit = held_speed_mps(hold, state["s"], dt) if np.isfinite(hold) else np.inf
             if planned > limit:
                 planned = limit

@@ -164,6 +164,12 @@ def summarise(seeds):
     effect, effect_ci = _mean_ci(speed[qs[-1]] - speed[qs[0]])
     ys_effect, ys_ci = _mean_ci(ys_delta)
 
+    def clean(low, high):  # the episodes where B collided in neither end arm
+        return np.array([not (s["arms"][low]["b_collided"] or s["arms"][high]["b_collided"]) for s in done], bool)
+
+    clean_effect, _ = _mean_ci((speed[qs[-1]] - speed[qs[0]])[clean(qs[0], qs[-1])])
+    ys_clean_effect, _ = _mean_ci(ys_delta[clean("yardstick_low", "yardstick_high")])
+
     def rate(names, key):
         vals = [bool(s["arms"][n][key]) for s in done for n in names]
         return float(np.mean(vals)) if vals else float("nan")
@@ -182,6 +188,8 @@ def summarise(seeds):
         "effect_ci95_mps": effect_ci,
         "yardstick_effect_mps": ys_effect,
         "yardstick_effect_ci95_mps": ys_ci,
+        "effect_collision_free_mps": clean_effect,
+        "yardstick_effect_collision_free_mps": ys_clean_effect,
         "responsive_share": float(responsive.mean()) if len(done) else float("nan"),
         "yardstick_responsive_share": float(ys_responsive.mean()) if len(done) else float("nan"),
         "spearman_responsive": _nanmean(rhos),
@@ -210,10 +218,11 @@ def _f(x, fmt="{:.2f}"):
 
 def table(summaries, yardsticks):
     head = ("| scenario | episodes | A at q 0.1 / 0.5 / 0.9 (m/s) | effect q0.9−q0.1 (m/s) | "
-            "yardstick | yardstick effect high−low (m/s) | responsive (scbg / yardstick) | "
+            "yardstick | yardstick effect high−low (m/s) | effect without B's collisions (scbg / yardstick) | "
+            "responsive (scbg / yardstick) | "
             "Spearman, responsive (scbg / yardstick) | B collisions (scbg / yardstick) | "
             "B plan on road | B on road |")
-    rows = [head, "|" + "---|" * 11]
+    rows = [head, "|" + "---|" * 12]
     for name, s in summaries.items():
         a = s["a_speed_mps"]
         ys = yardsticks.get(name, {})
@@ -222,6 +231,7 @@ def table(summaries, yardsticks):
             f"{_f(s['effect_mps'], '{:+.2f}')} ± {_f(s['effect_ci95_mps'])} | "
             f"{ys.get('parameter', '?')} {ys.get('low', '')} → {ys.get('high', '')} | "
             f"{_f(s['yardstick_effect_mps'], '{:+.2f}')} ± {_f(s['yardstick_effect_ci95_mps'])} | "
+            f"{_f(s['effect_collision_free_mps'], '{:+.2f}')} / {_f(s['yardstick_effect_collision_free_mps'], '{:+.2f}')} | "
             f"{_f(s['responsive_share'], '{:.0%}')} / {_f(s['yardstick_responsive_share'], '{:.0%}')} | "
             f"{_f(s['spearman_responsive'])} / {_f(s.get('yardstick_spearman_responsive'))} | "
             f"{_f(s['b_collision_rate'], '{:.1%}')} / {_f(s['yardstick_b_collision_rate'], '{:.1%}')} | "

@@ -54,7 +54,8 @@ from collections import deque
 
 import numpy as np
 
-from . import arc_lengths, check_arm, crossing_hold_m, held_speed_mps, point_at, yardstick_value
+from . import (arc_lengths, check_arm, crossing_hold_m, guarded_speed_mps, held_speed_mps, leader_on_path, path_samples,
+               point_at, yardstick_value)
 
 SCENARIOS = {
     "sumo-onramp": "SUMO on-ramp: one-lane main road, acceleration lane; A merges from the "
@@ -499,13 +500,16 @@ B_ACC_MPS2 = 2.6  # catching up with a plan after a hold: SUMO's car type's acce
 
 
 class _PlanFollower:
-    """B along its current plan: at the plan's point of each step, as long as the crossing rule
-    (:func:`crossing_hold_m`) lets it; held, it brakes to stop before the crossing, and after a
-    hold it catches up with the plan's timing at :data:`B_ACC_MPS2` until the next plan."""
+    """B along its current plan: at the plan's point of each step, but never faster than the
+    follow-distance guard (:func:`guarded_speed_mps`) allows behind a car in its way, and as long
+    as the crossing rule (:func:`crossing_hold_m`) lets it; held, it brakes to stop before the
+    crossing, and after a hold it catches up with the plan's timing at :data:`B_ACC_MPS2` until
+    the next plan."""
 
     def __init__(self, plan, start_xy):
         self.path = np.vstack([start_xy, plan])
         self.arc = arc_lengths(self.path)
+        self.samples = path_samples(self.path, self.arc)
         self.s_m = 0.0
 
     def step(self, traci, j, b_state, others) -> bool:
@@ -516,6 +520,10 @@ class _PlanFollower:
         speed = max(due - self.s_m, 0.0) / STEP_S
         if self.s_m < self.arc[j] - 1e-6:  # behind the plan's timing after a hold
             speed = min(speed, v_b + B_ACC_MPS2 * STEP_S)
+        rows = np.asarray(others, float).reshape(-1, 7)
+        gap, v_lead = leader_on_path(self.samples, self.s_m, rows[:, :2], np.hypot(rows[:, 3], rows[:, 4]),
+                                     0.5 * (rows[:, 5] + b_state[5]))
+        speed = guarded_speed_mps(speed, v_b, gap, v_lead, STEP_S)
         hold = crossing_hold_m(self.path, self.arc, self.s_m, b_state, others)
         if math.isfinite(hold):
             limit = held_speed_mps(hold, self.s_m, STEP_S)
