@@ -18,6 +18,9 @@ use crate::range::quantile_for_psi;
 use crate::ranked::measure_futures;
 use crate::tensors::to_vec;
 
+/// Chosen futures as returned (world frame), and the same in B's frame (what J_φ measures).
+type ChosenWithBFrame = (Vec<ChosenFuture>, Vec<Vec<[f32; 2]>>);
+
 /// What every generation for one (scene, A, B) shares ([`Scbg::pair_context`]): the plan's
 /// basis, the pair's example for J_φ and the predicted range of ψ.
 #[derive(Debug, Clone)]
@@ -184,7 +187,7 @@ impl Scbg {
         courtesy: &[Courtesy],
         adjust: Option<AdjustFuture<'_>>,
         device: &Device,
-    ) -> Result<(Vec<ChosenFuture>, Vec<Vec<[f32; 2]>>), GenerateError> {
+    ) -> Result<ChosenWithBFrame, GenerateError> {
         let (low, high) = (ctx.low, ctx.high);
         let mut choices = self.choose(&ctx.basis, courtesy, device)?;
         // The futures as returned (world frame); with `adjust`, J_φ measures them in B's frame.

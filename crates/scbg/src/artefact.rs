@@ -239,7 +239,11 @@ pub fn load_scbg(dir: &Path, predictor: Option<&Path>) -> anyhow::Result<LoadedS
     for (k, member) in manifest.members.iter().enumerate() {
         let member_dir = recorded_folder(dir, member);
         let loaded = load_generator(&member_dir, predictor).with_context(|| {
-            format!("{}: members[{k}] ({})", json.display(), member_dir.display())
+            format!(
+                "{}: members[{k}] ({})",
+                json.display(),
+                member_dir.display()
+            )
         })?;
         members.push(loaded);
     }

@@ -66,11 +66,13 @@ pub fn keep_in_lane(
     let heading = agent
         .and_then(|id| scene.current_state(id))
         .map(|s| f64::from(s.heading_rad));
-    Ok(scbg_sim::lanes::LaneSegments::new(&scene.map).keep_near_from(
-        plan_world_m,
-        max_offset_m,
-        heading,
-    ))
+    Ok(
+        scbg_sim::lanes::LaneSegments::new(&scene.map).keep_near_from(
+            plan_world_m,
+            max_offset_m,
+            heading,
+        ),
+    )
 }
 
 /// Steps between the generator's plans by default (2 s). The generator commits to one of B's

@@ -94,8 +94,7 @@ fn state(token: Option<&str>, max_body_bytes: usize) -> Arc<AppState> {
 /// The server of the repository's release model (`models/courtesy`) on the fixture's data:
 /// for a test of which way the knob moves A, which a tiny model does not decide.
 fn release_state() -> Arc<AppState> {
-    let model =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/courtesy");
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/courtesy");
     state_of(&model, None, 16 << 20)
 }
 

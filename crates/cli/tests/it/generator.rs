@@ -192,7 +192,14 @@ fn train_generator_saves_generator_and_range_predictor() {
     // `scbg train generator` into `out` with `epochs` and the remaining arguments.
     let train = |out: &str, epochs: usize, rest: &[&str]| {
         let (model, cache, out, config) = (p("model"), p("cache"), p(out), tiny(epochs));
-        let mut args = vec!["train", "generator", "--predictor", &model, "--data", &cache];
+        let mut args = vec![
+            "train",
+            "generator",
+            "--predictor",
+            &model,
+            "--data",
+            &cache,
+        ];
         args.extend(["--out", &out, "--config", &config]);
         args.extend(rest);
         scbg_ok(&args);
@@ -325,16 +332,30 @@ fn train_generator_saves_generator_and_range_predictor() {
     };
     let futures = |model: &str, quantiles: &[&str]| -> Vec<Value> {
         let out = generate_with(model, quantiles);
-        assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+        assert!(
+            out.status.success(),
+            "{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
         let json: Value = serde_json::from_slice(&out.stdout).unwrap();
         let trajectories = json["trajectories"].as_array().unwrap();
-        trajectories.iter().map(|t| t["world_xy_m"].clone()).collect()
+        trajectories
+            .iter()
+            .map(|t| t["world_xy_m"].clone())
+            .collect()
     };
     let gen_futures: Vec<Value> = trajs.iter().map(|t| t["world_xy_m"].clone()).collect();
     let gen_path = gen_dir.as_str();
-    for members in [["../gen2", "../gen", gen_path], ["../gen", gen_path, "../gen2"]] {
+    for members in [
+        ["../gen2", "../gen", gen_path],
+        ["../gen", gen_path, "../gen2"],
+    ] {
         ensemble(&members);
-        assert_eq!(futures(&ens_dir, &["0.1", "0.5", "0.9"]), gen_futures, "{members:?}");
+        assert_eq!(
+            futures(&ens_dir, &["0.1", "0.5", "0.9"]),
+            gen_futures,
+            "{members:?}"
+        );
     }
     assert_ne!(
         futures(&p("gen2"), &["0.9"]),

@@ -182,7 +182,12 @@ impl KnobCurve {
             b_offroad_rate_per_family
                 .entry(r.family.clone())
                 .or_insert_with(|| {
-                    rate(offroad.iter().filter(|o| o.0.family == r.family).map(|o| o.2))
+                    rate(
+                        offroad
+                            .iter()
+                            .filter(|o| o.0.family == r.family)
+                            .map(|o| o.2),
+                    )
                 });
         }
         let b_offroads = offroad

@@ -288,8 +288,7 @@ async fn viewer_in_a_headless_browser() {
 async fn hostile_clients_are_bounded() {
     use std::time::{Duration, Instant};
     use tokio::io::{AsyncReadExt, AsyncWriteExt};
-    let model =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/courtesy");
+    let model = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../models/courtesy");
     let model = scbg::Model::load(&model, &scbg::LoadOptions::default()).unwrap();
     let st = AppState::new(
         model,

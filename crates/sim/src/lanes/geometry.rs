@@ -23,7 +23,13 @@ pub(super) fn polyline_length(line: &[[f64; 2]]) -> f64 {
 /// Where `p` projects onto the line through segment `a`–`b`: the fraction along it (0 at `a`,
 /// 1 at `b`, outside [0, 1] past either end; 0 for a segment of no length) and the nearest
 /// point of the segment carried on `before_a_m` before `a` and `past_b_m` beyond `b`.
-pub(super) fn foot(a: [f64; 2], b: [f64; 2], p: [f64; 2], before_a_m: f64, past_b_m: f64) -> (f64, [f64; 2]) {
+pub(super) fn foot(
+    a: [f64; 2],
+    b: [f64; 2],
+    p: [f64; 2],
+    before_a_m: f64,
+    past_b_m: f64,
+) -> (f64, [f64; 2]) {
     let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
     let len2 = dx * dx + dy * dy;
     if len2 <= 0.0 {

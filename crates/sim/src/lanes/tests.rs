@@ -409,7 +409,11 @@ fn a_plan_turning_where_the_map_has_no_turn_lane_goes_on_along_its_lane() {
     for p in &plan {
         assert!((p[0] - 1.75).abs() <= 0.25 + 1e-6, "{p:?} left B's lane");
     }
-    assert!((plan[79][1] - (-8.0 + travelled)).abs() < 0.5, "{:?}", plan[79]);
+    assert!(
+        (plan[79][1] - (-8.0 + travelled)).abs() < 0.5,
+        "{:?}",
+        plan[79]
+    );
     // Inside the junction box both roads' lanes lie under B. A plan starting there and heading
     // east starts on the eastbound lane unless B's own heading (+y) is known: then it starts on
     // B's lane and goes on along it.
@@ -434,7 +438,8 @@ fn a_plan_into_a_linked_lane_keeps_to_the_road_through_the_joint() {
     approach.id = 1;
     approach.exit_lanes = vec![2];
     let (c, s) = (40f64.to_radians().cos(), 40f64.to_radians().sin());
-    let mut exit = lane_through((0..=10).map(|i| [5.0 * c * f64::from(i), -5.0 * s * f64::from(i)]));
+    let mut exit =
+        lane_through((0..=10).map(|i| [5.0 * c * f64::from(i), -5.0 * s * f64::from(i)]));
     exit.id = 2;
     let map = Map {
         lanes: vec![approach, exit],
