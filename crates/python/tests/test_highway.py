@@ -143,6 +143,8 @@ def test_the_summary_is_paired_within_episodes():
     seeds = []
     for base, slope in ((30.0, 1.0), (5.0, 0.0)):
         arms = {f"q{q:.1f}": _record(base + slope * q) for q in measure.QUANTILES}
+        if slope == 0.0:  # B collides at q 0.9 of the unresponsive episode
+            arms["q0.9"] = _record(base, True)
         arms.update(yardstick_low=_record(base), yardstick_high=_record(base + 0.5, True),
                     default=_record(base))
         seeds.append({"scenario": "s", "seed": len(seeds), "arms": arms})
@@ -152,11 +154,11 @@ def test_the_summary_is_paired_within_episodes():
     assert s["effect_mps"] == pytest.approx(0.4)
     assert s["yardstick_effect_mps"] == pytest.approx(0.5)
     # The yardstick's high arm collided in both: no collision-free episode is left to it.
-    assert s["effect_collision_free_mps"] == pytest.approx(0.4)
+    assert s["effect_collision_free_mps"] == pytest.approx(0.8)  # the first episode alone
     assert math.isnan(s["yardstick_effect_collision_free_mps"])
     assert s["responsive_share"] == 0.5 and s["yardstick_responsive_share"] == 1.0
     assert s["spearman_responsive"] == pytest.approx(1.0)
-    assert s["b_collision_rate"] == 0.0 and s["yardstick_b_collision_rate"] == 0.5
+    assert s["b_collision_rate"] == 0.1 and s["yardstick_b_collision_rate"] == 0.5
     assert s["b_plan_on_road_share"] == 0.5 and s["b_on_road_share"] == 1.0
     assert "| s | 2 |" in measure.table({"s": s}, {})
     assert math.isnan(s["yardstick_spearman_responsive"])  # two settings: no ranking
@@ -188,14 +190,59 @@ def test_a_yardstick_setting_between_its_ends():
     braking = highway.YARDSTICKS["merge-v0"]
     assert yardstick_value(braking, "low") == 8.0 and yardstick_value(braking, 1.0) == 0.5
     assert yardstick_value(braking, 0.5) == pytest.approx(4.25)
+    # A right of way is graded by A's lead at the conflict: B yields at a lead over 1.5 s at a
+    # quarter of the way, at any lead at three quarters.
+    right_of_way = highway.YARDSTICKS["intersection-v0"]
+    assert yardstick_value(right_of_way, 0.25) == pytest.approx(1.5)
+    assert yardstick_value(right_of_way, 0.75) == pytest.approx(-1.5)
     with pytest.raises(ValueError, match="two settings only"):
-        yardstick_value(highway.YARDSTICKS["intersection-v0"], 0.5)
+        yardstick_value({"parameter": "p", "low": "off", "high": "on"}, 0.5)
     check_arm({"kind": "yardstick", "level": 0.25})
     for bad in (1.5, -0.1, True, float("nan")):
         with pytest.raises(ValueError, match="level must be"):
             check_arm({"kind": "yardstick", "level": bad})
-    assert [a.get("level") for a in measure.arms("intersection-v0")][5:] == ["low", "high", None]
+    assert [a.get("level") for a in measure.arms("intersection-v0")][5:] == ["low", 0.25, 0.5, 0.75, "high", None]
     assert len(measure.arms("merge-v0")) == 11
+
+
+def test_a_cars_way_starts_where_it_is_at_its_lanes_end():
+    """highway-env drops a route's head 2.5 m before the lane ends, while the car's lane is
+    still the old one: its way still starts at the car and runs on along the route."""
+    highway = _highway()
+    ep = highway._Episode("intersection-v0", 0)
+    try:
+        car = next(v for v in ep.road.vehicles if getattr(v, "route", None) and len(v.route) > 1)
+        lane = ep.road.network.get_lane(car.lane_index)
+        car.position = lane.position(lane.length - 1.0, 0.0)
+        car.follow_road()  # the route's head goes, the lane stays
+        assert car.route[0][:2] != car.lane_index[:2]
+        way = highway._way(car)
+        assert np.hypot(*(way[0] - car.position)) < 0.5
+        assert np.hypot(*(way[5] - car.position)) == pytest.approx(10.0, abs=1.5)
+    finally:
+        ep.close()
+
+
+def test_the_graded_right_of_way_yields_to_an_a_that_arrives_first():
+    """Halfway between never and always, B yields exactly when A reaches the conflict first; a
+    quarter of the way, only to an A more than 1.5 s ahead; the ends are never and always."""
+    from types import SimpleNamespace
+
+    highway = _highway()
+
+    class Car:  # a car at `m` metres before the junction's centre at 10 m/s
+        def __init__(self, position):
+            self.position, self.speed = np.asarray(position, float), 10.0
+
+    def yields(level, a_m, b_m):
+        a, b = Car([0.0, -a_m]), Car([-b_m, 0.0])
+        road = SimpleNamespace(respect_priorities=lambda v1, v2: None)
+        highway._apply_yardstick(SimpleNamespace(scenario="intersection-v0", a=a, b=b, road=road), level)
+        return road.respect_priorities(a, b) is b
+
+    assert yields(0.5, 20.0, 30.0) and not yields(0.5, 30.0, 20.0)
+    assert not yields(0.25, 20.0, 30.0) and yields(0.25, 10.0, 30.0)
+    assert not yields("low", 10.0, 30.0) and yields("high", 30.0, 10.0)
 
 
 def test_the_release_models_knob_moves_a_behind_b_on_the_highway(release):

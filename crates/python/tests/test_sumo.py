@@ -141,11 +141,16 @@ def test_the_follow_guard_eases_behind_a_faster_car_and_stops_for_a_standing_one
     assert standing == pytest.approx(26.0 - sims.GUARD_MAX_BRAKE_MPS2 * step)
     assert sims.guarded_speed_mps(27.0, 26.0, math.inf, 0.0, step) == 27.0
     assert sims.guarded_speed_mps(26.3, 26.0, 200.0, 26.0, step) == 26.3
-    # The leader is the first car near B's path ahead (bumper to bumper); one 5 m aside is not.
+    # The leader is the first car near B's path ahead, its gap taken bumper to bumper where the
+    # path passes it, its speed the part along the path; a car 5 m aside is none.
     path = np.column_stack([np.arange(0.0, 40.0), np.zeros(40)])
     samples = sims.path_samples(path, sims.arc_lengths(path))
-    gap, v = sims.leader_on_path(samples, 0.0, [[25.0, 1.0], [10.0, 5.0]], [12.0, 3.0], [4.8, 4.8])
-    assert gap == pytest.approx(25.0 - 4.8, abs=1.5) and v == 12.0
+    gap, v = sims.leader_on_path(samples, 0.0, [[25.0, 0.0], [10.0, 5.0]], [[12.0, 0.0], [3.0, 0.0]], [4.8, 4.8])
+    assert gap == pytest.approx(25.0 - 4.8) and v == pytest.approx(12.0)
+    gap, v = sims.leader_on_path(samples, 2.0, [[25.0, 1.0]], [[-8.0, 0.0]], [4.8])
+    assert gap == pytest.approx(23.0 - 4.8) and v == 0.0  # coming towards B
+    # A much faster car just ahead still leaves B its jam distance: B brakes.
+    assert sims.guarded_speed_mps(11.0, 10.0, 0.5, 25.0, step) < 10.0
 
 
 def test_scbg_b_waits_for_a_priority_car_it_would_hit(release):

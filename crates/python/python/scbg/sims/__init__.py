@@ -26,14 +26,22 @@ def check_arm(arm):
 
 def yardstick_value(yardstick, level):
     """The setting of ``yardstick`` (an entry of a harness's ``YARDSTICKS``) at ``level``:
-    ``"low"``, ``"high"``, or a fraction of the way from the low to the high setting, which
-    only a yardstick whose settings are numbers has."""
+    ``"low"``, ``"high"``, or a fraction of the way from the low to the high setting. A right of
+    way (``yields``: never / always) is graded by ``lead_s``: between its ends B yields when A's
+    lead at the conflict exceeds the returned ``lead_s × (0.5 − level)`` seconds."""
     if level in ("low", "high"):
         return yardstick[level]
     low, high = yardstick["low"], yardstick["high"]
-    if not isinstance(low, (int, float)):
-        raise ValueError(f"yardstick {yardstick['parameter']!r} has two settings only: 'low' and 'high'")
-    return low + float(level) * (high - low)
+    if isinstance(low, (int, float)):
+        return low + float(level) * (high - low)
+    if "lead_s" in yardstick:
+        return yardstick["lead_s"] * (0.5 - float(level))
+    raise ValueError(f"yardstick {yardstick['parameter']!r} has two settings only: 'low' and 'high'")
+
+
+def graded(yardstick):
+    """Whether ``yardstick`` has settings between its ends (numbers, or a graded right of way)."""
+    return isinstance(yardstick["low"], (int, float)) or "lead_s" in yardstick
 
 
 def arc_lengths(points):
@@ -159,24 +167,31 @@ def path_samples(path, arc):
     return np.column_stack([np.interp(every_m, arc, path[:, 0]), np.interp(every_m, arc, path[:, 1])])
 
 
-def leader_on_path(samples, s_m, xy, speeds, half_lengths_m):
-    """Bumper-to-bumper gap (m) and speed of the nearest car in B's way along its path from arc
-    length ``s_m``, or (inf, 0): of the cars at ``xy`` ``[k, 2]`` (speeds ``[k]``), the first
-    whose centre comes within :data:`GUARD_CORRIDOR_M` of the path in
-    :data:`GUARD_LOOKAHEAD_M`. ``samples``: the path every metre (:func:`path_samples`);
-    ``half_lengths_m``: per car, its half length plus B's."""
+def leader_on_path(samples, s_m, xy, velocities, half_lengths_m):
+    """Bumper-to-bumper gap (m) and speed along B's path of the nearest car in B's way from arc
+    length ``s_m``, or (inf, 0): of the cars at ``xy`` ``[k, 2]`` (velocities ``[k, 2]``), the
+    first whose centre comes within :data:`GUARD_CORRIDOR_M` of the path in
+    :data:`GUARD_LOOKAHEAD_M`, its gap taken where the path passes nearest it and its speed as
+    the part of its velocity along the path there (none for a car coming towards B).
+    ``samples``: the path every metre (:func:`path_samples`); ``half_lengths_m``: per car, its
+    half length plus B's."""
     i0 = int(np.floor(s_m))
     pts = samples[i0:i0 + int(GUARD_LOOKAHEAD_M) + 1]
     xy = np.asarray(xy, float).reshape(-1, 2)
     if len(pts) == 0 or len(xy) == 0:
         return math.inf, 0.0
-    near = np.hypot(*(xy[:, None, :] - pts[None, :, :]).transpose(2, 0, 1)) < GUARD_CORRIDOR_M
+    dist = np.hypot(*(xy[:, None, :] - pts[None, :, :]).transpose(2, 0, 1))
+    near = dist < GUARD_CORRIDOR_M
     hit = near.any(axis=1)
     if not hit.any():
         return math.inf, 0.0
     first = np.where(hit, near.argmax(axis=1), np.iinfo(np.int64).max)
     j = int(first.argmin())
-    return float(i0 + first[j] - s_m - half_lengths_m[j]), float(speeds[j])
+    at = int(dist[j].argmin())  # where the path passes nearest the leader
+    step = pts[min(at + 1, len(pts) - 1)] - pts[max(at - 1, 0)]
+    along = step / max(float(np.hypot(*step)), 1e-9)
+    speed = max(float(np.asarray(velocities[j], float) @ along), 0.0)
+    return float(i0 + at - s_m - half_lengths_m[j]), speed
 
 
 def guarded_speed_mps(planned_mps, v_mps, gap_m, v_lead_mps, step_s):
@@ -186,8 +201,9 @@ def guarded_speed_mps(planned_mps, v_mps, gap_m, v_lead_mps, step_s):
         return planned_mps
     gap_m = max(gap_m, 0.1)
     dv = v_mps - v_lead_mps
-    want = GUARD_GAP_M + v_mps * GUARD_HEADWAY_S + v_mps * dv / (2.0 * math.sqrt(GUARD_ACC_MPS2 * GUARD_BRAKE_MPS2))
-    idm = GUARD_ACC_MPS2 * (1.0 - (max(want, 0.0) / gap_m) ** 2)
+    want = GUARD_GAP_M + max(0.0, v_mps * GUARD_HEADWAY_S + v_mps * dv / (
+        2.0 * math.sqrt(GUARD_ACC_MPS2 * GUARD_BRAKE_MPS2)))
+    idm = GUARD_ACC_MPS2 * (1.0 - (want / gap_m) ** 2)
     # The heuristic: a leader no slower than B needs no braking; else brake to match its speed.
     cah = 0.0 if v_lead_mps > 0.0 and dv <= 0.0 else -max(dv, 0.0) ** 2 / (2.0 * gap_m)
     if idm >= cah:

@@ -42,6 +42,7 @@ REPLAN_STEPS = 20  # B re-planned every 2 s, as scbg's own closed loop re-plans 
 LANE_KEEPING_M = 0.25  # B follows its plan kept in lane, as scbg's own closed loop does
 LENGTH_M, WIDTH_M = 5.0, 2.0  # highway-env's vehicle box
 MAX_WARMUP_STEPS = 400
+PAIR_LEAD_S = 3.0  # intersection and roundabout: A and B reach the conflict at most this far apart
 
 SCENARIOS = {
     "merge-v0": "highway-env's on-ramp: B the ramp car merging, A the right-lane highway car it meets",
@@ -60,10 +61,12 @@ YARDSTICKS = {
                    "note": "MOBIL's politeness: the weight B gives its followers' gain when it changes lanes"},
     "highway-v0-cutin": {"parameter": "LANE_CHANGE_MAX_BRAKING_IMPOSED", "low": 8.0, "high": 0.5,
                          "note": "MOBIL's limit on the braking B's lane change may impose on its new follower (m/s²)"},
-    "intersection-v0": {"parameter": "yields", "low": "never", "high": "always",
-                        "note": "highway-env's priority rule, per car: B never yields / B always yields to A"},
-    "roundabout-v0": {"parameter": "yields", "low": "never", "high": "always",
-                      "note": "B never waits / B waits at the conflict until A has passed it"},
+    "intersection-v0": {"parameter": "yields", "low": "never", "high": "always", "lead_s": 2 * PAIR_LEAD_S,
+                        "note": "highway-env's priority rule, per car: B never yields / B always yields to A; "
+                                "between, B yields when A's lead at the conflict exceeds 6 × (0.5 − level) s"},
+    "roundabout-v0": {"parameter": "yields", "low": "never", "high": "always", "lead_s": 2 * PAIR_LEAD_S,
+                      "note": "B never waits / B waits at the conflict until A has passed it; "
+                              "between, B waits when A's lead at the conflict exceeds 6 × (0.5 − level) s"},
 }
 
 _LANE_TYPES = {
@@ -338,7 +341,7 @@ def _conflict_pair(ep, centre, radius_m):
     if not cands:
         return None
     b = min(cands, key=lambda v: abs(_time_to(v, centre) - ta))
-    if abs(_time_to(b, centre) - ta) > 3.0:
+    if abs(_time_to(b, centre) - ta) > PAIR_LEAD_S:
         return None
     return a, b
 
@@ -363,6 +366,9 @@ def _apply_yardstick(ep, level):
     value = yardstick_value(ys, level)
     b, a = ep.b, ep.a
     if ys["parameter"] == "yields":
+        if level not in ("low", "high"):  # graded: decided once, by A's lead at the takeover
+            lead_s = _time_to(b, np.zeros(2)) - _time_to(a, np.zeros(2))
+            value = "always" if lead_s > value else "never"
         road = ep.road
         if hasattr(road, "respect_priorities"):
             rule = road.respect_priorities
@@ -413,7 +419,7 @@ def _leader_gap(ep, samples, s):
     """:func:`scbg.sims.leader_on_path` among highway-env's cars and obstacles (merge-v0's wall
     at the end of the acceleration lane)."""
     others = [v for v in list(ep.road.vehicles) + list(ep.road.objects) if v is not ep.b]
-    return leader_on_path(samples, s, [v.position for v in others], [float(v.speed) for v in others],
+    return leader_on_path(samples, s, [v.position for v in others], [v.velocity for v in others],
                           [LENGTH_M] * len(others))
 
 
@@ -455,18 +461,27 @@ def _room_to_enter(ep, lane_index):
 def _way(v):
     """The path (highway-env's frame) car ``v`` will drive from where it is, along its route as
     highway-env itself predicts it, every 2 m up to :data:`scbg.sims.CROSS_REACH_M` (cut where
-    the route leaves the network); None for a car without a lane."""
+    highway-env's guess of a lane on the route's next road fails); None for a car without a
+    lane."""
     lane = getattr(v, "lane", None)
     if lane is None:
         return None
     s_m, _ = lane.local_coordinates(v.position)
-    route = getattr(v, "route", None) or [v.lane_index]
+    route = list(getattr(v, "route", None) or [])
+    # highway-env drops a route's head 2.5 m before the lane ends and names its lane by its
+    # road only: the route from the lane the car is on.
+    if route and route[0][:2] == v.lane_index[:2]:
+        route = [v.lane_index] + route[1:]
+    elif route and route[0][0] == v.lane_index[1]:
+        route = [v.lane_index] + route
+    else:
+        route = route or [v.lane_index]
     network = v.road.network
     way = []
     for d in np.arange(0.0, CROSS_REACH_M + 1e-9, 2.0):
         try:
             way.append(network.position_heading_along_route(route, s_m + d, 0.0, v.lane_index)[0])
-        except (IndexError, KeyError):  # highway-env guesses a lane its route's next road lacks
+        except (IndexError, KeyError):  # a lane id the route's next road lacks
             break
     return np.array(way) if len(way) >= 2 else None
 

@@ -3,7 +3,7 @@
 For every scenario and seed, the same episode (same start, same takeover step, same A and B) is
 run once per arm: B driven by scbg at courtesy quantiles 0.1 … 0.9, and B driven by the
 simulator's own model at five settings of its own courtesy parameter from low to high (the
-yardstick; its two ends where the settings are not numbers) and at its default. The knob is
+yardstick; a right of way graded by A's lead at the conflict) and at its default. The knob is
 judged *within* each episode (only the quantile changes), against what the simulator's own
 idea of courtesy does to A in the same episodes: its effect, and its own within-episode
 Spearman, the ceiling of what a monotone courtesy setting reaches there.
@@ -29,8 +29,8 @@ from concurrent.futures import ProcessPoolExecutor
 import numpy as np
 
 QUANTILES = (0.1, 0.3, 0.5, 0.7, 0.9)
-# The yardstick's settings, as fractions of the way from its low to its high setting. A
-# yardstick whose settings are not numbers (yields never / always) has the two ends alone.
+# The yardstick's settings, as fractions of the way from its low to its high setting (a right of
+# way, graded by A's lead at the conflict; one that is not graded has the two ends alone).
 YARDSTICK_LEVELS = ("low", 0.25, 0.5, 0.75, "high")
 RESPONSE_MPS = 0.05  # A "responds" when its speeds differ by more than this across the arms
 
@@ -52,9 +52,10 @@ def all_scenarios():
 
 
 def yardstick_levels(scenario):
-    """The yardstick's settings measured in ``scenario``: five where its settings are numbers."""
-    ys = yardsticks_of([scenario])[scenario]
-    return YARDSTICK_LEVELS if isinstance(ys["low"], (int, float)) else ("low", "high")
+    """The yardstick's settings measured in ``scenario``: five where it is graded."""
+    from . import graded
+
+    return YARDSTICK_LEVELS if graded(yardsticks_of([scenario])[scenario]) else ("low", "high")
 
 
 def arms(scenario):

@@ -521,7 +521,7 @@ class _PlanFollower:
         if self.s_m < self.arc[j] - 1e-6:  # behind the plan's timing after a hold
             speed = min(speed, v_b + B_ACC_MPS2 * STEP_S)
         rows = np.asarray(others, float).reshape(-1, 7)
-        gap, v_lead = leader_on_path(self.samples, self.s_m, rows[:, :2], np.hypot(rows[:, 3], rows[:, 4]),
+        gap, v_lead = leader_on_path(self.samples, self.s_m, rows[:, :2], rows[:, 3:5],
                                      0.5 * (rows[:, 5] + b_state[5]))
         speed = guarded_speed_mps(speed, v_b, gap, v_lead, STEP_S)
         hold = crossing_hold_m(self.path, self.arc, self.s_m, b_state, others)
