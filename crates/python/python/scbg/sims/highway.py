@@ -23,7 +23,8 @@ converted by flipping y, headings by negating them.
 Scenarios (``SCENARIOS``): ``merge-v0`` (B the ramp car, A the highway car it meets),
 ``highway-v0`` (B the car ahead of A in A's lane), ``highway-v0-cutin`` (B a car beside A that
 changes into A's lane ahead of it), ``intersection-v0`` (B a car whose path crosses A's) and
-``roundabout-v0`` (B the car circulating towards A's entry).
+``roundabout-v0`` (B the car from another road reaching the ring nearest in time to A: mostly
+one entering while A circulates).
 """
 
 from __future__ import annotations
@@ -49,7 +50,8 @@ SCENARIOS = {
     "highway-v0": "highway-env's 4-lane highway: B the car ahead of A in A's lane",
     "highway-v0-cutin": "highway-env's 4-lane highway: B a car beside A changing into A's lane ahead of it",
     "intersection-v0": "highway-env's unsignalised 4-way junction: B a car whose path crosses A's",
-    "roundabout-v0": "highway-env's roundabout: B the circulating car, A the car entering ahead of it",
+    "roundabout-v0": "highway-env's roundabout: B the car from another road reaching the ring nearest in time "
+                     "to A, mostly one entering while A circulates",
 }
 
 # highway-env's own idea of B's courtesy toward A, per scenario: the parameter set on B from the
