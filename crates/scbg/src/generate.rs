@@ -206,10 +206,7 @@ fn per_member<T: Send>(
     let window = &prepared.windows[0];
     // Members share their policy (`LoadedScbg::set_policy`), so one rule serves them all.
     let leaves = off_road_rule(model, scene, b);
-    let members: Vec<()> = vec![(); model.members().count()];
-    let mut values = each_member(model, &members, |m, ()| {
-        build(m, &prepared, window).map_err(invalid)
-    })?;
+    let mut values = each_member(model, |_, m| build(m, &prepared, window).map_err(invalid))?;
     if let Some(leaves) = &leaves {
         for value in &mut values {
             drop(value, leaves);
@@ -218,20 +215,23 @@ fn per_member<T: Send>(
     Ok(values)
 }
 
-/// `f` of every member of `model` with its entry of `items` (one per member, in order), the
-/// members in parallel on the rayon pool: an ensemble's request costs about one member's time
-/// per free core instead of the sum.
-fn each_member<'a, I: Sync, T: Send>(
-    model: &'a LoadedScbg,
-    items: &'a [I],
-    f: impl Fn(&'a LoadedScbg, &'a I) -> anyhow::Result<T> + Sync,
+/// `f(k, member)` of every member of `model` (`k` its index in [`LoadedScbg::members`]), in
+/// member order, the members in parallel on the rayon pool: an ensemble's request costs about
+/// one member's time per free core instead of the sum. One member runs on the caller's thread.
+fn each_member<T: Send>(
+    model: &LoadedScbg,
+    f: impl Fn(usize, &LoadedScbg) -> anyhow::Result<T> + Sync,
 ) -> anyhow::Result<Vec<T>> {
     use rayon::prelude::*;
-    let pairs: Vec<(&LoadedScbg, &I)> = model.members().zip(items).collect();
-    if let [(m, item)] = pairs[..] {
-        return Ok(vec![f(m, item)?]);
+    let members: Vec<&LoadedScbg> = model.members().collect();
+    if let [only] = members[..] {
+        return Ok(vec![f(0, only)?]);
     }
-    pairs.into_par_iter().map(|(m, item)| f(m, item)).collect()
+    members
+        .into_par_iter()
+        .enumerate()
+        .map(|(k, m)| f(k, m))
+        .collect()
 }
 
 /// A generator error caused by the request, as an [`InvalidRequest`].
@@ -309,9 +309,9 @@ pub fn generate_in(
             .map_err(invalid);
     }
     // Each member's kept futures, unmeasured: only the one kept is measured, by all of them.
-    let per_member = each_member(model, &context.members, |m, generator| {
+    let per_member = each_member(model, |k, m| {
         m.scbg
-            .choose_in_adjusted(generator, &courtesy, Some(&keep), &m.device)
+            .choose_in_adjusted(&context.members[k], &courtesy, Some(&keep), &m.device)
             .map_err(invalid)
     })?;
     (0..courtesy.len())
@@ -408,9 +408,9 @@ pub fn plan_from(
     courtesy: Courtesy,
 ) -> anyhow::Result<Vec<[f64; 2]>> {
     same_members(model, basis.0.len())?;
-    let mut plans = each_member(model, &basis.0, |m, basis| {
+    let mut plans = each_member(model, |k, m| {
         m.scbg
-            .plan_from(basis, courtesy.get(), &m.device)
+            .plan_from(&basis.0[k], courtesy.get(), &m.device)
             .map_err(invalid)
     })?;
     let futures: Vec<&[[f64; 2]]> = plans.iter().map(Vec::as_slice).collect();
@@ -438,9 +438,9 @@ pub fn courtesy_in(
     future_world: &[[f64; 2]],
 ) -> anyhow::Result<CourtesyOf> {
     same_members(model, context.members.len())?;
-    let measured = each_member(model, &context.members, |m, generator| {
+    let measured = each_member(model, |k, m| {
         m.scbg
-            .courtesy_in(generator, future_world, &m.device)
+            .courtesy_in(&context.members[k], future_world, &m.device)
             .map(|c| CourtesyOf {
                 psi: c.psi,
                 a_expected_reward_conditional: c.a_expected_reward_conditional,
