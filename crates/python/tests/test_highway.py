@@ -111,6 +111,31 @@ def test_highway_envs_own_courtesy_moves_a_at_the_intersection():
     assert np.mean(deltas) > 0.3, deltas
 
 
+def test_b_in_contact_is_crashed_and_brakes_to_a_stop_as_highway_envs_cars_do(trained):
+    """highway-env moves two cars about to touch apart by an impact, and each car's own step
+    crashes it; B's step, which follows scbg's plan, does the same, and B then brakes to a stop
+    without re-planning."""
+    highway = _highway()
+    model, _ = trained
+    ep = highway._Episode("highway-v0", 0)
+    try:
+        for _ in range(highway.HISTORY_STEPS):
+            ep.step()
+        ep.a, ep.b = highway._pair(ep)
+        stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0,
+                 "b_held_steps": 0}
+        highway._follow_plan(ep, model, 0.5, stats)
+        ep.step()
+        v0, planned = float(ep.b.speed), stats["b_plan_points"]
+        ep.b.impact = np.array([0.0, 0.2])
+        for _ in range(2 * highway.REPLAN_STEPS):
+            ep.step()
+        assert ep.b.crashed and ep.b.impact is None
+        assert ep.b.speed < 0.05 * v0 and stats["b_plan_points"] == planned
+    finally:
+        ep.close()
+
+
 def test_bad_requests_are_named():
     highway = _highway()
     with pytest.raises(ValueError, match="unknown highway-env scenario 'merge-v9'"):
@@ -230,19 +255,43 @@ def test_the_graded_right_of_way_yields_to_an_a_that_arrives_first():
 
     highway = _highway()
 
-    class Car:  # a car at `m` metres before the junction's centre at 10 m/s
-        def __init__(self, position):
-            self.position, self.speed = np.asarray(position, float), 10.0
-
-    def yields(level, a_m, b_m):
-        a, b = Car([0.0, -a_m]), Car([-b_m, 0.0])
+    def yields(level, lead_s):
+        a, b = object(), object()
         road = SimpleNamespace(respect_priorities=lambda v1, v2: None)
-        highway._apply_yardstick(SimpleNamespace(scenario="intersection-v0", a=a, b=b, road=road), level)
+        ep = SimpleNamespace(scenario="intersection-v0", a=a, b=b, road=road, lead_s=lead_s)
+        highway._apply_yardstick(ep, level)
         return road.respect_priorities(a, b) is b
 
-    assert yields(0.5, 20.0, 30.0) and not yields(0.5, 30.0, 20.0)
-    assert not yields(0.25, 20.0, 30.0) and yields(0.25, 10.0, 30.0)
-    assert not yields("low", 10.0, 30.0) and yields("high", 30.0, 10.0)
+    assert yields(0.5, 1.0) and not yields(0.5, -1.0)
+    assert not yields(0.25, 1.0) and yields(0.25, 2.0)
+    assert not yields("low", 2.0) and yields("high", -2.0)
+
+
+def test_conflict_pairs_are_cars_whose_ways_meet_ahead_of_a():
+    """intersection-v0 and roundabout-v0: B's way meets A's ahead of A within the pairing's
+    lead; a car on A's own way (A itself, or one behind it in its lane) is never B."""
+    highway = _highway()
+    from highway_env.vehicle.behavior import IDMVehicle
+
+    for scenario in ("intersection-v0", "roundabout-v0"):
+        ep = highway._Episode(scenario, 0)
+        try:
+            for _ in range(highway.HISTORY_STEPS):
+                ep.step()
+            a, b = highway._pair(ep)
+            lead_s = highway._meeting_lead_s(a, b)
+            assert abs(lead_s) <= highway.PAIR_LEAD_S and b.lane_index[0] != a.lane_index[0]
+            apart_m, along_m, _ = highway._along_way(highway._way(b, highway.PAIR_REACH_M),
+                                                     highway._way(a, highway.PAIR_REACH_M))
+            assert apart_m.min() < highway.PAIR_GAP_M and along_m[apart_m.argmin()] >= 0.0
+            assert highway._meeting_lead_s(a, a) is None
+            lane = ep.road.network.get_lane(a.lane_index)
+            s_a, _ = lane.local_coordinates(a.position)
+            behind = IDMVehicle(ep.road, lane.position(s_a - 10.0, 0.0), lane.heading_at(s_a - 10.0), a.speed)
+            behind.route = list(a.route or [])
+            assert highway._meeting_lead_s(a, behind) is None
+        finally:
+            ep.close()
 
 
 def test_the_release_models_knob_moves_a_behind_b_on_the_highway(release):

@@ -23,8 +23,8 @@ converted by flipping y, headings by negating them.
 Scenarios (``SCENARIOS``): ``merge-v0`` (B the ramp car, A the highway car it meets),
 ``highway-v0`` (B the car ahead of A in A's lane), ``highway-v0-cutin`` (B a car beside A that
 changes into A's lane ahead of it), ``intersection-v0`` (B a car whose path crosses A's) and
-``roundabout-v0`` (B the car from another road reaching the ring nearest in time to A: mostly
-one entering while A circulates).
+``roundabout-v0`` (B a car whose way meets A's, from another road, nearest in time to A: mostly
+one circulating while A enters).
 """
 
 from __future__ import annotations
@@ -33,8 +33,9 @@ import numpy as np
 
 import scbg
 
-from . import (CROSS_LOOKAHEAD_M, CROSS_REACH_M, GUARD_LOOKAHEAD_M, arc_lengths as _arc, check_arm, crossing_hold_m,
-               guarded_speed_mps, held_speed_mps, leader_on_path, path_samples, point_at as _at, yardstick_value)
+from . import (CROSS_LOOKAHEAD_M, CROSS_REACH_M, GUARD_LOOKAHEAD_M, _along_way, arc_lengths as _arc, check_arm,
+               crossing_hold_m, guarded_speed_mps, held_speed_mps, leader_on_path, path_samples, point_at as _at,
+               yardstick_value)
 
 STEP_SECS = 0.1
 HISTORY_STEPS = 11  # 1.1 s, the current step included
@@ -43,15 +44,21 @@ REPLAN_STEPS = 20  # B re-planned every 2 s, as scbg's own closed loop re-plans 
 LANE_KEEPING_M = 0.25  # B follows its plan kept in lane, as scbg's own closed loop does
 LENGTH_M, WIDTH_M = 5.0, 2.0  # highway-env's vehicle box
 MAX_WARMUP_STEPS = 400
-PAIR_LEAD_S = 3.0  # intersection and roundabout: A and B reach the conflict at most this far apart
+# intersection and roundabout: A and B reach the place where their ways meet at most PAIR_LEAD_S
+# apart, the first of them PAIR_HORIZON_S from it; ways meet where their centre lines come closer
+# than PAIR_GAP_M (a car's width plus a metre: the roundabout's two ring lanes, 4 m apart, do not).
+PAIR_LEAD_S = 3.0
+PAIR_HORIZON_S = 6.0
+PAIR_GAP_M = 3.0
+PAIR_REACH_M = 120.0
 
 SCENARIOS = {
     "merge-v0": "highway-env's on-ramp: B the ramp car merging, A the right-lane highway car it meets",
     "highway-v0": "highway-env's 4-lane highway: B the car ahead of A in A's lane",
     "highway-v0-cutin": "highway-env's 4-lane highway: B a car beside A changing into A's lane ahead of it",
     "intersection-v0": "highway-env's unsignalised 4-way junction: B a car whose path crosses A's",
-    "roundabout-v0": "highway-env's roundabout: B the car from another road reaching the ring nearest in time "
-                     "to A, mostly one entering while A circulates",
+    "roundabout-v0": "highway-env's roundabout: B a car whose way meets A's, mostly one circulating while A "
+                     "enters",
 }
 
 # highway-env's own idea of B's courtesy toward A, per scenario: the parameter set on B from the
@@ -231,6 +238,7 @@ class _Episode:
         self.history = []  # [step][car] state rows, in the order of self.cars
         self.cars = list(self.road.vehicles)
         self.a = self.b = None
+        self.lead_s = None  # intersection and roundabout: A's lead where the ways of A and B meet
         self._record()
 
     def _jitter(self):
@@ -325,27 +333,38 @@ def _highway_pair(ep, cut_in):
     return a, min(ahead, key=lambda v: _lane_x(v) - _lane_x(a))
 
 
-def _time_to(v, point):
-    d = np.linalg.norm(np.asarray(point) - v.position)
-    return d / max(v.speed, 1.0)
+def _meeting_lead_s(a, b):
+    """Where the ways of A and B (:func:`_way`, out to :data:`PAIR_REACH_M`) first meet along
+    B's, B's lead (s) over A there: B's time to the meeting place less A's, each at its speed
+    now; None where B starts on A's way, the ways do not meet, or they meet behind A."""
+    way_a, way_b = _way(a, PAIR_REACH_M), _way(b, PAIR_REACH_M)
+    if way_a is None or way_b is None:
+        return None
+    apart_m, along_a_m, _ = _along_way(way_b, way_a)
+    meets = apart_m < PAIR_GAP_M
+    if not meets.any() or meets[0]:
+        return None
+    i = int(meets.argmax())
+    if along_a_m[i] < 0.0:
+        return None
+    t_a = along_a_m[i] / max(float(a.speed), 1.0)
+    t_b = _arc(way_b)[i] / max(float(b.speed), 1.0)
+    if max(t_a, t_b) > PAIR_HORIZON_S:
+        return None
+    return t_b - t_a
 
 
-def _conflict_pair(ep, centre, radius_m):
-    """intersection-v0 / roundabout-v0: A = the ego; B = the car that would reach the
-    conflict area (a disc around ``centre``) closest in time to A, from a different road."""
+def _conflict_pair(ep):
+    """intersection-v0 / roundabout-v0: A = the ego; B = the car from another road whose way
+    meets A's ahead of A nearest in time to A (:func:`_meeting_lead_s`), once the first of them
+    is :data:`PAIR_HORIZON_S` from the meeting place and B's lead is within
+    :data:`PAIR_LEAD_S`."""
     a = ep.ego
-    if np.linalg.norm(a.position - centre) > radius_m + 30.0:
+    leads = {v: _meeting_lead_s(a, v) for v in ep.cars if v is not a and v.lane_index[0] != a.lane_index[0]}
+    leads = {v: t for v, t in leads.items() if t is not None and abs(t) <= PAIR_LEAD_S}
+    if not leads:
         return None
-    ta = _time_to(a, centre)
-    cands = [v for v in ep.cars if v is not a and v.lane_index[0] != a.lane_index[0]
-             and np.linalg.norm(v.position - centre) < radius_m + 45.0
-             and np.dot(centre - v.position, [np.cos(v.heading), np.sin(v.heading)]) > 0.0]
-    if not cands:
-        return None
-    b = min(cands, key=lambda v: abs(_time_to(v, centre) - ta))
-    if abs(_time_to(b, centre) - ta) > PAIR_LEAD_S:
-        return None
-    return a, b
+    return a, min(leads, key=lambda v: abs(leads[v]))
 
 
 def _pair(ep):
@@ -355,9 +374,7 @@ def _pair(ep):
         return _highway_pair(ep, cut_in=False)
     if ep.scenario == "highway-v0-cutin":
         return _highway_pair(ep, cut_in=True)
-    if ep.scenario == "intersection-v0":
-        return _conflict_pair(ep, np.zeros(2), 10.0)
-    return _conflict_pair(ep, np.zeros(2), 25.0)
+    return _conflict_pair(ep)
 
 
 # ---- the arms ----
@@ -369,8 +386,7 @@ def _apply_yardstick(ep, level):
     b, a = ep.b, ep.a
     if ys["parameter"] == "yields":
         if level not in ("low", "high"):  # graded: decided once, by A's lead at the takeover
-            lead_s = _time_to(b, np.zeros(2)) - _time_to(a, np.zeros(2))
-            value = "always" if lead_s > value else "never"
+            value = "always" if ep.lead_s > value else "never"
         road = ep.road
         if hasattr(road, "respect_priorities"):
             rule = road.respect_priorities
@@ -460,9 +476,9 @@ def _room_to_enter(ep, lane_index):
     return True
 
 
-def _way(v):
+def _way(v, reach_m=CROSS_REACH_M):
     """The path (highway-env's frame) car ``v`` will drive from where it is, along its route as
-    highway-env itself predicts it, every 2 m up to :data:`scbg.sims.CROSS_REACH_M` (cut where
+    highway-env itself predicts it, every 2 m up to ``reach_m`` (cut where
     highway-env's guess of a lane on the route's next road fails); None for a car without a
     lane."""
     lane = getattr(v, "lane", None)
@@ -480,7 +496,7 @@ def _way(v):
         route = route or [v.lane_index]
     network = v.road.network
     way = []
-    for d in np.arange(0.0, CROSS_REACH_M + 1e-9, 2.0):
+    for d in np.arange(0.0, reach_m + 1e-9, 2.0):
         try:
             way.append(network.position_heading_along_route(route, s_m + d, 0.0, v.lane_index)[0])
         except (IndexError, KeyError):  # a lane id the route's next road lacks
@@ -517,7 +533,15 @@ def _follow_plan(ep, model, quantile, stats):
             replan()
             state["since"] = 0
 
+    own_step = b.step
+
     def step(dt):
+        if b.crashed or b.impact is not None:
+            # highway-env's collision check found B in contact (or about to be, which moves both
+            # cars apart by an impact): B is crashed, and brakes to a stop as its own cars do.
+            b.action = {"steering": 0.0, "acceleration": -float(b.speed)}
+            own_step(dt)
+            return
         path, arc = state["path"], state["arc"]
         k = min(state["k"] + 1, len(arc) - 1)
         planned = max(arc[k] - state["s"], 0.0) / dt  # the speed that keeps the plan's timing
@@ -596,6 +620,8 @@ def episode(model, scenario: str, seed: int, arm: dict, trace: list | None = Non
             ep.step()
             warm += 1
         ep.a, ep.b = pair
+        if scenario in ("intersection-v0", "roundabout-v0"):
+            ep.lead_s = _meeting_lead_s(ep.a, ep.b)  # A's lead at the takeover: B's time less A's
         if ep.a.crashed or ep.b.crashed:
             raise RuntimeError(f"{scenario} seed {seed}: A or B crashed before the takeover")
         stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0,
