@@ -203,4 +203,19 @@ mod tests {
             _ => unreachable!(),
         }
     }
+
+    #[test]
+    fn synth_draws_the_default_world_unless_told() {
+        let cli = Cli::try_parse_from(["scbg", "synth", "--out", "x"]).unwrap();
+        let super::Command::Synth(s) = cli.command else {
+            unreachable!()
+        };
+        assert_eq!(s.families, scbg_synth::Family::DEFAULT);
+        let cli =
+            Cli::try_parse_from(["scbg", "synth", "--out", "x", "--families", "leftturn"]).unwrap();
+        let super::Command::Synth(s) = cli.command else {
+            unreachable!()
+        };
+        assert_eq!(s.families, [scbg_synth::Family::Leftturn]);
+    }
 }

@@ -65,7 +65,7 @@ fn rewards_by_hand() {
 
 /// A from a synthetic merge/crossing/cut-in scene, conditioned on B; standardised.
 fn pair_sample() -> AgentSample {
-    let g = scbg_synth::generate(3, 1, &scbg_synth::Family::ALL);
+    let g = scbg_synth::generate(3, 1, &scbg_synth::Family::DEFAULT);
     let p = PreparedScene::from_scene(
         &g.scene,
         &WindowConfig::default(),

@@ -27,9 +27,9 @@ fn offset_from_path(path: &[f32], valid: &[bool], p: [f32; 2]) -> Option<f32> {
     Some(((p[1] - a[1]) * t[0] - (p[0] - a[0]) * t[1]) / len)
 }
 
-/// Synthetic scene `index` of data seed 11 (every family), and its prepared form.
-fn synthetic(index: u64) -> (scbg_synth::Generated, PreparedScene) {
-    let g = scbg_synth::generate(11, index, &Family::ALL);
+/// Synthetic scene `index` of data seed 11 drawn from `families`, and its prepared form.
+fn synthetic(index: u64, families: &[Family]) -> (scbg_synth::Generated, PreparedScene) {
+    let g = scbg_synth::generate(11, index, families);
     let p = PreparedScene::from_scene(
         &g.scene,
         &WindowConfig::default(),
@@ -40,7 +40,7 @@ fn synthetic(index: u64) -> (scbg_synth::Generated, PreparedScene) {
     (g, p)
 }
 
-/// In every synthetic family A has a lane path starting on A (A drives its lane's centre),
+/// In every synthetic family (the left turn's too) A has a lane path starting on A (A drives its lane's centre),
 /// 5 m apart along the lane for at least 150 m; in a cut-in scene, where B starts one lane to A's right or ahead
 /// in A's lane, B's offset from A's path is −1 or 0 lane widths although the road curves.
 #[test]
@@ -50,8 +50,12 @@ fn synthetic_targets_have_their_lane_and_b_its_offset_from_it() {
         ..Default::default()
     };
     let mut cutin_offsets = Vec::new();
-    for index in 0..40 {
-        let (g, p) = synthetic(index);
+    // The default world's families, then left turns (drawn only when asked for).
+    let scenes = (0..40)
+        .map(|i| (i, &Family::DEFAULT[..]))
+        .chain((0..8).map(|i| (i, &[Family::Leftturn][..])));
+    for (index, families) in scenes {
+        let (g, p) = synthetic(index, families);
         let w = p.windows[0];
         let a = p.tracks.iter().position(|t| t.id == g.truth.a_id).unwrap();
         let b = p.tracks.iter().position(|t| t.id == g.truth.b_id).unwrap();
@@ -154,7 +158,7 @@ fn the_lanes_beside_a_path_are_the_roads_own() {
     };
     let (mut cutins, mut letins) = (0, 0);
     for index in 0..40 {
-        let (g, p) = synthetic(index);
+        let (g, p) = synthetic(index, &Family::DEFAULT);
         let w = p.windows[0];
         let track = |id| p.tracks.iter().position(|t| t.id == id).unwrap();
         let at_a = (LANE_PATH_BEHIND_M / LANE_PATH_SPACING_M) as usize;

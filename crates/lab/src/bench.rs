@@ -287,7 +287,7 @@ pub fn ingest(
 /// Synthetic generate + encode throughput of `scenarios` scenarios at 1 thread and at every
 /// thread: `(threads, scenarios/s, KB per scenario)` rows.
 pub fn synth(scenarios: usize) -> anyhow::Result<Vec<(usize, f64, f64)>> {
-    let families = scbg_synth::Family::ALL;
+    let families = scbg_synth::Family::DEFAULT;
     let all = rayon::current_num_threads();
     let mut rows = Vec::new();
     for threads in [1, all] {

@@ -37,6 +37,8 @@ pub struct PipelineConfig {
 pub struct DataConfig {
     /// Synthetic scenes to generate when no data is given.
     pub scenarios: usize,
+    /// The families they are drawn from.
+    pub families: Vec<scbg_synth::Family>,
     /// Counterfactual siblings per synthetic scene for the predictor's training.
     pub counterfactuals: usize,
     /// Families held out of training, only evaluated.
@@ -189,6 +191,11 @@ impl PipelineConfig {
         let config: Self = toml::Value::Table(base)
             .try_into()
             .map_err(|e: toml::de::Error| InvalidRequest(e.message().to_string()))?;
+        if config.data.families.is_empty() {
+            return Err(InvalidRequest(
+                "[data] families: at least one family is needed".into(),
+            ));
+        }
         config.label_options()?;
         Ok(config)
     }
@@ -259,6 +266,7 @@ mod tests {
     fn the_documented_defaults_are_complete_and_are_the_demos() {
         let c = PipelineConfig::default();
         assert_eq!(c.data.scenarios, 1500);
+        assert_eq!(c.data.families, scbg_synth::Family::DEFAULT);
         assert_eq!(c.predictor.epochs, 34);
         assert_eq!(c.generator.seeds, 3);
         assert_eq!(c.closed_loop.scenes, 60);
@@ -308,6 +316,11 @@ mod tests {
         let bad = PipelineConfig::from_toml("[labels]\naudience = \"crowd\"\n").unwrap_err();
         assert!(bad.0.contains("crowd"), "{bad}");
         assert!(PipelineConfig::from_toml("[data]\nscenarios = \"many\"\n").is_err());
+        let none = PipelineConfig::from_toml("[data]\nfamilies = []\n").unwrap_err();
+        assert!(none.0.contains("[data] families"), "{none}");
+        let transfer = include_str!("../../../docs/transfer.toml");
+        let t = PipelineConfig::from_toml(transfer).unwrap();
+        assert!(t.data.families.contains(&scbg_synth::Family::Leftturn));
     }
 
     #[test]

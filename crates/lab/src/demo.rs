@@ -112,7 +112,7 @@ pub fn run_demo(options: &DemoOptions, progress: &dyn Progress) -> anyhow::Resul
                 scenarios: options.config.data.scenarios,
                 seed: options.seed,
                 out: synth_dir.clone(),
-                families: scbg_synth::Family::ALL.to_vec(),
+                families: options.config.data.families.clone(),
                 held_out: options.config.data.held_out_families.clone(),
                 scenarios_per_file: 250,
                 counterfactuals: options.config.data.counterfactuals,

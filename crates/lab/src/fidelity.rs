@@ -336,7 +336,7 @@ mod tests {
     #[test]
     fn oracle_scores_the_logged_future_of_a_truth_role() {
         use scbg_synth::{Family, generate};
-        let g = generate(3, 1, &Family::ALL);
+        let g = generate(3, 1, &Family::DEFAULT);
         let t = &g.truth;
         let b = &g.scene.tracks[1];
         // B's logged future in A's frame at the current step.
@@ -366,7 +366,7 @@ mod tests {
         };
         use scbg_synth::{Family, generate};
         for i in 0..6 {
-            let g = generate(5, i, &Family::ALL);
+            let g = generate(5, i, &Family::DEFAULT);
             let t = &g.truth;
             let prepared = PreparedScene::from_scene(
                 &g.scene,

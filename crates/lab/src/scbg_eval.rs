@@ -170,7 +170,16 @@ impl ScbgEval {
             ));
         }
         if !self.truth_control.is_empty() {
-            let families = scbg_synth::Family::ALL.map(scbg_synth::Family::name);
+            // A column per family the evaluated scenes hold.
+            let families: Vec<&str> = scbg_synth::Family::ALL
+                .map(scbg_synth::Family::name)
+                .into_iter()
+                .filter(|f| {
+                    self.truth_control
+                        .iter()
+                        .any(|(_, t)| t.knob.spearman_quantile_psi_true.contains_key(*f))
+                })
+                .collect();
             s.push_str(&format!("\nControl in truth — Spearman(input quantile, ψ_true of the generated future), oracle of the synthetic simulator; pooled over examples, and within an example (the mean over examples of the Spearman across its own futures, 0 where they all give A the same reward; the share of examples where they do not):\n\n| model | all | {0} | within an example: all | {0} | responsive | each example ordered by q: all | scored pair roles | Pearson(achieved ψ, ψ_true) |\n|---|---|{1}---|{1}---|---|---|---|\n", families.join(" | "), "---|".repeat(families.len())));
             let row = |label: &str, w: &crate::fidelity::WorldKnob, pearson: Option<f64>| {
                 let c = |x: Option<f64>| x.map_or("-".into(), |x| format!("{x:.3}"));

@@ -115,7 +115,7 @@ pub fn write_synthetic(
 /// Synthetic scenario `index` of the run with `seed` as the bytes of a one-record WOMD
 /// Scenario TFRecord file, with its ground truth (what a client would upload).
 pub fn scenario_bytes(seed: u64, index: u64) -> anyhow::Result<(Vec<u8>, GroundTruth)> {
-    let g = generate(seed, index, &Family::ALL);
+    let g = generate(seed, index, &Family::DEFAULT);
     let bytes = scbg_womd::scenes_to_tfrecord_bytes([&g.scene])?;
     Ok((bytes, g.truth))
 }

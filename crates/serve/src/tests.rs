@@ -32,7 +32,7 @@ fn fixture() -> &'static (tempfile::TempDir, Vec<u8>, scbg_lab::synth::GroundTru
                 scenarios: 12,
                 seed: 3,
                 out: p("data"),
-                families: Family::ALL.to_vec(),
+                families: Family::DEFAULT.to_vec(),
                 held_out: Vec::new(),
                 scenarios_per_file: 12,
                 counterfactuals: 0,

@@ -53,7 +53,7 @@ fn following_the_logged_plan_reproduces_the_synthetic_log() {
     };
     let (mut worst_b, mut worst_a) = (0.0f64, 0.0f64);
     for index in 0..12 {
-        let scenario = Scenario::draw(3, index, &Family::ALL);
+        let scenario = Scenario::draw(3, index, &Family::DEFAULT);
         let log = scenario.generate().scene;
         let mut sim = Simulation::reset(
             &log,
@@ -163,7 +163,7 @@ fn with_the_right_of_way_a_logged_b_that_goes_first_still_does() {
 
 #[test]
 fn idm_world_and_external_ego() {
-    let log = scbg_synth::generate(4, 1, &Family::ALL).scene;
+    let log = scbg_synth::generate(4, 1, &Family::DEFAULT).scene;
     // IDM for everyone but B; B follows its log.
     let config = SimConfig {
         others: OthersMode::Reactive,
@@ -207,7 +207,7 @@ fn idm_world_and_external_ego() {
 
 #[test]
 fn bad_requests_name_what_is_wrong() {
-    let log = scbg_synth::generate(4, 2, &Family::ALL).scene;
+    let log = scbg_synth::generate(4, 2, &Family::DEFAULT).scene;
     let c = SimConfig::default();
     let err = |r: Result<Simulation, SimError>| r.unwrap_err().to_string();
     assert!(err(Simulation::reset(&log, None, &[999], c, None)).contains("no agent with id 999"));
@@ -232,7 +232,7 @@ fn bad_requests_name_what_is_wrong() {
         err(Simulation::reset(&invalid, None, &[B_ID], c, None))
             .contains("not valid at the current step 10")
     );
-    let other = Scenario::draw(4, 3, &Family::ALL).closed_loop();
+    let other = Scenario::draw(4, 3, &Family::DEFAULT).closed_loop();
     assert!(err(Simulation::reset(&log, None, &[B_ID], c, Some(other))).contains("not this"));
     // A failing planner leaves the simulation where it was.
     let mut sim = Simulation::reset(&log, None, &[B_ID], c, None).unwrap();
@@ -297,7 +297,7 @@ fn lane_keeping_holds_a_plan_beside_the_lane_near_it() {
     let (mut kept, mut free) = (0.0f64, 0.0f64);
     let scenes = 6;
     for index in 0..scenes {
-        let log = scbg_synth::generate(5, index, &Family::ALL).scene;
+        let log = scbg_synth::generate(5, index, &Family::DEFAULT).scene;
         kept += off_lane(
             SimConfig {
                 lane_keeping_m: Some(0.0),

@@ -16,6 +16,7 @@
 
 mod closed_loop;
 pub mod families;
+mod family;
 mod map_detail;
 mod path;
 mod sim;
@@ -26,6 +27,7 @@ use scbg_scene::{PredictionDifficulty, PredictionTarget, Scene};
 
 pub use closed_loop::{BPrefix, ClosedLoop};
 pub use families::{A_ID, B_ID, CUT_IN_REACTION_S, LEAST_COURTEOUS_CUT_IN_BRAKE_MPS2, NUM_STEPS};
+pub use family::{Family, UnknownFamily};
 pub use path::RefPath;
 pub use sim::{Idm, STEP_SECS, boxes_overlap, closer};
 
@@ -33,67 +35,6 @@ use families::{BPlan, Run};
 
 /// History steps including the current one.
 pub const CURRENT_STEP: usize = 10;
-
-/// The scene families.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "lowercase")]
-#[cfg_attr(feature = "clap", derive(clap::ValueEnum))]
-pub enum Family {
-    /// On-ramp merge into A's highway lane.
-    Merge,
-    /// Unprotected crossing at a stop-controlled intersection.
-    Crossing,
-    /// Lane change / cut-in on a two-lane road.
-    Cutin,
-    /// B leading A in A's lane on a procedural road.
-    Following,
-    /// B on the main lane letting A in from an on-ramp.
-    Letin,
-    /// A and B meeting at a roundabout's entry, one circulating, one entering.
-    Roundabout,
-}
-
-impl Family {
-    /// Every family.
-    pub const ALL: [Family; 6] = [
-        Family::Merge,
-        Family::Crossing,
-        Family::Cutin,
-        Family::Following,
-        Family::Letin,
-        Family::Roundabout,
-    ];
-
-    /// The family's name (`merge`, `crossing`, `cutin`, `following`, `letin`, `roundabout`).
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Merge => "merge",
-            Self::Crossing => "crossing",
-            Self::Cutin => "cutin",
-            Self::Following => "following",
-            Self::Letin => "letin",
-            Self::Roundabout => "roundabout",
-        }
-    }
-
-    /// The family of a name.
-    pub fn parse(name: &str) -> Result<Self, UnknownFamily> {
-        Self::ALL
-            .into_iter()
-            .find(|f| f.name() == name.trim())
-            .ok_or_else(|| UnknownFamily(name.to_string()))
-    }
-}
-
-/// A family name that is not `merge`, `crossing`, `cutin`, `following`, `letin` or
-/// `roundabout` (holds the name given).
-#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
-#[error(
-    "unknown scene family {0:?} (expected merge, crossing, cutin, following, letin or roundabout)"
-)]
-pub struct UnknownFamily(pub String);
 
 /// What the generator knows about a scenario and a model has to discover: one line of the
 /// `ground_truth.jsonl` sidecar.
@@ -155,6 +96,7 @@ enum Params {
     Following(families::FollowingParams),
     Letin(families::LetinParams),
     Roundabout(families::RoundaboutParams),
+    Leftturn(families::LeftTurnParams),
 }
 
 /// Draws of the courtesy prior `c' ∈ [0, 1]` behind ψ_true's expectation: stratified, the
@@ -230,6 +172,7 @@ impl Scenario {
             Family::Following => Params::Following(families::following_params(&mut rng)),
             Family::Letin => Params::Letin(families::letin_params(&mut rng)),
             Family::Roundabout => Params::Roundabout(families::roundabout_params(&mut rng)),
+            Family::Leftturn => Params::Leftturn(families::leftturn_params(&mut rng)),
         };
         Self {
             seed,
@@ -292,6 +235,7 @@ impl Scenario {
             Params::Following(p) => families::following_paths(p),
             Params::Letin(p) => families::letin_paths(p),
             Params::Roundabout(p) => families::roundabout_paths(p),
+            Params::Leftturn(p) => families::leftturn_paths(p),
         }
     }
 
@@ -305,6 +249,7 @@ impl Scenario {
             Params::Following(p) => families::simulate_following(p, paths, b, with_map),
             Params::Letin(p) => families::simulate_letin(p, paths, b, with_map),
             Params::Roundabout(p) => families::simulate_roundabout(p, paths, b, with_map),
+            Params::Leftturn(p) => families::simulate_leftturn(p, paths, b, with_map),
         }
     }
 

@@ -13,7 +13,7 @@ use crate::{Checkpoint, NoProgress, Progress, train};
 pub(crate) fn tiny_cache(dir: &Path, n: u64) {
     cache_of(
         dir,
-        (0..n).map(|i| scbg_synth::generate(42, i, &scbg_synth::Family::ALL).scene),
+        (0..n).map(|i| scbg_synth::generate(42, i, &scbg_synth::Family::DEFAULT).scene),
     );
 }
 
@@ -184,7 +184,7 @@ fn fine_tuning_starts_from_the_checkpoint_and_keeps_its_statistics() {
     let other = dir.path().join("other");
     cache_of(
         &other,
-        (20..30).map(|i| scbg_synth::generate(43, i, &scbg_synth::Family::ALL).scene),
+        (20..30).map(|i| scbg_synth::generate(43, i, &scbg_synth::Family::DEFAULT).scene),
     );
     let tuned = dir.path().join("tuned");
     let config = TrainConfig {
@@ -239,7 +239,7 @@ fn counterfactual_siblings_add_conditional_samples_of_the_sdc_in_the_training_sp
     cache_of(
         &cf,
         (0..n).flat_map(|i| {
-            let s = scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::ALL);
+            let s = scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::DEFAULT);
             (0..2).map(move |k| s.counterfactual(k, 2))
         }),
     );
@@ -250,7 +250,7 @@ fn counterfactual_siblings_add_conditional_samples_of_the_sdc_in_the_training_sp
     let dataset = scbg_features::cache::PreparedDataset::open(&cf).unwrap();
     let samples = crate::data::counterfactual_samples(&dataset, &config).unwrap();
     let train_ids: Vec<String> = (0..n)
-        .map(|i| scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::ALL).scenario_id())
+        .map(|i| scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::DEFAULT).scenario_id())
         .filter(|id| {
             crate::data::split_of(id, config.validation_fraction) == crate::data::Split::Train
         })
@@ -412,7 +412,7 @@ fn reaction_samples_join_at_their_epoch_made_from_the_run_itself() {
     cache_of(
         &rx,
         (0..n).flat_map(|i| {
-            let s = scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::ALL);
+            let s = scbg_synth::Scenario::draw(42, i, &scbg_synth::Family::DEFAULT);
             (0..3).map(move |k| s.counterfactual(k, 3))
         }),
     );

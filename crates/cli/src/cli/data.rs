@@ -96,7 +96,8 @@ pub struct SynthArgs {
     /// Output folder.
     #[arg(long)]
     pub out: PathBuf,
-    /// Scene families to draw from (comma-separated).
+    /// Scene families to draw from (comma-separated; the default world is every family but
+    /// leftturn).
     #[arg(
         long,
         value_enum,

@@ -64,7 +64,7 @@ fn demo_writes_a_report() {
     let families = report["spearman_latent"].as_object().unwrap();
     assert_eq!(
         families.len(),
-        scbg_synth::Family::ALL.len(),
+        scbg_synth::Family::DEFAULT.len(),
         "every family of the synthetic world: {report}"
     );
     // The closed-loop stage ran on the held-out scenes.

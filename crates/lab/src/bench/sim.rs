@@ -78,7 +78,7 @@ pub fn sim(
         let scenes = scenes.max(1);
         let (mut gen_ms, mut world_ms, mut wosac_ms) = (Vec::new(), Vec::new(), Vec::new());
         for k in 0..scenes {
-            let g = scbg_synth::generate(0, k as u64, &scbg_synth::Family::ALL);
+            let g = scbg_synth::generate(0, k as u64, &scbg_synth::Family::DEFAULT);
             let (scene, truth) = (g.scene, g.truth);
             let controlled = |q: f32| {
                 [ControlledAgent::new(

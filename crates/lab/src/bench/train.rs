@@ -32,7 +32,7 @@ pub fn train(
     // Samples from real geometry: synthetic scenes through the feature pipeline.
     let mut samples = Vec::new();
     for i in 0..batch_size as u64 {
-        let g = scbg_synth::generate(9, i, &scbg_synth::Family::ALL);
+        let g = scbg_synth::generate(9, i, &scbg_synth::Family::DEFAULT);
         let p = PreparedScene::from_scene(
             &g.scene,
             &WindowConfig::default(),

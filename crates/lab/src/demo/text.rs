@@ -106,7 +106,17 @@ impl DemoReport {
                 _ => "-".into(),
             }
         };
-        let families = scbg_synth::Family::ALL.map(scbg_synth::Family::name);
+        // A column per family the run drew.
+        let families: Vec<&str> = scbg_synth::Family::ALL
+            .map(scbg_synth::Family::name)
+            .into_iter()
+            .filter(|f| {
+                self.truth_control.as_object().is_some_and(|m| {
+                    m.values()
+                        .any(|v| v["spearman_quantile_psi_true"].get(*f).is_some())
+                })
+            })
+            .collect();
         let mut out = format!(
             "Mean ± standard deviation over {} generator seeds ({:?}):\n\n| model | CourtesyMSE *data* | CourtesyMSE *range* | CourtesyMSE *arbitrary* | TrajADE (m) | corr(q, ψ) all | corr(q, ψ) high | Spearman(q, ψ_true) all | {} | within an example |\n|---|---|---|---|---|---|---|---|{}---|\n",
             self.generator_seeds.len(),

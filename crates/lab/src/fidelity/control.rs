@@ -523,7 +523,7 @@ mod tests {
         use scbg_synth::{Family, generate};
         let mut changed = 0;
         for index in 0..6 {
-            let g = generate(5, index, &Family::ALL);
+            let g = generate(5, index, &Family::DEFAULT);
             let t = &g.truth;
             let scenario = Scenario::of_truth(t).unwrap();
             let logged: Vec<[f64; 2]> = g.scene.tracks[1].states[CURRENT_STEP + 1..]

@@ -16,7 +16,7 @@ const N: usize = scbg_metrics::wosac::ROLLOUTS_PER_SCENARIO;
 /// `n` synthetic scenes (91 steps, an SDC, road edges), ids `synth-…`.
 fn scenes(n: u64) -> Vec<Scene> {
     (0..n)
-        .map(|i| scbg_synth::generate(3, i, &scbg_synth::Family::ALL).scene)
+        .map(|i| scbg_synth::generate(3, i, &scbg_synth::Family::DEFAULT).scene)
         .collect()
 }
 

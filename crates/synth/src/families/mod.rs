@@ -28,7 +28,13 @@
 //!   it presses on at 1.05 × its desired speed), or B enters ahead of a circulating A only when
 //!   its lead exceeds `0.3 + 2.7c` s (then `+15 % c` desired speed), and otherwise waits at the
 //!   yield line until A has passed. An entering vehicle yields to every circulating one it
-//!   would not be an accepted 0.8–1.6 s ahead of.
+//!   would not be an accepted 0.8–1.6 s ahead of;
+//! - **leftturn**: B, oncoming on A's two-lane road, turns left across A's lane into a side
+//!   road leaving on A's right at 60–120° (turn radius 9–15 m, taken at 3 m/s² lateral). B
+//!   turns before A only when A's time to where B's body is in A's lane exceeds B's time to
+//!   clear it by `−3 + 5c` s (then at `+20 % c` desired speed), otherwise it waits 2 m short
+//!   of A's lane until A has passed; A reacts as at a crossing. Not in the default world
+//!   ([`crate::Family::DEFAULT`]).
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
@@ -225,6 +231,37 @@ pub(crate) fn orient_road_edges(map: &mut Map) {
     }
 }
 
+/// The lateral acceleration (m/s²) drivers keep to on the connectors, turns and rings: each slows
+/// for the curves within [`CURVE_LOOKAHEAD_S`] ahead.
+pub(super) const LATERAL_MPS2: f64 = 3.0;
+/// How far ahead (s, at the current speed, plus 5 m) drivers look for curves.
+pub(super) const CURVE_LOOKAHEAD_S: f64 = 2.5;
+
+/// The speed (m/s) at which each metre of `path` is driven at [`LATERAL_MPS2`] (its
+/// curvature over ±2 m).
+pub(super) fn curve_speeds(path: &RefPath) -> Vec<f64> {
+    let n = path.length_m().floor() as usize + 1;
+    (0..n)
+        .map(|i| {
+            let s = i as f64;
+            let turn =
+                scbg_scene::wrap_angle_rad(path.heading_at(s + 2.0) - path.heading_at(s - 2.0));
+            let curvature = turn.abs() / 4.0;
+            (LATERAL_MPS2 / curvature.max(1e-6)).sqrt()
+        })
+        .collect()
+}
+
+/// The speed the curves ahead of arclength `s` allow at speed `v` ([`curve_speeds`]).
+pub(super) fn curve_limit(speeds: &[f64], s: f64, v: f64) -> f64 {
+    let from = (s.max(0.0) as usize).min(speeds.len() - 1);
+    let to = ((s + v * CURVE_LOOKAHEAD_S + 5.0).max(0.0) as usize).clamp(from, speeds.len() - 1);
+    speeds[from..=to]
+        .iter()
+        .copied()
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Background traffic as the families draw it: `(s, v, size, idm)` per vehicle.
 pub(super) type Background = (f64, f64, (f64, f64), Idm);
 
@@ -320,6 +357,7 @@ impl PairSetup {
 mod crossing;
 mod cutin;
 mod following;
+mod leftturn;
 mod letin;
 mod merge;
 mod roundabout;
@@ -330,6 +368,7 @@ pub use cutin::{
     simulate_cutin,
 };
 pub use following::{FollowingParams, following_params, following_paths, simulate_following};
+pub use leftturn::{LeftTurnParams, leftturn_params, leftturn_paths, simulate_leftturn};
 pub use letin::{
     LETIN_HEADWAY_S, LetinParams, PRESS_ON_SHARE, letin_lets_in, letin_params, letin_paths,
     simulate_letin,

@@ -8,8 +8,8 @@ use rand_pcg::Pcg64Mcg;
 use scbg_scene::Map;
 
 use super::{
-    BPlan, Background, NUM_STEPS, PairSetup, Run, committed_to_cross, idm, noise_track,
-    vehicle_size,
+    BPlan, Background, NUM_STEPS, PairSetup, Run, committed_to_cross, curve_limit, curve_speeds,
+    idm, noise_track, vehicle_size,
 };
 use crate::CURRENT_STEP;
 use crate::RefPath;
@@ -32,27 +32,6 @@ const LET_IN_BRAKE_MPS2: f64 = 3.5;
 const LET_IN_HEADWAY_S: f64 = 1.8;
 /// How far behind B (m, in the merge coordinate) an entering A still makes B adjust its speed.
 const NOTICE_BEHIND_M: f64 = 5.0;
-/// The lateral acceleration (m/s²) drivers keep to on the connectors and the ring: each slows
-/// for the curves within [`CURVE_LOOKAHEAD_S`] ahead.
-const LATERAL_MPS2: f64 = 3.0;
-/// How far ahead (s, at the current speed, plus 5 m) drivers look for curves.
-const CURVE_LOOKAHEAD_S: f64 = 2.5;
-
-/// The speed (m/s) at which each metre of `path` is driven at [`LATERAL_MPS2`] (its
-/// curvature over ±2 m).
-fn curve_speeds(path: &RefPath) -> Vec<f64> {
-    let n = path.length_m().floor() as usize + 1;
-    (0..n)
-        .map(|i| {
-            let s = i as f64;
-            let turn =
-                scbg_scene::wrap_angle_rad(path.heading_at(s + 2.0) - path.heading_at(s - 2.0));
-            let curvature = turn.abs() / 4.0;
-            (LATERAL_MPS2 / curvature.max(1e-6)).sqrt()
-        })
-        .collect()
-}
-
 /// Seconds to cover `d` m from speed `v`, speeding up at `accel` up to `v_max` (m/s).
 fn time_to_cover(d: f64, v: f64, accel: f64, v_max: f64) -> f64 {
     let v_max = v_max.max(v).max(0.5);
@@ -75,16 +54,6 @@ fn start_before(speeds: &[f64], to_s: f64, secs: f64, v: f64) -> (f64, f64) {
         s -= 1.0;
     }
     (s, v.min(curve_limit(speeds, s, v)))
-}
-
-/// The speed the curves ahead of arclength `s` allow at speed `v` ([`curve_speeds`]).
-fn curve_limit(speeds: &[f64], s: f64, v: f64) -> f64 {
-    let from = (s.max(0.0) as usize).min(speeds.len() - 1);
-    let to = ((s + v * CURVE_LOOKAHEAD_S + 5.0).max(0.0) as usize).clamp(from, speeds.len() - 1);
-    speeds[from..=to]
-        .iter()
-        .copied()
-        .fold(f64::INFINITY, f64::min)
 }
 
 /// The random draws of one roundabout scene (geometry, A and B, circulating traffic, noise).
