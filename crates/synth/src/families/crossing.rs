@@ -8,8 +8,8 @@ use scbg_scene::{
 };
 
 use super::{
-    BPlan, Background, NUM_STEPS, PairSetup, Run, STOP_LINE_TO_ZONE_M, arc_path,
-    committed_to_cross, idm, mp, noise_track, pts, vehicle_size,
+    BPlan, Background, Conflict, NUM_STEPS, PairSetup, Run, arc_path, idm, mp, noise_track, pts,
+    vehicle_size,
 };
 use crate::CURRENT_STEP;
 use crate::path::RefPath;
@@ -127,7 +127,13 @@ pub fn simulate_crossing(
     let (a_path, b_path) = (&paths[0], &paths[1]);
     // Half-width of the crossing road along each path (both roads have two lanes).
     let half_zone = w / p.crossing_angle_rad.sin().abs() + 1.0;
-    let stop_s = p.b_conflict_s - half_zone - STOP_LINE_TO_ZONE_M;
+    let zone = Conflict {
+        b_in_s: p.b_conflict_s - half_zone,
+        b_out_s: p.b_conflict_s + half_zone,
+        a_in_s: p.a_conflict_s - half_zone,
+        a_out_s: p.a_conflict_s + half_zone,
+    };
+    let stop_s = zone.stop_s();
     let mut agents = p.pair.agents(1, 0.0, with_b);
     let follower_idx = agents.len();
     if let Some((gap, v, size, m)) = p.follower {
@@ -168,44 +174,26 @@ pub fn simulate_crossing(
         let c = b.courtesy(t);
         // B decides from the current step on, so its courtesy shows in the future to predict.
         if with_b && decision.is_none() && t >= CURRENT_STEP && agents[1].s >= stop_s - 20.0 {
-            let (a, b) = (&agents[0], &agents[1]);
-            let tau_a = (p.a_conflict_s - half_zone - a.s - a.length_m / 2.0) / a.v.max(1.0);
-            let tau_b_clear = (p.b_conflict_s + half_zone + b.length_m - b.s) / b.v.max(3.0);
-            let go = tau_a - tau_b_clear > -2.5 + 5.0 * c;
+            let go = zone.b_goes_first(&agents[0], &agents[1], -2.5 + 5.0 * c);
             decision = Some(go);
             if go {
                 agents[1].idm.desired_speed_mps *= 1.0 + 0.2 * c;
             }
         }
         // A: follows nothing on its road but B occupying (or committed to) the conflict zone, by
-        // B's observable motion only ([`committed_to_cross`]).
-        {
-            let a = &agents[0];
-            let mut leader = None;
-            if with_b {
-                let (s_b, _, v_b) = agents[1].delayed(p.pair.reaction_steps);
-                let b_len = agents[1].length_m;
-                let b_in_or_coming = s_b > p.b_conflict_s - half_zone - b_len - 25.0
-                    && committed_to_cross(s_b, v_b, stop_s, b_len / 2.0);
-                let b_not_cleared = s_b < p.b_conflict_s + half_zone + b_len;
-                let a_before = a.s + a.length_m / 2.0 < p.a_conflict_s - half_zone + 1.0;
-                if b_in_or_coming && b_not_cleared && a_before {
-                    leader = Some((
-                        p.a_conflict_s - half_zone - 1.0 - a.s - a.length_m / 2.0,
-                        0.0,
-                    ));
-                }
-            }
-            cmds[0] = a.idm.accel(a.v, leader) + p.noise[0][t];
-        }
+        // B's observable motion only ([`Conflict::a_leader`]).
+        let leader = if with_b {
+            zone.a_leader(&agents[0], &agents[1], p.pair.reaction_steps)
+        } else {
+            None
+        };
+        cmds[0] = agents[0].idm.accel(agents[0].v, leader) + p.noise[0][t];
         if with_b {
             let b = &agents[1];
-            let mut leader = None;
-            let a_cleared = agents[0].s - agents[0].length_m > p.a_conflict_s + half_zone;
+            let a_cleared = agents[0].s - agents[0].length_m > zone.a_out_s;
             let undecided_history = decision.is_none() && t < CURRENT_STEP;
-            if decision != Some(true) && !undecided_history && !a_cleared && b.s < stop_s + 0.5 {
-                leader = Some((stop_s - b.s - b.length_m / 2.0, 0.0));
-            }
+            let waits = decision != Some(true) && !undecided_history && !a_cleared;
+            let leader = if waits { zone.b_stop_leader(b) } else { None };
             cmds[1] = b.idm.accel(b.v, leader) + p.noise[1][t];
         }
         if p.follower.is_some() {

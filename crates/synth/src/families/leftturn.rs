@@ -8,8 +8,8 @@ use rand_pcg::Pcg64Mcg;
 use scbg_scene::{Lane, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
 
 use super::{
-    BPlan, Background, NUM_STEPS, PairSetup, Run, STOP_LINE_TO_ZONE_M, committed_to_cross,
-    curve_limit, curve_speeds, idm, noise_track, pts, vehicle_size,
+    BPlan, Background, Conflict, NUM_STEPS, PairSetup, Run, curve_limit, curve_speeds, idm,
+    noise_track, pts, vehicle_size,
 };
 use crate::CURRENT_STEP;
 use crate::path::RefPath;
@@ -154,16 +154,10 @@ pub fn leftturn_paths(p: &LeftTurnParams) -> Vec<RefPath> {
     ]
 }
 
-/// Where B's body is in A's lane: along B's path from `in_s` (B's front there enters it) to
-/// `out_s` (B's centre there has left it), and along A's path from `a_in` to `a_out`.
-struct Zone {
-    in_s: f64,
-    out_s: f64,
-    a_in: f64,
-    a_out: f64,
-}
-
-fn zone(b_path: &RefPath, lane_width_m: f64) -> Zone {
+/// Where B's body is in A's lane: from where B's front, at that point of its path, enters A's
+/// lane (its centre [`ZONE_MARGIN_M`] beyond the lane's line) to where B's centre has left it,
+/// and the stretch of A's lane this crosses (a metre added each side).
+fn zone(b_path: &RefPath, lane_width_m: f64) -> Conflict {
     let edge = lane_width_m / 2.0 + ZONE_MARGIN_M;
     let n = b_path.length_m().floor() as usize;
     let points: Vec<(f64, f64, f64)> = (0..=n)
@@ -172,20 +166,20 @@ fn zone(b_path: &RefPath, lane_width_m: f64) -> Zone {
             (i as f64, x, y)
         })
         .collect();
-    let in_s = points.iter().find(|p| p.2 < edge).map_or(0.0, |p| p.0);
-    let out_s = points
+    let b_in_s = points.iter().find(|p| p.2 < edge).map_or(0.0, |p| p.0);
+    let b_out_s = points
         .iter()
         .find(|p| p.2 < -edge)
         .map_or(b_path.length_m(), |p| p.0);
-    let inside = points.iter().filter(|p| p.0 >= in_s && p.0 <= out_s);
+    let inside = points.iter().filter(|p| p.0 >= b_in_s && p.0 <= b_out_s);
     let (a_in, a_out) = inside.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
         (lo.min(p.1), hi.max(p.1))
     });
-    Zone {
-        in_s,
-        out_s,
-        a_in: a_in - 1.0,
-        a_out: a_out + 1.0,
+    Conflict {
+        b_in_s,
+        b_out_s,
+        a_in_s: a_in - 1.0,
+        a_out_s: a_out + 1.0,
     }
 }
 
@@ -196,7 +190,7 @@ fn zone(b_path: &RefPath, lane_width_m: f64) -> Zone {
 /// turns before A only when A's time to the zone where B's body is in A's lane exceeds B's
 /// time to clear it by `−3 + 5c` s (then at `+20 % c` desired speed), and otherwise waits
 /// there until A has passed. A reacts to B only through B's observable motion
-/// ([`committed_to_cross`]), as at a crossing. Every vehicle slows for the curves ahead.
+/// ([`Conflict::a_leader`]), as at a crossing. Every vehicle slows for the curves ahead.
 pub fn simulate_leftturn(
     p: &LeftTurnParams,
     paths: Vec<RefPath>,
@@ -204,8 +198,8 @@ pub fn simulate_leftturn(
     with_map: bool,
 ) -> Run {
     let with_b = b.present();
-    let z = zone(&paths[1], p.lane_width_m);
-    let stop_s = z.in_s - STOP_LINE_TO_ZONE_M;
+    let zone = zone(&paths[1], p.lane_width_m);
+    let stop_s = zone.stop_s();
     let b_curves = curve_speeds(&paths[1]);
     let mut agents = p.pair.agents(1, 0.0, with_b);
     let follower_idx = agents.len();
@@ -223,42 +217,27 @@ pub fn simulate_leftturn(
         let mut cmds = vec![0.0; agents.len()];
         let c = b.courtesy(t);
         if with_b && decision.is_none() && t >= CURRENT_STEP && agents[1].s >= stop_s - 20.0 {
-            let (a, b) = (&agents[0], &agents[1]);
-            let tau_a = (z.a_in - a.s - a.length_m / 2.0) / a.v.max(1.0);
-            let tau_b_clear = (z.out_s + b.length_m - b.s) / b.v.max(3.0);
-            let go = tau_a - tau_b_clear > -3.0 + 5.0 * c;
+            let go = zone.b_goes_first(&agents[0], &agents[1], -3.0 + 5.0 * c);
             decision = Some(go);
             if go {
                 agents[1].idm.desired_speed_mps *= 1.0 + 0.2 * c;
             }
         }
         // A: follows nothing on its road but B occupying (or committed to) its lane, by B's
-        // observable motion only.
-        {
-            let a = &agents[0];
-            let mut leader = None;
-            if with_b {
-                let (s_b, _, v_b) = agents[1].delayed(p.pair.reaction_steps);
-                let b_len = agents[1].length_m;
-                let b_in_or_coming = s_b > z.in_s - b_len - 25.0
-                    && committed_to_cross(s_b, v_b, stop_s, b_len / 2.0);
-                let b_not_cleared = s_b < z.out_s + b_len;
-                let a_before = a.s + a.length_m / 2.0 < z.a_in + 1.0;
-                if b_in_or_coming && b_not_cleared && a_before {
-                    leader = Some((z.a_in - 1.0 - a.s - a.length_m / 2.0, 0.0));
-                }
-            }
-            cmds[0] = a.idm.accel(a.v, leader) + p.noise[0][t];
-        }
+        // observable motion only ([`Conflict::a_leader`]).
+        let leader = if with_b {
+            zone.a_leader(&agents[0], &agents[1], p.pair.reaction_steps)
+        } else {
+            None
+        };
+        cmds[0] = agents[0].idm.accel(agents[0].v, leader) + p.noise[0][t];
         if with_b {
             let b = &agents[1];
-            let mut leader = None;
             let a = &agents[0];
-            let a_cleared = a.s - a.length_m / 2.0 > z.a_out;
+            let a_cleared = a.s - a.length_m / 2.0 > zone.a_out_s;
             let undecided_history = decision.is_none() && t < CURRENT_STEP;
-            if decision != Some(true) && !undecided_history && !a_cleared && b.s < stop_s + 0.5 {
-                leader = Some((stop_s - b.s - b.length_m / 2.0, 0.0));
-            }
+            let waits = decision != Some(true) && !undecided_history && !a_cleared;
+            let leader = if waits { zone.b_stop_leader(b) } else { None };
             let mut m = b.idm;
             m.desired_speed_mps = m.desired_speed_mps.min(curve_limit(&b_curves, b.s, b.v));
             cmds[1] = m.accel(b.v, leader) + p.noise[1][t];

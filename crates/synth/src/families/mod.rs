@@ -192,6 +192,58 @@ pub(super) fn committed_to_cross(s: f64, v: f64, stop_s: f64, half_length_m: f64
         || v * v / (2.0 * (stop_s - s).max(0.1)) > 3.5
 }
 
+/// Where B's path crosses A's way (crossing and left-turn families), and the rules both meet it
+/// by. Along B's path: B's front enters A's way at `b_in_s`, B's centre has left it at
+/// `b_out_s`; along A's path: A's front reaches B's way at `a_in_s`, and it has passed at
+/// `a_out_s`.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Conflict {
+    pub b_in_s: f64,
+    pub b_out_s: f64,
+    pub a_in_s: f64,
+    pub a_out_s: f64,
+}
+
+impl Conflict {
+    /// B's stop line, [`STOP_LINE_TO_ZONE_M`] before the zone along B's path.
+    pub(super) fn stop_s(&self) -> f64 {
+        self.b_in_s - STOP_LINE_TO_ZONE_M
+    }
+
+    /// B's gap acceptance: B goes first when A's time to the zone exceeds B's time to clear it
+    /// (each at its speed now) by `accept_s`.
+    pub(super) fn b_goes_first(&self, a: &Agent, b: &Agent, accept_s: f64) -> bool {
+        let tau_a = (self.a_in_s - a.s - a.length_m / 2.0) / a.v.max(1.0);
+        let tau_b_clear = (self.b_out_s + b.length_m - b.s) / b.v.max(3.0);
+        tau_a - tau_b_clear > accept_s
+    }
+
+    /// A's reaction to B, by B's observable motion only (seen `reaction_steps` late): while B
+    /// is within 25 m before the zone, committed to it ([`committed_to_cross`]) and not clear
+    /// of it, and A has not reached it, A treats the zone's entry as a standing obstacle.
+    pub(super) fn a_leader(
+        &self,
+        a: &Agent,
+        b: &Agent,
+        reaction_steps: usize,
+    ) -> Option<(f64, f64)> {
+        let (s_b, _, v_b) = b.delayed(reaction_steps);
+        let b_len = b.length_m;
+        let b_in_or_coming = s_b > self.b_in_s - b_len - 25.0
+            && committed_to_cross(s_b, v_b, self.stop_s(), b_len / 2.0);
+        let b_not_cleared = s_b < self.b_out_s + b_len;
+        let a_before = a.s + a.length_m / 2.0 < self.a_in_s + 1.0;
+        (b_in_or_coming && b_not_cleared && a_before)
+            .then(|| (self.a_in_s - 1.0 - a.s - a.length_m / 2.0, 0.0))
+    }
+
+    /// B's stop line as a standing obstacle, for a B that waits and has not passed it.
+    pub(super) fn b_stop_leader(&self, b: &Agent) -> Option<(f64, f64)> {
+        let stop_s = self.stop_s();
+        (b.s < stop_s + 0.5).then(|| (stop_s - b.s - b.length_m / 2.0, 0.0))
+    }
+}
+
 /// Orients every road edge the way WOMD does — the road on its left, so that the WOSAC signed
 /// distance is negative on the road and positive off it: an edge whose nearest lane-centre
 /// point (from the middle of the edge) lies on its right is reversed. Closed polylines (islands)
