@@ -188,8 +188,9 @@ fn zone(b_path: &RefPath, lane_width_m: f64) -> Conflict {
 ///
 /// B, from the current step on and within 20 m of its waiting point (2 m before A's lane),
 /// turns before A only when A's time to the zone where B's body is in A's lane exceeds B's
-/// time to clear it by `−3 + 5c` s (then at `+20 % c` desired speed), and otherwise waits
-/// there until A has passed. A reacts to B only through B's observable motion
+/// time to clear it by `−2 + 5c` s (then at `+20 % c` desired speed), and otherwise waits
+/// there until A has passed, and then turns ahead of the car behind A only by the same rule. A
+/// (and the car behind it) reacts to B only through B's observable motion
 /// ([`Conflict::a_leader`]), as at a crossing. Every vehicle slows for the curves ahead.
 pub fn simulate_leftturn(
     p: &LeftTurnParams,
@@ -217,7 +218,7 @@ pub fn simulate_leftturn(
         let mut cmds = vec![0.0; agents.len()];
         let c = b.courtesy(t);
         if with_b && decision.is_none() && t >= CURRENT_STEP && agents[1].s >= stop_s - 20.0 {
-            let go = zone.b_goes_first(&agents[0], &agents[1], -3.0 + 5.0 * c);
+            let go = zone.b_goes_first(&agents[0], &agents[1], -2.0 + 5.0 * c);
             decision = Some(go);
             if go {
                 agents[1].idm.desired_speed_mps *= 1.0 + 0.2 * c;
@@ -233,8 +234,13 @@ pub fn simulate_leftturn(
         cmds[0] = agents[0].idm.accel(agents[0].v, leader) + p.noise[0][t];
         if with_b {
             let b = &agents[1];
-            let a = &agents[0];
-            let a_cleared = a.s - a.length_m / 2.0 > zone.a_out_s;
+            let cleared = |v: &Agent| v.s - v.length_m / 2.0 > zone.a_out_s;
+            // Once A has passed, B turns ahead of the car behind A by the same gap acceptance.
+            let follower_lets_b_go = p.follower.is_none() || {
+                let f = &agents[follower_idx];
+                cleared(f) || zone.b_goes_first(f, b, -2.0 + 5.0 * c)
+            };
+            let a_cleared = cleared(&agents[0]) && follower_lets_b_go;
             let undecided_history = decision.is_none() && t < CURRENT_STEP;
             let waits = decision != Some(true) && !undecided_history && !a_cleared;
             let leader = if waits { zone.b_stop_leader(b) } else { None };
@@ -243,9 +249,13 @@ pub fn simulate_leftturn(
             cmds[1] = m.accel(b.v, leader) + p.noise[1][t];
         }
         if p.follower.is_some() {
+            // Behind A, and reacting to B as A does.
             let (f, a) = (&agents[follower_idx], &agents[0]);
-            cmds[follower_idx] =
-                f.idm.accel(f.v, Some((f.gap_to(a.s, a.length_m), a.v))) + p.noise[2][t];
+            let mut leader = Some((f.gap_to(a.s, a.length_m), a.v));
+            if with_b {
+                leader = closer(leader, zone.a_leader(f, &agents[1], p.pair.reaction_steps));
+            }
+            cmds[follower_idx] = f.idm.accel(f.v, leader) + p.noise[2][t];
         }
         if p.oncoming.is_some() {
             // Behind B while B's rear is still on the oncoming lane (both paths share its
@@ -427,7 +437,7 @@ mod tests {
 
     /// B's turn is a lane from the oncoming lane to the side road's outbound lane, which
     /// leaves A's road on A's right at the drawn 60–120°; B drives on those lanes all along,
-    /// and the least courteous B is across A's lane on the side road by the scene's end in most
+    /// and the least courteous B is across A's lane on the side road by the scene's end in many
     /// scenes.
     #[test]
     fn the_turn_joins_the_oncoming_lane_to_the_side_road() {
@@ -485,7 +495,65 @@ mod tests {
             let end = paths[1].pose(b.s, 0.0);
             through += usize::from(crossed && end.1 < -p.lane_width_m / 2.0);
         }
-        // The least courteous B gets through within the scene's 9 s in most scenes.
-        assert!(through >= 24, "{through} of 40");
+        // The least courteous B is across within the scene's 9 s in half the scenes (21 of 40
+        // here); the others wait for A or are still coming.
+        assert!(through >= 14, "{through} of 40");
+    }
+
+    /// The world's own B, at any courtesy, keeps clear of every other vehicle: it waits for the
+    /// car behind A as for A, and A and that car brake for a B committed to the turn.
+    #[test]
+    fn b_keeps_clear_of_everyone_at_any_courtesy() {
+        let (mut runs, mut contacts) = (0, 0);
+        for seed in 0..300 {
+            let p = leftturn_params(&mut Pcg64Mcg::seed_from_u64(1000 + seed));
+            for (history, future) in [(0.0, 0.0), (0.5, 0.5), (1.0, 1.0), (0.5, 0.0), (0.5, 1.0)] {
+                let paths = leftturn_paths(&p);
+                let plan = BPlan::Simulated { history, future };
+                let run = simulate_leftturn(&p, paths.clone(), plan, false);
+                let state =
+                    |agent: &Agent, t| crate::sim::recorded_state(agent, &paths, NUM_STEPS, t);
+                let b = &run.agents[1];
+                let hit = run
+                    .agents
+                    .iter()
+                    .filter(|o| o.id != b.id && o.id != 101)
+                    .any(|o| {
+                        (0..NUM_STEPS)
+                            .any(|t| crate::sim::boxes_overlap(&state(b, t), &state(o, t)))
+                    });
+                runs += 1;
+                contacts += usize::from(hit);
+            }
+        }
+        assert!(
+            contacts * 100 <= runs * 2,
+            "B in contact in {contacts} of {runs} runs"
+        );
+    }
+
+    /// Scene 201 of data seed 0 (every family): a B that went as soon as A had passed turned
+    /// into the car behind A at any courtesy from the current step on; it waits for that car
+    /// too.
+    #[test]
+    fn b_waits_for_the_car_behind_a() {
+        let s = crate::Scenario::draw(0, 201, &crate::Family::ALL);
+        assert_eq!(s.family, crate::Family::Leftturn);
+        for q in [0.3, 0.9] {
+            let run = s.simulate(BPlan::Simulated {
+                history: s.courtesy,
+                future: q,
+            });
+            let state =
+                |agent: &Agent, t| crate::sim::recorded_state(agent, &run.paths, NUM_STEPS, t);
+            let (b, behind) = (
+                &run.agents[1],
+                run.agents.iter().find(|o| o.id == 303).unwrap(),
+            );
+            assert!(
+                (0..NUM_STEPS).all(|t| !crate::sim::boxes_overlap(&state(b, t), &state(behind, t))),
+                "q {q}"
+            );
+        }
     }
 }

@@ -32,7 +32,7 @@
 //! - **leftturn**: B, oncoming on A's two-lane road, turns left across A's lane into a side
 //!   road leaving on A's right at 60–120° (turn radius 9–15 m, taken at 3 m/s² lateral). B
 //!   turns before A only when A's time to where B's body is in A's lane exceeds B's time to
-//!   clear it by `−3 + 5c` s (then at `+20 % c` desired speed), otherwise it waits 2 m short
+//!   clear it by `−2 + 5c` s (then at `+20 % c` desired speed), otherwise it waits 2 m short
 //!   of A's lane until A has passed; A reacts as at a crossing. Not in the default world
 //!   ([`crate::Family::DEFAULT`]).
 
