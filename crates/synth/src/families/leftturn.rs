@@ -49,7 +49,8 @@ pub fn leftturn_params(rng: &mut Pcg64Mcg) -> LeftTurnParams {
     let tau_a: f64 = rng.random_range(4.5..7.0);
     let b_v_des = rng.random_range(9.0..12.0);
     let b_v0 = rng.random_range(6.0..10.0);
-    // B reaches its turn around A's arrival at the junction, give or take.
+    // B reaches its turn 0–5 s before A reaches the junction, then slows for the turn: its
+    // decision comes with A 0–8 s out, where its courtesy decides whether it goes first.
     let tau_b = tau_a + rng.random_range(-5.0..0.0);
     let lane_width_m = rng.random_range(3.3..3.8);
     let junction_angle_rad = rng.random_range(60f64..120.0).to_radians();
