@@ -21,11 +21,13 @@ pub enum Family {
     Roundabout,
     /// B, oncoming on A's road, turning left across A's lane into a side road.
     Leftturn,
+    /// B in the through lane at a lane drop letting A, whose lane ends, in.
+    Zipper,
 }
 
 impl Family {
     /// Every family.
-    pub const ALL: [Family; 7] = [
+    pub const ALL: [Family; 8] = [
         Family::Merge,
         Family::Crossing,
         Family::Cutin,
@@ -33,10 +35,11 @@ impl Family {
         Family::Letin,
         Family::Roundabout,
         Family::Leftturn,
+        Family::Zipper,
     ];
 
     /// The families of the default world (the demo's and `scbg synth`'s unless told): every
-    /// family but the left turn, which is drawn only when asked for (`--families`, or a
+    /// family but the left turn and the zipper, which are drawn only when asked for (`--families`, or a
     /// config's `[data] families`), e.g. to measure transfer to it (`docs/transfer.toml`).
     pub const DEFAULT: [Family; 6] = [
         Family::Merge,
@@ -48,7 +51,7 @@ impl Family {
     ];
 
     /// The family's name (`merge`, `crossing`, `cutin`, `following`, `letin`, `roundabout`,
-    /// `leftturn`).
+    /// `leftturn`, `zipper`).
     pub fn name(self) -> &'static str {
         match self {
             Self::Merge => "merge",
@@ -58,6 +61,7 @@ impl Family {
             Self::Letin => "letin",
             Self::Roundabout => "roundabout",
             Self::Leftturn => "leftturn",
+            Self::Zipper => "zipper",
         }
     }
 
@@ -71,9 +75,9 @@ impl Family {
 }
 
 /// A family name that is not `merge`, `crossing`, `cutin`, `following`, `letin`,
-/// `roundabout` or `leftturn` (holds the name given).
+/// `roundabout`, `leftturn` or `zipper` (holds the name given).
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 #[error(
-    "unknown scene family {0:?} (expected merge, crossing, cutin, following, letin, roundabout or leftturn)"
+    "unknown scene family {0:?} (expected merge, crossing, cutin, following, letin, roundabout, leftturn or zipper)"
 )]
 pub struct UnknownFamily(pub String);

@@ -97,6 +97,7 @@ enum Params {
     Letin(families::LetinParams),
     Roundabout(families::RoundaboutParams),
     Leftturn(families::LeftTurnParams),
+    Zipper(families::LetinParams),
 }
 
 /// Draws of the courtesy prior `c' ∈ [0, 1]` behind ψ_true's expectation: stratified, the
@@ -173,6 +174,7 @@ impl Scenario {
             Family::Letin => Params::Letin(families::letin_params(&mut rng)),
             Family::Roundabout => Params::Roundabout(families::roundabout_params(&mut rng)),
             Family::Leftturn => Params::Leftturn(families::leftturn_params(&mut rng)),
+            Family::Zipper => Params::Zipper(families::zipper_params(&mut rng)),
         };
         Self {
             seed,
@@ -233,7 +235,7 @@ impl Scenario {
             Params::Crossing(p) => families::crossing_paths(p),
             Params::Cutin(p) => families::cutin_paths(p),
             Params::Following(p) => families::following_paths(p),
-            Params::Letin(p) => families::letin_paths(p),
+            Params::Letin(p) | Params::Zipper(p) => families::letin_paths(p),
             Params::Roundabout(p) => families::roundabout_paths(p),
             Params::Leftturn(p) => families::leftturn_paths(p),
         }
@@ -247,7 +249,7 @@ impl Scenario {
             Params::Crossing(p) => families::simulate_crossing(p, paths, b, with_map),
             Params::Cutin(p) => families::simulate_cutin(p, paths, b, with_map),
             Params::Following(p) => families::simulate_following(p, paths, b, with_map),
-            Params::Letin(p) => families::simulate_letin(p, paths, b, with_map),
+            Params::Letin(p) | Params::Zipper(p) => families::simulate_letin(p, paths, b, with_map),
             Params::Roundabout(p) => families::simulate_roundabout(p, paths, b, with_map),
             Params::Leftturn(p) => families::simulate_leftturn(p, paths, b, with_map),
         }
@@ -491,7 +493,10 @@ impl Scenario {
             map: {
                 let mut map = std::mem::take(&mut run.map);
                 families::orient_road_edges(&mut map);
-                let parallel_edges = matches!(self.family, Family::Cutin | Family::Following);
+                let parallel_edges = matches!(
+                    self.family,
+                    Family::Cutin | Family::Following | Family::Zipper
+                );
                 map_detail::vary(&mut map, self.seed, self.index, parallel_edges);
                 map
             },

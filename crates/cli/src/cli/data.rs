@@ -97,7 +97,7 @@ pub struct SynthArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Scene families to draw from (comma-separated; the default world is every family but
-    /// leftturn).
+    /// leftturn and zipper).
     #[arg(
         long,
         value_enum,

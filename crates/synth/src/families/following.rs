@@ -17,7 +17,7 @@
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
 use scbg_scene::{
-    Lane, LaneNeighbor, LaneType, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType,
+    Lane, LaneNeighbor, Map, ObjectType, RoadEdge, RoadEdgeType, RoadLine, RoadLineType,
 };
 
 use super::{BPlan, NUM_STEPS, PairSetup, Run, idm, noise_track, pts, vehicle_size};
@@ -309,12 +309,7 @@ pub fn simulate_following(
 fn following_map(p: &FollowingParams, path: &RefPath) -> Map {
     let w = p.lane_width_m;
     let end = ROAD_M - 20.0;
-    let lane_type = if p.speed_limit_mps < 20.0 {
-        LaneType::SurfaceStreet
-    } else {
-        LaneType::Freeway
-    };
-    let speed_limit_mph = Some((p.speed_limit_mps / 0.447_04 / 5.0).round() * 5.0);
+    let (lane_type, speed_limit_mph) = super::road_class(p.speed_limit_mps);
     let lane_id = |l: usize| 1 + l as i64;
     let mut lanes: Vec<Lane> = (0..p.lanes)
         .map(|l| Lane {

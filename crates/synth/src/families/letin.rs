@@ -15,7 +15,7 @@ use crate::sim::{Agent, STEP_SECS, closer};
 /// behind B whatever B does.
 const NOTICE_BEHIND_M: f64 = 15.0;
 
-/// The random draws of one let-in scene (geometry, A and B, background traffic, noise).
+/// The random draws of one let-in or zipper scene (geometry, A and B, background traffic, noise).
 #[derive(Debug, Clone)]
 pub struct LetinParams {
     ramp: Ramp,
@@ -25,6 +25,8 @@ pub struct LetinParams {
     pair: PairSetup,
     background: Vec<Background>,
     noise: Vec<Vec<f64>>,
+    /// B's rule for letting A in.
+    rule: LetInRule,
 }
 
 /// Draws the parameters of a let-in scene.
@@ -46,7 +48,6 @@ pub fn letin_params(rng: &mut Pcg64Mcg) -> LetinParams {
     let a_s0 = (merge_mid - (tau_b - lead_s) * a_v0).max(5.0);
     let accepted_lag_s = rng.random_range(0.8..1.6);
     let background = main_lane_traffic(rng, b_s0);
-    let n_agents = 2 + background.len();
     let ramp = Ramp {
         curvature: rng.random_range(-1.0 / 900.0..1.0 / 900.0),
         lane_width_m,
@@ -54,14 +55,34 @@ pub fn letin_params(rng: &mut Pcg64Mcg) -> LetinParams {
         taper_m,
         accel_lane_m: rng.random_range(20.0..60.0),
         ramp_angle_rad: rng.random_range(5f64..15.0).to_radians(),
+        lane_drop: None,
     };
-    let pair = PairSetup::draw(rng, (a_v_des, a_s0, a_v0), (b_v_des, b_s0, b_v0));
-    LetinParams {
-        ramp,
-        accepted_lag_s,
-        pair,
-        background,
-        noise: (0..n_agents).map(|_| noise_track(rng, NUM_STEPS)).collect(),
+    let a = (a_v_des, a_s0, a_v0);
+    let b = (b_v_des, b_s0, b_v0);
+    LetinParams::draw_pair(rng, ramp, accepted_lag_s, (a, b), background, LETIN_RULE)
+}
+
+impl LetinParams {
+    /// A let-in scene on `ramp` with B's `rule`: draws A and B (`(v_des, s0, v0)` each, see
+    /// [`PairSetup::draw`]) and every agent's noise, in that order.
+    pub(super) fn draw_pair(
+        rng: &mut Pcg64Mcg,
+        ramp: Ramp,
+        accepted_lag_s: f64,
+        (a, b): ((f64, f64, f64), (f64, f64, f64)),
+        background: Vec<Background>,
+        rule: LetInRule,
+    ) -> Self {
+        let pair = PairSetup::draw(rng, a, b);
+        let n_agents = 2 + background.len();
+        Self {
+            ramp,
+            accepted_lag_s,
+            pair,
+            background,
+            noise: (0..n_agents).map(|_| noise_track(rng, NUM_STEPS)).collect(),
+            rule,
+        }
     }
 }
 
@@ -71,11 +92,33 @@ pub fn letin_paths(p: &LetinParams) -> Vec<RefPath> {
 }
 
 /// B's decision, from the current step on, whether to let A in ahead of it: when A's lead over
-/// B at the merge (each at its speed then) exceeds `1.5 − 4c` s. A courteous B lets in an A
-/// that would arrive up to 2.5 s after it; one that is not, only an A already 1.5 s ahead.
-pub fn letin_lets_in(lead_s: f64, courtesy: f64) -> bool {
-    lead_s > 1.5 - 4.0 * courtesy
+/// B at the merge (each at its speed then) exceeds `least_courteous_s − span_s · c`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LetInRule {
+    /// The lead (s) above which the least courteous B (c = 0) lets A in.
+    pub least_courteous_s: f64,
+    /// How much less lead (s) the most courteous B (c = 1) asks for.
+    pub span_s: f64,
+    /// How firmly (m/s², at most) a B that lets A in drops back behind an A beside it or just
+    /// behind it; `None`: it only keeps behind an A already ahead of it.
+    pub drop_back_mps2: Option<f64>,
 }
+
+impl LetInRule {
+    /// Whether B with courtesy `courtesy` lets in an A with lead `lead_s` at the merge.
+    pub fn lets_in(&self, lead_s: f64, courtesy: f64) -> bool {
+        lead_s > self.least_courteous_s - self.span_s * courtesy
+    }
+}
+
+/// The let-in family's rule, `1.5 − 4c` s: a courteous B lets in an A that would arrive up to
+/// 2.5 s after it; one that is not, only an A already 1.5 s ahead. B does not brake for an A
+/// that is not yet ahead of it.
+pub const LETIN_RULE: LetInRule = LetInRule {
+    least_courteous_s: 1.5,
+    span_s: 4.0,
+    drop_back_mps2: None,
+};
 
 /// The time headway (s) at which a B that lets A in keeps behind a merging A ahead of it (or
 /// its own, when longer): more than any A's accepted lag.
@@ -136,7 +179,7 @@ pub fn simulate_letin(p: &LetinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
         if with_b && lets_in.is_none() && t >= CURRENT_STEP {
             let (a, me) = (&agents[0], &agents[1]);
             let lead = (merge_mid - me.s) / me.v.max(1.0) - (merge_mid - a.s) / a.v.max(1.0);
-            lets_in = Some(letin_lets_in(lead, b.courtesy(t)));
+            lets_in = Some(p.rule.lets_in(lead, b.courtesy(t)));
         }
         let parallel_start = taper_start - ramp.accel_lane_m;
         if with_b && !a_may_merge && (parallel_start..taper_start).contains(&agents[0].s) {
@@ -194,6 +237,7 @@ pub fn simulate_letin(p: &LetinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
                 }
             }
             let mut idm = me.idm;
+            let mut drop_back = None;
             let a = &agents[0];
             if i == 1 && !a_in_lane && a.s < ramp.merge_end_s {
                 match lets_in {
@@ -202,6 +246,15 @@ pub fn simulate_letin(p: &LetinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
                         idm.time_headway_s = idm.time_headway_s.max(LETIN_HEADWAY_S);
                         leader = closer(leader, Some((me.gap_to(a.s, a.length_m), a.v)));
                     }
+                    // B lets in an A beside it or just behind: where the rule says so, it drops
+                    // back behind A.
+                    Some(true) if a.s > me.s - NOTICE_BEHIND_M => {
+                        if let Some(brake) = p.rule.drop_back_mps2 {
+                            idm.time_headway_s = idm.time_headway_s.max(LETIN_HEADWAY_S);
+                            let gap = me.gap_to(a.s, a.length_m);
+                            drop_back = Some((closer(leader, Some((gap, a.v))), brake));
+                        }
+                    }
                     // B presses on past an A beside or ahead of it.
                     Some(false) if a.s > me.s - NOTICE_BEHIND_M => {
                         idm.desired_speed_mps *= PRESS_ON_SHARE;
@@ -209,7 +262,10 @@ pub fn simulate_letin(p: &LetinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
                     _ => {}
                 }
             }
-            cmds[i] = idm.accel(me.v, leader) + p.noise[i][t];
+            cmds[i] = match drop_back {
+                Some((l, brake)) => idm.accel(me.v, l).max(-brake),
+                None => idm.accel(me.v, leader),
+            } + p.noise[i][t];
         }
         for (i, a) in agents.iter_mut().enumerate() {
             let d_next = if i == 0 {

@@ -2,7 +2,9 @@
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
-use scbg_scene::{Lane, LaneType, Map, RoadEdge, RoadEdgeType, RoadLine, RoadLineType};
+use scbg_scene::{
+    Lane, LaneNeighbor, LaneType, Map, RoadEdge, RoadEdgeType, RoadLine, RoadLineType,
+};
 
 use super::{
     BPlan, Background, NUM_STEPS, PairSetup, Run, arc_path, idm, merging_into_lane, noise_track,
@@ -27,7 +29,9 @@ pub struct MergeParams {
 }
 
 /// A main lane along a gently curved path with an on-ramp joining it from the right: the
-/// geometry the merge and let-in families share.
+/// geometry the merge and let-in families share. With [`Self::lane_drop`] the ramp is instead
+/// a lane that runs beside the main lane from the road's start and ends in the taper (the
+/// zipper family's lane drop).
 #[derive(Debug, Clone)]
 pub(super) struct Ramp {
     pub curvature: f64,
@@ -37,6 +41,8 @@ pub(super) struct Ramp {
     pub taper_m: f64,
     pub accel_lane_m: f64,
     pub ramp_angle_rad: f64,
+    /// A lane drop's speed limit (m/s); `None` for an on-ramp.
+    pub lane_drop: Option<f64>,
 }
 
 /// The grass island between the main lane and the on-ramp, as a closed polygon traversed with
@@ -111,6 +117,7 @@ pub fn merge_params(rng: &mut Pcg64Mcg) -> MergeParams {
             taper_m,
             accel_lane_m,
             ramp_angle_rad,
+            lane_drop: None,
         },
         pair,
         background,
@@ -135,7 +142,7 @@ impl Ramp {
         } else if s >= taper_start {
             let u = (s - taper_start) / self.taper_m;
             -w * 0.5 * (1.0 + (std::f64::consts::PI * u).cos())
-        } else if s >= parallel_start {
+        } else if s >= parallel_start || self.lane_drop.is_some() {
             -w
         } else {
             // Smooth entry into the parallel lane: the slope eases from tan(angle) to 0 over
@@ -157,8 +164,12 @@ impl Ramp {
     }
 
     /// The map: the main lane before and after the merge, the ramp lane from `ramp_start`, the
-    /// acceleration lane's road line, the road edges and the gore island.
+    /// acceleration lane's road line, the road edges and the gore island (a lane drop:
+    /// [`Self::lane_drop_map`]).
     pub fn map(&self, path: &RefPath, ramp_start: f64) -> Map {
+        if let Some(limit_mps) = self.lane_drop {
+            return self.lane_drop_map(path, limit_mps);
+        }
         let w = self.lane_width_m;
         let taper_start = self.taper_start();
         let main_lane = |s0: f64, s1: f64| pts(path.offset_points(s0, s1, 1.0, |_| 0.0));
@@ -215,6 +226,79 @@ impl Ramp {
                     id: 22,
                     edge_type: RoadEdgeType::Boundary,
                     polyline: pts(gore_island(path, self, ramp_start)),
+                },
+            ],
+            ..Default::default()
+        }
+    }
+
+    /// A lane drop's map: the through lane before and after the drop, the dropped lane beside
+    /// it from the road's start to the taper's end (lane neighbours of each other up to the
+    /// taper), the broken line between them, and the road's two edges, the right one along the
+    /// dropped lane's outer side; lanes typed by the road's limit ([`super::road_class`]).
+    fn lane_drop_map(&self, path: &RefPath, limit_mps: f64) -> Map {
+        let w = self.lane_width_m;
+        let (start, end) = (-50.0, 650.0);
+        let taper_start = self.taper_start();
+        let (lane_type, speed_limit_mph) = super::road_class(limit_mps);
+        let lane = |id, polyline, entry: Vec<i64>, exit: Vec<i64>| Lane {
+            id,
+            lane_type,
+            speed_limit_mph,
+            polyline,
+            entry_lanes: entry,
+            exit_lanes: exit,
+            ..Default::default()
+        };
+        let mut through = lane(
+            1,
+            pts(path.offset_points(start, self.merge_end_s, 1.0, |_| 0.0)),
+            vec![],
+            vec![2],
+        );
+        let mut dropped = lane(
+            3,
+            pts(path.offset_points(start, self.merge_end_s, 1.0, |s| self.ramp_d(s))),
+            vec![],
+            vec![2],
+        );
+        // Both polylines are sampled every metre from `start`: index k is at `start + k`.
+        let beside_end = (taper_start - start).round() as i32;
+        let neighbour = |id| LaneNeighbor {
+            feature_id: id,
+            self_start_index: 0,
+            self_end_index: beside_end,
+            neighbor_start_index: 0,
+            neighbor_end_index: beside_end,
+            ..Default::default()
+        };
+        through.right_neighbors.push(neighbour(3));
+        dropped.left_neighbors.push(neighbour(1));
+        let after = lane(
+            2,
+            pts(path.offset_points(self.merge_end_s, end, 1.0, |_| 0.0)),
+            vec![1, 3],
+            vec![],
+        );
+        Map {
+            lanes: vec![through, after, dropped],
+            road_lines: vec![RoadLine {
+                id: 10,
+                line_type: RoadLineType::BrokenSingleWhite,
+                polyline: pts(path.offset_points(start, taper_start, 1.0, |_| -w / 2.0)),
+            }],
+            road_edges: vec![
+                RoadEdge {
+                    id: 20,
+                    edge_type: RoadEdgeType::Boundary,
+                    polyline: pts(path.offset_points(start, end, 2.0, |_| w / 2.0 + 0.5)),
+                },
+                RoadEdge {
+                    id: 21,
+                    edge_type: RoadEdgeType::Boundary,
+                    polyline: pts(path.offset_points(start, end, 2.0, |s| {
+                        self.ramp_d(s).min(0.0) - w / 2.0 - 0.5
+                    })),
                 },
             ],
             ..Default::default()

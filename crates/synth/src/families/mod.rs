@@ -34,7 +34,10 @@
 //!   turns before A only when A's time to where B's body is in A's lane exceeds B's time to
 //!   clear it by `−2 + 5c` s (then at `+20 % c` desired speed), otherwise it waits 2 m short
 //!   of A's lane until A has passed; A reacts as at a crossing. Not in the default world
-//!   ([`crate::Family::DEFAULT`]).
+//!   ([`crate::Family::DEFAULT`]);
+//! - **zipper**: the let-in at a lane drop: A's lane of a two-lane road (limit 11–22 m/s) ends
+//!   in a 40–80 m taper, B in the through lane beside it, behind a slower queue, lets A in by
+//!   the let-in's rule or presses on. Not in the default world.
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;
@@ -314,6 +317,23 @@ pub(super) fn curve_limit(speeds: &[f64], s: f64, v: f64) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// The speed limit (m/s) from which a procedural road is typed Freeway (below it SurfaceStreet).
+const FREEWAY_FROM_MPS: f64 = 20.0;
+
+/// A procedural road's lane type and speed limit (mph, rounded to 5 as signs are) for its
+/// limit in m/s: SurfaceStreet below [`FREEWAY_FROM_MPS`], else Freeway.
+pub(super) fn road_class(speed_limit_mps: f64) -> (scbg_scene::LaneType, Option<f64>) {
+    let lane_type = if speed_limit_mps < FREEWAY_FROM_MPS {
+        scbg_scene::LaneType::SurfaceStreet
+    } else {
+        scbg_scene::LaneType::Freeway
+    };
+    (
+        lane_type,
+        Some((speed_limit_mps / 0.447_04 / 5.0).round() * 5.0),
+    )
+}
+
 /// Background traffic as the families draw it: `(s, v, size, idm)` per vehicle.
 pub(super) type Background = (f64, f64, (f64, f64), Idm);
 
@@ -413,6 +433,7 @@ mod leftturn;
 mod letin;
 mod merge;
 mod roundabout;
+mod zipper;
 
 pub use crossing::{CrossingParams, crossing_params, crossing_paths, simulate_crossing};
 pub use cutin::{
@@ -422,7 +443,7 @@ pub use cutin::{
 pub use following::{FollowingParams, following_params, following_paths, simulate_following};
 pub use leftturn::{LeftTurnParams, leftturn_params, leftturn_paths, simulate_leftturn};
 pub use letin::{
-    LETIN_HEADWAY_S, LetinParams, PRESS_ON_SHARE, letin_lets_in, letin_params, letin_paths,
+    LETIN_HEADWAY_S, LETIN_RULE, LetInRule, LetinParams, PRESS_ON_SHARE, letin_params, letin_paths,
     simulate_letin,
 };
 pub use merge::{MergeParams, merge_params, merge_paths, simulate_merge};
@@ -430,3 +451,4 @@ pub use roundabout::{
     RoundaboutParams, roundabout_enters_first, roundabout_lets_in, roundabout_params,
     roundabout_paths, simulate_roundabout,
 };
+pub use zipper::{ZIPPER_RULE, zipper_params};
