@@ -40,7 +40,7 @@ fn synthetic(index: u64, families: &[Family]) -> (scbg_synth::Generated, Prepare
     (g, p)
 }
 
-/// In every synthetic family (the left turn's too) A has a lane path starting on A (A drives its lane's centre),
+/// In every synthetic family (the left turn's and the zipper's too) A has a lane path starting on A (A drives its lane's centre),
 /// 5 m apart along the lane for at least 150 m; in a cut-in scene, where B starts one lane to A's right or ahead
 /// in A's lane, B's offset from A's path is −1 or 0 lane widths although the road curves.
 #[test]
@@ -50,10 +50,11 @@ fn synthetic_targets_have_their_lane_and_b_its_offset_from_it() {
         ..Default::default()
     };
     let mut cutin_offsets = Vec::new();
-    // The default world's families, then left turns (drawn only when asked for).
+    // The default world's families, then left turns and zippers (drawn only when asked for).
     let scenes = (0..40)
         .map(|i| (i, &Family::DEFAULT[..]))
-        .chain((0..8).map(|i| (i, &[Family::Leftturn][..])));
+        .chain((0..8).map(|i| (i, &[Family::Leftturn][..])))
+        .chain((0..8).map(|i| (i, &[Family::Zipper][..])));
     for (index, families) in scenes {
         let (g, p) = synthetic(index, families);
         let w = p.windows[0];
