@@ -237,7 +237,8 @@ pub fn simulate_letin(p: &LetinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
                 }
             }
             let mut idm = me.idm;
-            let mut drop_back = None;
+            // The firmest braking B's command may ask for (only a B dropping back has one).
+            let mut firmest_mps2 = f64::INFINITY;
             let a = &agents[0];
             if i == 1 && !a_in_lane && a.s < ramp.merge_end_s {
                 match lets_in {
@@ -251,8 +252,8 @@ pub fn simulate_letin(p: &LetinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
                     Some(true) if a.s > me.s - NOTICE_BEHIND_M => {
                         if let Some(brake) = p.rule.drop_back_mps2 {
                             idm.time_headway_s = idm.time_headway_s.max(LETIN_HEADWAY_S);
-                            let gap = me.gap_to(a.s, a.length_m);
-                            drop_back = Some((closer(leader, Some((gap, a.v))), brake));
+                            leader = closer(leader, Some((me.gap_to(a.s, a.length_m), a.v)));
+                            firmest_mps2 = brake;
                         }
                     }
                     // B presses on past an A beside or ahead of it.
@@ -262,10 +263,7 @@ pub fn simulate_letin(p: &LetinParams, paths: Vec<RefPath>, b: BPlan<'_>, with_m
                     _ => {}
                 }
             }
-            cmds[i] = match drop_back {
-                Some((l, brake)) => idm.accel(me.v, l).max(-brake),
-                None => idm.accel(me.v, leader),
-            } + p.noise[i][t];
+            cmds[i] = idm.accel(me.v, leader).max(-firmest_mps2) + p.noise[i][t];
         }
         for (i, a) in agents.iter_mut().enumerate() {
             let d_next = if i == 0 {

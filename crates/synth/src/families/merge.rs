@@ -296,9 +296,9 @@ impl Ramp {
                 RoadEdge {
                     id: 21,
                     edge_type: RoadEdgeType::Boundary,
-                    polyline: pts(path.offset_points(start, end, 2.0, |s| {
-                        self.ramp_d(s).min(0.0) - w / 2.0 - 0.5
-                    })),
+                    polyline: pts(
+                        path.offset_points(start, end, 2.0, |s| self.ramp_d(s) - w / 2.0 - 0.5)
+                    ),
                 },
             ],
             ..Default::default()

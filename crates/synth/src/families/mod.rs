@@ -36,8 +36,9 @@
 //!   of A's lane until A has passed; A reacts as at a crossing. Not in the default world
 //!   ([`crate::Family::DEFAULT`]);
 //! - **zipper**: the let-in at a lane drop: A's lane of a two-lane road (limit 11–22 m/s) ends
-//!   in a 40–80 m taper, B in the through lane beside it, behind a slower queue, lets A in by
-//!   the let-in's rule or presses on. Not in the default world.
+//!   in a 40–80 m taper, B in the through lane beside it, behind a slower queue, lets A in
+//!   when A's lead at the merge exceeds `0.6 − 0.8c` s (dropping back behind an A beside it at
+//!   up to 3 m/s²) or presses on. Not in the default world.
 
 use rand::Rng;
 use rand_pcg::Pcg64Mcg;

@@ -4,10 +4,10 @@
 //! The road is a two-lane arterial or freeway (limit 11–22 m/s) whose right lane ends in a 40–80 m
 //! taper; A drives in it, B beside it in the through lane, with a slower car ahead of B
 //! (the queue the zipper forms) and another behind. The manoeuvres are the let-in family's
-//! ([`super::simulate_letin`]): B lets A in when A's lead at the merge exceeds `1.5 − 4c` s and
-//! then keeps behind A at a 1.8 s headway, else presses on; A merges ahead of B only into an
-//! accepted lag, looked for over the last 40–80 m of its lane, and otherwise waits at the
-//! taper for B to pass. What differs is the road (a lane beside the through lane from the
+//! ([`super::simulate_letin`]) under [`ZIPPER_RULE`]: B lets A in when A's lead at the merge
+//! exceeds `0.6 − 0.8c` s, then drops back behind an A beside it and keeps behind A at a 1.8 s
+//! headway, else presses on; A merges ahead of B only into an accepted lag, looked for over the
+//! last 40–80 m of its lane, and otherwise waits at the taper for B to pass. What differs is the road (a lane beside the through lane from the
 //! start, lane neighbours, the line between them), the speeds and the shorter taper: a road
 //! class and a situation the let-in family does not show.
 
@@ -93,7 +93,7 @@ mod tests {
     /// neighbour up to the taper and both lead into the lane after the drop (2); A starts in the
     /// dropped lane; at any courtesy of B no vehicle touches another.
     #[test]
-    fn the_dropped_lane_joins_the_through_lane_and_a_gets_in() {
+    fn the_dropped_lane_joins_the_through_lane_and_no_one_touches() {
         for seed in 0..60 {
             let p = zipper_params(&mut Pcg64Mcg::seed_from_u64(seed));
             for c in [0.0, 0.5, 1.0] {
