@@ -64,7 +64,7 @@ pub fn crossing_params(rng: &mut Pcg64Mcg) -> CrossingParams {
     // Draw order is part of the data: keep it.
     let curvature = rng.random_range(-1.0 / 1500.0..1.0 / 1500.0);
     let lane_width_m = rng.random_range(3.3..3.8);
-    let crossing_angle_rad = rng.random_range(60f64..120.0).to_radians();
+    let crossing_angle_rad = rng.random_range(70f64..110.0).to_radians();
     let from_right = rng.random_bool(0.5);
     let a_s0 = (a_conflict_s - (tau_a + history_s) * a_v0).max(5.0);
     let pair = PairSetup::draw(rng, (a_v_des, a_s0, a_v0), (b_v_des, b_s0, b_v0));
