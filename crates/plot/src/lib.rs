@@ -18,7 +18,7 @@ mod charts;
 mod scene;
 mod trajectories;
 
-pub use canvas::{PlotError, draw_png, write_png};
+pub use canvas::{PlotError, Rgba8, draw_png, read_png, write_png};
 pub use charts::{Series, histogram, line_chart, scatter, scatter_series};
 pub use scene::{RenderOptions, render_scene};
 pub use trajectories::{Line, trajectories};

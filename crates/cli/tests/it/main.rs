@@ -69,12 +69,10 @@ pub fn real_dir() -> Option<PathBuf> {
 /// share of its pixels (1–95 %) differs from the background (its corner's colour), in at
 /// least three colours.
 pub fn assert_drawn_png(path: &Path, size: (u32, u32)) {
-    let img = image::open(path)
-        .unwrap_or_else(|e| panic!("{}: {e}", path.display()))
-        .to_rgba8();
-    assert_eq!(img.dimensions(), size, "{}", path.display());
-    let background = *img.get_pixel(0, 0);
-    let drawn: Vec<&image::Rgba<u8>> = img.pixels().filter(|p| **p != background).collect();
+    let img = scbg_plot::read_png(path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((img.width, img.height), size, "{}", path.display());
+    let background = img.pixels().next().expect("a non-empty image");
+    let drawn: Vec<[u8; 4]> = img.pixels().filter(|p| *p != background).collect();
     let share = drawn.len() as f64 / f64::from(size.0 * size.1);
     assert!(
         (0.01..=0.95).contains(&share),
@@ -82,7 +80,7 @@ pub fn assert_drawn_png(path: &Path, size: (u32, u32)) {
         path.display(),
         100.0 * share
     );
-    let colours: std::collections::BTreeSet<[u8; 4]> = drawn.iter().map(|p| p.0).collect();
+    let colours: std::collections::BTreeSet<[u8; 4]> = drawn.iter().copied().collect();
     assert!(
         colours.len() >= 3,
         "{}: colours {colours:?}",
