@@ -105,8 +105,12 @@ def test_crossing_rule_holds_b_only_for_a_car_that_cannot_stop():
     assert sims.crossing_hold_m(path, arc, 0.0, b, [far, passed, beside]) == math.inf
     # A standing car in the way: it cannot stop short of a B already in its way, nor clear it.
     assert sims.crossing_hold_m(path, arc, 0.0, b, [_row(0.0, 20.0, 0.0, 0.0)]) < 20.0
-    # B 3 m before the hold at 8 m/s needs 4 m to stop at its hardest: it goes on.
+    # B 3 m before the hold at 8 m/s needs 4 m to stop at its hardest: it goes on, committed
+    # (it clears the car's way rather than slow down in it where no right of way rules).
     assert sims.crossing_hold_m(path, arc, hold - 3.0, b, [near]) == math.inf
+    assert sims.crossing_rule(path, arc, hold - 3.0, b, [near]) == (math.inf, True)
+    assert sims.crossing_rule(path, arc, 0.0, b, [near]) == (pytest.approx(hold), False)
+    assert sims.crossing_rule(path, arc, hold - 3.0, b, [far, passed, beside]) == (math.inf, False)
 
 
 def test_crossing_rule_follows_a_turning_car_along_its_way():

@@ -100,16 +100,29 @@ def _along_way(pts, way):
 def crossing_hold_m(path, arc, s_m, b_state, others, ways=None):
     """How far along B's path (arc length, from the path's start) B's centre may go: the first
     place where its box would enter the way of a crossing car that can neither stop short nor
-    has passed, less :data:`CROSS_MARGIN_M`; ``inf`` where no such car is. ``path``/``arc``:
-    B's plan and its arc lengths; ``s_m``: B's progress along it; ``b_state`` and ``others``:
-    B's and the other cars' state rows ``[x, y, heading, vx, vy, length, width]`` now, in the
-    path's frame; ``ways``, optionally: per other car, the path ``[m, 2]`` its centre will
-    drive from where it is, or None (the default: the straight line along its heading)."""
+    has passed, less :data:`CROSS_MARGIN_M`; ``inf`` where no such car is or B is too late to
+    stop for it. :func:`crossing_rule` also says what B does when too late."""
+    return crossing_rule(path, arc, s_m, b_state, others, ways)[0]
+
+
+def crossing_rule(path, arc, s_m, b_state, others, ways=None):
+    """B's gap acceptance where its path crosses another car's way: ``(hold_m, committed)``.
+    ``hold_m``: how far along B's path (arc length, from the path's start) B's centre may go —
+    the first place where its box would enter the way of a crossing car that can neither stop
+    short nor has passed, less :data:`CROSS_MARGIN_M` — or ``inf`` where no such car is or B can
+    no longer stop before it. ``committed``: such a car is there and B can no longer stop
+    before it; where the simulator's cars do not yield by a right of way, B then goes on at its
+    speed rather than slow down in that car's way.
+
+    ``path``/``arc``: B's plan and its arc lengths; ``s_m``: B's progress along it; ``b_state``
+    and ``others``: B's and the other cars' state rows ``[x, y, heading, vx, vy, length, width]``
+    now, in the path's frame; ``ways``, optionally: per other car, the path ``[m, 2]`` its centre
+    will drive from where it is, or None (the default: the straight line along its heading)."""
     length_b, width_b = b_state[5], b_state[6]
     v_b = math.hypot(b_state[3], b_state[4])
     ahead = np.arange(s_m, min(s_m + CROSS_LOOKAHEAD_M, arc[-1]) + 1e-9, 0.5)
     if len(ahead) < 2:
-        return math.inf
+        return math.inf, False
     pts = np.column_stack([np.interp(ahead, arc, path[:, 0]), np.interp(ahead, arc, path[:, 1])])
     steps = np.diff(pts, axis=0)
     steps = np.vstack([steps, steps[-1:]])
@@ -135,8 +148,8 @@ def crossing_hold_m(path, arc, s_m, b_state, others, ways=None):
             continue  # it can stop short of B
         hold = min(hold, ahead[i] - CROSS_MARGIN_M)
     if hold - s_m < v_b * v_b / (2.0 * B_MAX_BRAKE_MPS2):
-        return math.inf  # too late to stop: B is committed
-    return hold
+        return math.inf, math.isfinite(hold)  # too late to stop: B is committed
+    return hold, False
 
 
 def held_speed_mps(hold_m, s_m, step_s):

@@ -34,7 +34,7 @@ import numpy as np
 import scbg
 
 from . import (CROSS_LOOKAHEAD_M, CROSS_REACH_M, GUARD_LOOKAHEAD_M, _along_way, arc_lengths as _arc, check_arm,
-               crossing_hold_m, guarded_speed_mps, held_speed_mps, leader_on_path, path_samples, point_at as _at,
+               crossing_rule, guarded_speed_mps, held_speed_mps, leader_on_path, path_samples, point_at as _at,
                yardstick_value)
 
 STEP_SECS = 0.1
@@ -422,7 +422,7 @@ def _make_b_wait_for_a(ep):
 # courteous B): B changes into a lane only when no car there is alongside it and the car behind
 # it there can stay behind braking at most GAP_BRAKE_MPS2 after GAP_REACTION_S; until then it
 # keeps to its lane at the plan's timing, behind the follow-distance guard. Where its plan crosses
-# another road, the same rule holds it before the crossing (:func:`scbg.sims.crossing_hold_m`).
+# another road, the same rule holds it before the crossing (:func:`scbg.sims.crossing_rule`).
 GAP_BRAKE_MPS2 = 7.0
 GAP_REACTION_S = 0.5
 GAP_REACH_M = 60.0  # cars farther than this from B are never in the way of its lane change
@@ -565,12 +565,19 @@ def _follow_plan(ep, model, quantile, stats):
         if here is None:  # where B's plan crosses another road, the crossing rule
             cars = [u for u in ep.road.vehicles if u is not b
                     and np.hypot(*(u.position - b.position)) < CROSS_REACH_M + CROSS_LOOKAHEAD_M]
-            hold = crossing_hold_m(path, arc, state["s"], _row(b), [_row(u) for u in cars],
-                                   ways=[_way(u) for u in cars])
+            hold, committed = crossing_rule(path, arc, state["s"], _row(b), [_row(u) for u in cars],
+                                            ways=[_way(u) for u in cars])
             limit = held_speed_mps(hold, state["s"], dt) if np.isfinite(hold) else np.inf
             if planned > limit:
                 planned = limit
                 stats["b_held_steps"] += 1
+            elif committed and not hasattr(ep.road, "respect_priorities"):
+                # Too late to stop, on a road without a right of way (the roundabout: its cars
+                # see B only once it is on their lane, so one entering does not yield to B): B
+                # goes on at its speed, the follow-distance guard still ruling, rather than slow
+                # down in the way of a car that cannot stop. Where highway-env's road yields by
+                # priority (the intersection), B keeps to its plan.
+                planned = max(planned, guarded_speed_mps(v, v, gap, v_lead, dt))
         state["s"] = min(state["s"] + planned * dt, arc[-1])
         # Pure pursuit of the path (a lane change is steered, not jumped): head for the path
         # point a look-ahead beyond B's progress (B's own lane's while held), turning at most
