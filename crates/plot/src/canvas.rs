@@ -58,7 +58,7 @@ pub fn write_png(path: &Path, rgb: &[u8], width: u32, height: u32) -> Result<(),
             writer.write_image_data(rgb)?;
             writer.finish()
         })
-        .map_err(|e| io(std::io::Error::other(e)))?;
+        .map_err(|e| io(e.into()))?;
     scbg_base::atomic::write(path, &bytes).map_err(|e| io(e.into()))
 }
 
@@ -94,16 +94,12 @@ pub fn read_png(path: &Path) -> Result<Rgba8, PlotError> {
     let file = std::fs::File::open(path).map_err(io)?;
     let mut decoder = png::Decoder::new(std::io::BufReader::new(file));
     decoder.set_transformations(png::Transformations::normalize_to_color8());
-    let mut reader = decoder
-        .read_info()
-        .map_err(|e| io(std::io::Error::other(e)))?;
+    let mut reader = decoder.read_info().map_err(|e| io(e.into()))?;
     let size = reader
         .output_buffer_size()
         .ok_or_else(|| io(std::io::Error::other("image too large")))?;
     let mut buf = vec![0; size];
-    let frame = reader
-        .next_frame(&mut buf)
-        .map_err(|e| io(std::io::Error::other(e)))?;
+    let frame = reader.next_frame(&mut buf).map_err(|e| io(e.into()))?;
     buf.truncate(frame.buffer_size());
     let rgba = match frame.color_type {
         png::ColorType::Rgba => buf,
