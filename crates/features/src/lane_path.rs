@@ -9,7 +9,8 @@
 //!
 //! The map gives no lane connectivity after preparation (polylines only), so continuation is
 //! geometric: the lane polyline whose first point lies within [`CONTINUATION_M`] of the
-//! current end, heading on within [`MAX_TURN_RAD`], the straightest first.
+//! current end, heading on within [`MAX_TURN_RAD`]: of those starting nearest the end (within
+//! [`CONTINUATION_TIE_M`]), the straightest.
 
 use crate::lane_move::LANE_MOVE_M;
 use crate::prepared::{RoadKind, RoadPolyline};
@@ -30,6 +31,9 @@ const MAX_HEADING_RAD: f32 = std::f32::consts::FRAC_PI_4;
 const CONTINUATION_M: f32 = 5.0;
 /// A continuing lane's first direction is within this of the current end's direction.
 const MAX_TURN_RAD: f32 = std::f32::consts::FRAC_PI_6;
+/// Lanes starting at most this much farther from the current end than the nearest start are
+/// equally its continuation (a split), metres; a neighbour's next lane starts a lane width away.
+const CONTINUATION_TIE_M: f32 = 1.0;
 
 /// Arc length of lane path point `k` from the target's projection on its lane, metres.
 pub fn lane_path_arc_m(k: usize) -> f32 {
@@ -119,23 +123,28 @@ impl LaneNetwork {
                     return None;
                 }
                 let (cx, cy) = cell(end);
-                let mut best: Option<(f32, usize)> = None;
+                // `(gap, turn, lane)` of every lane that may continue this one.
+                let mut candidates: Vec<(f32, f32, usize)> = Vec::new();
                 for dx in -1..=1 {
                     for dy in -1..=1 {
                         for &j in starts.get(&(cx + dx, cy + dy)).into_iter().flatten() {
                             let q = &points[j];
+                            let gap = norm(sub(q[0], end));
                             let turn = angle_between(end_dir, sub(q[1], q[0]));
-                            if j != i
-                                && norm(sub(q[0], end)) <= CONTINUATION_M
-                                && turn <= MAX_TURN_RAD
-                                && best.is_none_or(|b| (turn, j) < b)
-                            {
-                                best = Some((turn, j));
+                            if j != i && gap <= CONTINUATION_M && turn <= MAX_TURN_RAD {
+                                candidates.push((gap, turn, j));
                             }
                         }
                     }
                 }
-                best.map(|b| b.1)
+                // The lanes that start where this one ends, the straightest first: on a curve
+                // the next lane of a neighbour (a lane width away) can be straighter.
+                let nearest = candidates.iter().map(|c| c.0).fold(f32::INFINITY, f32::min);
+                candidates
+                    .iter()
+                    .filter(|c| c.0 <= nearest + CONTINUATION_TIE_M)
+                    .min_by(|a, b| (a.1, a.2).partial_cmp(&(b.1, b.2)).expect("finite"))
+                    .map(|c| c.2)
             })
             .collect();
         let owned: Vec<RoadPolyline> = lanes.into_iter().cloned().collect();
@@ -353,5 +362,38 @@ mod tests {
         assert!((pts[4][0] - 30.0).abs() < 1e-3 && (pts[4][1] - 1.0).abs() < 1e-3);
         // Off every lane: no path.
         assert!(lane_path(&road, [30.0, 9.0], 0.0).is_none());
+    }
+
+    #[test]
+    fn on_a_two_lane_ring_the_path_keeps_its_lane_across_the_lane_ends() {
+        // A ring of two lanes (radii 20 and 24 m) in eight arcs each, points every ~2 m as
+        // highway-env samples them: the outer lane's next arc, 4 m away, turns less per point.
+        let arc = |radius: f32, from: usize| {
+            let n = (radius * std::f32::consts::FRAC_PI_4 / 2.0).ceil() as usize;
+            lane(
+                (0..=n)
+                    .map(|i| {
+                        let a = (from as f32 + i as f32 / n as f32) * std::f32::consts::FRAC_PI_4;
+                        [radius * a.cos(), radius * a.sin()]
+                    })
+                    .collect(),
+            )
+        };
+        let road: Vec<RoadPolyline> = (0..8).flat_map(|k| [arc(20.0, k), arc(24.0, k)]).collect();
+        for (radius, at) in [(20.0f32, 0.3f32), (24.0, 2.6)] {
+            let (pts, valid) = lane_path(
+                &road,
+                [radius * at.cos(), radius * at.sin()],
+                at + std::f32::consts::FRAC_PI_2,
+            )
+            .expect("a path");
+            for (k, (p, _)) in pts.iter().zip(&valid).enumerate().filter(|(_, (_, v))| **v) {
+                let r = (p[0] * p[0] + p[1] * p[1]).sqrt();
+                assert!(
+                    (r - radius).abs() < 0.2,
+                    "radius {radius}, point {k}: r = {r}"
+                );
+            }
+        }
     }
 }

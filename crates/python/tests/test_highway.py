@@ -136,6 +136,35 @@ def test_b_in_contact_is_crashed_and_brakes_to_a_stop_as_highway_envs_cars_do(tr
         ep.close()
 
 
+def test_the_intersections_right_of_way_sees_where_b_goes(trained):
+    """highway-env's intersection predicts each car along its route from the route's first road;
+    B, driven by scbg, drops the roads it has finished as highway-env's cars do, so the
+    prediction starts where B is."""
+    highway = _highway()
+    model, _ = trained
+    ep = highway._Episode("intersection-v0", 3)
+    try:
+        for _ in range(highway.HISTORY_STEPS):
+            ep.step()
+        while (pair := highway._pair(ep)) is None:
+            ep.step()
+        ep.a, ep.b = pair
+        stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0,
+                 "b_held_steps": 0}
+        highway._follow_plan(ep, model, 0.5, stats)
+        start = ep.b.lane_index[:2]
+        for _ in range(highway.MEASURE_STEPS):
+            ep.step()
+            if ep.b.lane_index[:2] != start:
+                break
+        assert ep.b.lane_index[:2] != start, "B never left its first road"
+        assert ep.b.route[0][:2] == ep.b.lane_index[:2]
+        predicted = np.array(ep.b.predict_trajectory_constant_speed(np.array([0.25]))[0][0])
+        assert np.hypot(*(predicted - ep.b.position)) < 0.25 * ep.b.speed + 1.0
+    finally:
+        ep.close()
+
+
 def test_bad_requests_are_named():
     highway = _highway()
     with pytest.raises(ValueError, match="unknown highway-env scenario 'merge-v9'"):

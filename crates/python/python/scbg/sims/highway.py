@@ -504,6 +504,18 @@ def _way(v, reach_m=CROSS_REACH_M):
     return np.array(way) if len(way) >= 2 else None
 
 
+def _drop_finished_roads(v):
+    """Drops the roads ``v`` has finished from the front of its route, as highway-env's own cars
+    do on reaching a lane's end (``RoadNetwork.next_lane``). The intersection's right of way
+    predicts each car along its route from the route's first road (``ControlledVehicle.
+    predict_trajectory_constant_speed``): with its spawn road still first, B's predicted path
+    lies back where it entered and no car ever yields to it."""
+    route = getattr(v, "route", None)
+    roads = [r[:2] for r in route or []]
+    if v.lane_index is not None and v.lane_index[:2] in roads:
+        del route[:roads.index(v.lane_index[:2])]
+
+
 def _lookahead(speed_mps):
     """How far ahead of B's progress its path tracker aims, metres."""
     return max(TRACK_LOOKAHEAD_M, speed_mps * TRACK_LOOKAHEAD_S)
@@ -594,6 +606,7 @@ def _follow_plan(ep, model, quantile, stats):
         b.speed = planned
         b.position = b.position + planned * dt * np.array([np.cos(b.heading), np.sin(b.heading)])
         b.on_state_update()
+        _drop_finished_roads(b)
         state["k"] = k
         state["since"] += 1
 
