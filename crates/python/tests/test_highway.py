@@ -111,20 +111,28 @@ def test_highway_envs_own_courtesy_moves_a_at_the_intersection():
     assert np.mean(deltas) > 0.3, deltas
 
 
+def _taken_over(highway, model, scenario, seed, quantile=0.5):
+    """An episode of ``scenario`` at its takeover step, B following scbg's plan: ``(ep, stats)``."""
+    ep = highway._Episode(scenario, seed)
+    for _ in range(highway.HISTORY_STEPS):
+        ep.step()
+    while (pair := highway._pair(ep)) is None:
+        ep.step()
+    ep.a, ep.b = pair
+    stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0,
+             "b_held_steps": 0}
+    highway._follow_plan(ep, model, quantile, stats)
+    return ep, stats
+
+
 def test_b_in_contact_is_crashed_and_brakes_to_a_stop_as_highway_envs_cars_do(trained):
     """highway-env moves two cars about to touch apart by an impact, and each car's own step
     crashes it; B's step, which follows scbg's plan, does the same, and B then brakes to a stop
     without re-planning."""
     highway = _highway()
     model, _ = trained
-    ep = highway._Episode("highway-v0", 0)
+    ep, stats = _taken_over(highway, model, "highway-v0", 0)
     try:
-        for _ in range(highway.HISTORY_STEPS):
-            ep.step()
-        ep.a, ep.b = highway._pair(ep)
-        stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0,
-                 "b_held_steps": 0}
-        highway._follow_plan(ep, model, 0.5, stats)
         ep.step()
         v0, planned = float(ep.b.speed), stats["b_plan_points"]
         ep.b.impact = np.array([0.0, 0.2])
@@ -142,16 +150,8 @@ def test_the_intersections_right_of_way_sees_where_b_goes(trained):
     prediction starts where B is."""
     highway = _highway()
     model, _ = trained
-    ep = highway._Episode("intersection-v0", 3)
+    ep, _ = _taken_over(highway, model, "intersection-v0", 3)
     try:
-        for _ in range(highway.HISTORY_STEPS):
-            ep.step()
-        while (pair := highway._pair(ep)) is None:
-            ep.step()
-        ep.a, ep.b = pair
-        stats = {"b_plan_points": 0, "b_plan_points_on_road": 0, "b_raw_plan_points_on_road": 0,
-                 "b_held_steps": 0}
-        highway._follow_plan(ep, model, 0.5, stats)
         start = ep.b.lane_index[:2]
         for _ in range(highway.MEASURE_STEPS):
             ep.step()
