@@ -44,7 +44,7 @@ pub use model::{
     CandidateFutures, DEFAULT_MODE_SLOWDOWNS, Generator, GeneratorConfig, RELATIVE_COURTESY_FLOOR,
     relative_courtesy,
 };
-pub use modes::{BModes, MAX_SPEEDUP, slowdown_warp};
+pub use modes::{BModes, MAX_SPEEDUP, slowdown_warp, slowed_future};
 pub use plan::PlanBasis;
 pub use range::{
     HIGH_QUANTILE, LOW_QUANTILE, RangePredictor, psi_for_quantile, quantile_for_psi, range_step,

@@ -77,6 +77,17 @@ pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option
     if slowdowns.is_empty() || steps == 0 {
         return None;
     }
+    Some(Tensor::from_data(
+        burn::tensor::TensorData::new(
+            slowdown_weights(slowdowns, steps),
+            [slowdowns.len(), steps, steps],
+        ),
+        device,
+    ))
+}
+
+/// The weights of [`slowdown_warp`], row-major `[S, T, T]`.
+fn slowdown_weights(slowdowns: &[f32], steps: usize) -> Vec<f32> {
     let t_max = steps as f32;
     let mut weights = vec![0.0f32; slowdowns.len() * steps * steps];
     for (i, &w) in slowdowns.iter().enumerate() {
@@ -104,10 +115,30 @@ pub fn slowdown_warp(slowdowns: &[f32], steps: usize, device: &Device) -> Option
             }
         }
     }
-    Some(Tensor::from_data(
-        burn::tensor::TensorData::new(weights, [slowdowns.len(), steps, steps]),
-        device,
-    ))
+    weights
+}
+
+/// One future slowed (or hurried) by factor `w` as [`slowdown_warp`] slows a mode: `future`
+/// holds the positions at steps 1‥T in any frame, `origin` the position at step 0 in the same
+/// frame.
+pub fn slowed_future(future: &[[f64; 2]], origin: [f64; 2], w: f32) -> Vec<[f64; 2]> {
+    if w == 1.0 {
+        return future.to_vec(); // the warp is the identity: keep the points to the bit
+    }
+    let steps = future.len();
+    let weights = slowdown_weights(&[w], steps);
+    (0..steps)
+        .map(|s| {
+            let row = &weights[s * steps..(s + 1) * steps];
+            let mut p = origin;
+            for (&wj, q) in row.iter().zip(future) {
+                let wj = f64::from(wj);
+                p[0] += wj * (q[0] - origin[0]);
+                p[1] += wj * (q[1] - origin[1]);
+            }
+            p
+        })
+        .collect()
 }
 
 /// The largest factor of [`slowdown_warp`] (larger ones are clamped to it): a copy that ends
@@ -166,6 +197,47 @@ mod tests {
         let speeds: Vec<f32> = (1..80).map(|s| x(s) - x(s - 1)).collect();
         assert!(speeds.windows(2).all(|w| w[1] <= w[0] + 1e-4), "eases off");
         assert!((speeds[78] - 0.5).abs() < 0.02, "{}", speeds[78]);
+    }
+
+    /// One future slowed on the host, in a frame whose origin is not B's position, is the
+    /// tensor warp's copy of it in B's frame, moved back.
+    #[test]
+    fn a_slowed_future_in_any_frame_is_the_warped_mode() {
+        let device = Device::flex();
+        let modes = two_modes(&device);
+        let warp = slowdown_warp(&[0.5], 80, &device).unwrap();
+        let warped: Vec<f32> = warp
+            .expand([2, 80, 80])
+            .matmul(modes.clone())
+            .into_data()
+            .try_to_vec()
+            .unwrap();
+        let xy: Vec<f32> = modes.into_data().try_to_vec().unwrap();
+        let origin = [120.0, -35.0];
+        let turning: Vec<[f64; 2]> = (0..80)
+            .map(|s| {
+                let i = (80 + s) * 2;
+                [
+                    origin[0] + f64::from(xy[i]),
+                    origin[1] + f64::from(xy[i + 1]),
+                ]
+            })
+            .collect();
+        let slowed = slowed_future(&turning, origin, 0.5);
+        assert_eq!(slowed.len(), 80);
+        for (s, p) in slowed.iter().enumerate() {
+            let i = (80 + s) * 2;
+            let want = [f64::from(warped[i]), f64::from(warped[i + 1])];
+            assert!(
+                (p[0] - origin[0] - want[0]).abs() < 1e-3,
+                "{s}: {p:?} {want:?}"
+            );
+            assert!(
+                (p[1] - origin[1] - want[1]).abs() < 1e-3,
+                "{s}: {p:?} {want:?}"
+            );
+        }
+        assert_eq!(slowed_future(&turning, origin, 1.0)[41], turning[41]);
     }
 
     /// A factor above 1 hurries the mode along its path: factor 1.5 on the turning mode

@@ -83,9 +83,12 @@ pub fn psi_true_of_role(truth: &GroundTruth, role: &LabelledRole) -> Vec<Option<
 /// (the labelled futures after the `samples` sampled ones,
 /// [`scbg_courtesy::label::LabelOptions::lane_move_steps`]), the scene replayed with B
 /// following that future and A and the others reacting by the synthetic world's rule
-/// ([`scbg_synth::ClosedLoop::replayed_scene`], id `<scene>~rx<k>`, `k` the future's index). As
-/// training data they show the conditional predictor what A does when B drives the kind of
-/// future B's marginal samples are — the futures whose labels the generators rank. Empty for
+/// ([`scbg_synth::ClosedLoop::replayed_scene`], id `<scene>~rx<k>`, `k` the future's index).
+/// The sampled futures take turns being followed as they are and slowed by each of the
+/// generator's [`scbg_generator::DEFAULT_MODE_SLOWDOWNS`] ([`scbg_generator::slowed_future`]):
+/// the first as it is, the second at 0.75, the third at 0.5. As training data they show the
+/// conditional predictor what A does when B drives the kinds of future the generator chooses
+/// among — B's modes and their slowed copies, whose courtesy J_φ ranks. Empty for
 /// a role the ground truth does not describe; a future the oracle cannot replay is skipped.
 pub fn reaction_scenes(
     truth: &GroundTruth,
@@ -103,12 +106,20 @@ pub fn reaction_scenes(
     let futures = role.labels.futures_in_a.iter().enumerate();
     let sampled = futures.clone().skip(1).take(per_role.min(samples));
     let moves = futures.skip(1 + samples).take(per_role);
+    // B's sampled futures as they are, then slowed as the generator slows its modes.
+    let (x0, y0) = role.b.world_from_agent.world_from_agent(0.0, 0.0);
+    let factors: Vec<f32> = std::iter::once(1.0)
+        .chain(scbg_generator::DEFAULT_MODE_SLOWDOWNS)
+        .collect();
+    let sampled = sampled.enumerate().map(|(i, (k, f))| {
+        let future = world_points(&role.a.world_from_agent, f);
+        let w = factors[i % factors.len()];
+        (k, scbg_generator::slowed_future(&future, [x0, y0], w))
+    });
+    let moves = moves.map(|(k, f)| (k, world_points(&role.a.world_from_agent, f)));
     sampled
         .chain(moves)
-        .filter_map(|(k, f)| {
-            let future = world_points(&role.a.world_from_agent, f);
-            world.replayed_scene(&future, &format!("rx{k}")).ok()
-        })
+        .filter_map(|(k, future)| world.replayed_scene(&future, &format!("rx{k}")).ok())
         .collect()
 }
 

@@ -39,9 +39,10 @@ pub struct LabelArgs {
     #[arg(long, default_value_t = 1)]
     pub num_shards: usize,
     /// With --ground-truth: also write reaction siblings to this folder, the scene replayed
-    /// with B following each of its first 3 sampled futures and A and the others reacting by
-    /// the synthetic world's rule (`reaction-NNNNN.tfrecord`; prepare it with `scbg data
-    /// prepare` and give it to `scbg train predictor` as `counterfactual_cache`).
+    /// with B following each of its first 3 sampled futures (the second and third slowed to
+    /// 0.75 and 0.5 of their speed by the horizon, as the generator slows B's modes) and A and
+    /// the others reacting by the synthetic world's rule (`reaction-NNNNN.tfrecord`; prepare it
+    /// with `scbg data prepare` and give it to `scbg train predictor` as `counterfactual_cache`).
     #[arg(long, requires = "ground_truth")]
     pub reaction_siblings: Option<PathBuf>,
 }

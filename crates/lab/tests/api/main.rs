@@ -121,6 +121,22 @@ fn label_train_and_generate_through_the_library() {
         .find(|r| r.scenario_id == examples[0].scenario_id && r.sample == 0)
         .unwrap();
     assert_eq!(first.psi, examples[0].psi[0]);
+    // Sibling `~rx2` replays the ground-truth role's second sampled future slowed as the
+    // generator slows its first copies (factor 0.75): it ends at the slowed future's last
+    // point, short of the future's own.
+    let e = examples
+        .iter()
+        .find(|e| e.scenario_id == t.scenario_id && e.b.target_track_id == t.b_id)
+        .unwrap();
+    let future = scbg_lab::fidelity::world_points(&e.b.world_from_agent, &e.futures_b[2]);
+    let origin = e.b.world_from_agent.world_from_agent(0.0, 0.0);
+    let slowed = scbg_generator::slowed_future(&future, [origin.0, origin.1], 0.75);
+    let b = scene.tracks.iter().find(|k| k.id == t.b_id).unwrap();
+    let end = b.states.last().unwrap();
+    let off = |p: [f64; 2]| (end.x_m - p[0]).hypot(end.y_m - p[1]);
+    let travelled = |p: [f64; 2]| (p[0] - origin.0).hypot(p[1] - origin.1);
+    assert!(off(slowed[79]) < 0.5, "{} m", off(slowed[79]));
+    assert!(travelled(slowed[79]) < 0.9 * travelled(future[79]));
 
     let saved = generator::train_variant(
         &predictors,
