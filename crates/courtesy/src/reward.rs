@@ -40,20 +40,7 @@ impl Reward {
     pub fn evaluate(self, xy: Tensor<3>, step_secs: f32) -> Tensor<1> {
         let [n, t, _] = xy.dims();
         match self {
-            Self::AverageSpeed => {
-                let device = xy.device();
-                let prev = Tensor::cat(
-                    vec![
-                        Tensor::zeros([n, 1, 2], &device),
-                        xy.clone().narrow(1, 0, t - 1),
-                    ],
-                    1,
-                );
-                let d = xy - prev;
-                // sqrt(|d|² + ε): differentiable at standstill.
-                let speed = (d.powf_scalar(2.0).sum_dim(2) + 1e-6).sqrt() / step_secs;
-                speed.mean_dim(1).reshape([n])
-            }
+            Self::AverageSpeed => scbg_model::loss::average_speed(xy, step_secs),
             Self::Progress => {
                 xy.narrow(1, t - 1, 1).narrow(2, 0, 1).reshape([n]) / (t as f32 * step_secs)
             }

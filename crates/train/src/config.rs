@@ -48,6 +48,10 @@ pub struct TrainConfig {
     /// Weight of the mode-classification cross-entropy added to the GMM NLL
     /// (`scbg_model::loss::mode_classification_loss`; 0 = NLL only).
     pub classification_weight: f32,
+    /// Weight of the within-group speed contrast added for the reaction siblings of one scene
+    /// (`scbg_model::loss::group_speed_contrast`: how B's future moves A's expected average
+    /// speed, the difference the courtesy measure ranks by; 0 = none).
+    pub reaction_contrast_weight: f32,
     /// `flex`, `tch`, `cuda` or `vulkan` (each when built with it).
     pub backend: String,
     /// Data-parallel chunks per step: 1 (default) runs the batch in one graph; N > 1 splits
@@ -111,6 +115,7 @@ impl Default for TrainConfig {
             max_targets_per_window: 4,
             lr_schedule: "cosine".into(),
             classification_weight: 1.0,
+            reaction_contrast_weight: 0.0,
             backend: "flex".into(),
             data_parallel_chunks: 1,
             counterfactual_cache: None,
@@ -146,7 +151,7 @@ impl TrainConfig {
     }
 
     /// Checks the preset, positive `batch_size` and `epochs`, `validation_fraction` in
-    /// `[0, 1)`, a known `lr_schedule`, a finite, non-negative `classification_weight` and a
+    /// `[0, 1)`, a known `lr_schedule`, finite, non-negative loss weights and a
     /// `reaction_cache` wherever `reaction_from_epoch` is set.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.model_config()?;
@@ -165,6 +170,11 @@ impl TrainConfig {
                 "lr_schedule {:?}: expected \"plateau\" or \"cosine\"",
                 self.lr_schedule
             )));
+        }
+        if !self.reaction_contrast_weight.is_finite() || self.reaction_contrast_weight < 0.0 {
+            return Err(ConfigError::Invalid(
+                "reaction_contrast_weight must be finite and >= 0".into(),
+            ));
         }
         if !self.classification_weight.is_finite() || self.classification_weight < 0.0 {
             return Err(ConfigError::Invalid(

@@ -374,6 +374,83 @@ fn an_epoch_with_joined_samples_keeps_its_length_and_takes_them_all() {
 }
 
 #[test]
+fn reaction_siblings_of_one_role_share_a_group_and_a_batch() {
+    let dir = tempfile::tempdir().unwrap();
+    tiny_cache(dir.path(), 3);
+    let config = tiny_config(1);
+    let dataset = scbg_features::cache::PreparedDataset::open(dir.path()).unwrap();
+    let (train_set, _) = crate::data::load_samples(&dataset, &config).unwrap();
+    let base = train_set
+        .samples
+        .iter()
+        .find(|s| s.has_condition() && s.future_valid.iter().all(|&v| v))
+        .expect("a fully valid pair sample")
+        .clone();
+    let sibling = |k: usize| scbg_features::AgentSample {
+        scenario_id: format!("{}~rx{k}", base.scenario_id),
+        condition_required: true,
+        ..base.clone()
+    };
+    use crate::trainer::group_key;
+    // The logged sample is in no group; its siblings are in one, another target in another.
+    assert_eq!(group_key(&base), None);
+    assert!(group_key(&sibling(1)).is_some());
+    assert_eq!(group_key(&sibling(1)), group_key(&sibling(7)));
+    let other = scbg_features::AgentSample {
+        target_track_id: base.target_track_id + 1,
+        ..sibling(1)
+    };
+    assert_ne!(group_key(&other), group_key(&sibling(1)));
+    let mut partial = sibling(2);
+    partial.future_valid[3] = false;
+    assert_eq!(group_key(&partial), None);
+    // Members move up to their first one; the rest keep their order; nothing is lost.
+    let keys = [
+        None,
+        Some(1),
+        None,
+        Some(2),
+        Some(1),
+        None,
+        Some(1),
+        Some(2),
+    ];
+    let order = crate::trainer::keep_groups_together(vec![0, 1, 2, 3, 4, 5, 6, 7], &keys);
+    assert_eq!(order, [0, 1, 4, 6, 2, 3, 7, 5]);
+    let order = crate::trainer::keep_groups_together(vec![7, 5, 4, 0, 1, 2, 3, 6], &keys);
+    assert_eq!(order, [7, 3, 5, 4, 1, 6, 0, 2]);
+    // In a batch, two siblings whose A drives at different speeds add the contrast.
+    let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
+    let mut faster = sibling(2);
+    faster.future_xy_m.iter_mut().for_each(|v| *v *= 1.5);
+    let refs = [&sibling(1), &base, &faster];
+    let device = burn::tensor::Device::flex().autodiff();
+    device.seed(5);
+    let model = config.model_config().unwrap().init(&device);
+    let augment = scbg_model::BatchAugment {
+        condition_dropout: 0.0,
+        history_mask_prob: 0.0,
+    };
+    let loss = |weight: f32, chunks: usize| {
+        let config = TrainConfig {
+            reaction_contrast_weight: weight,
+            data_parallel_chunks: chunks,
+            ..config.clone()
+        };
+        let mut rng = <rand_pcg::Pcg64Mcg as rand::SeedableRng>::seed_from_u64(0);
+        crate::trainer::loss_and_grads(&model, &refs, &augment, &mut rng, &device, &config).0
+    };
+    let (plain, with) = (loss(0.0, 1), loss(1.0, 1));
+    assert!(with > plain + 1e-3, "{with} vs {plain}");
+    // Split across chunks (one sibling in each), the group has nothing to compare with.
+    let split = loss(1.0, 2);
+    assert!(
+        (split - loss(0.0, 2)).abs() <= 1e-4 * (1.0 + split.abs()),
+        "{split}"
+    );
+}
+
+#[test]
 fn reaction_samples_join_at_their_epoch_made_from_the_run_itself() {
     let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
     let dir = tempfile::tempdir().unwrap();

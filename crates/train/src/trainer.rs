@@ -12,7 +12,7 @@ use rand::seq::SliceRandom;
 use rayon::prelude::*;
 use scbg_features::AgentSample;
 use scbg_features::cache::{CacheError, PreparedDataset};
-use scbg_model::loss::mode_classification_loss;
+use scbg_model::loss::{group_centring, group_speed_contrast, mode_classification_loss};
 use scbg_model::{Batch, BatchAugment, Multipath, gmm_nll};
 
 use crate::checkpoint::{Checkpoint, CheckpointError, EpochReport, TrainState};
@@ -171,7 +171,11 @@ pub fn train(
             );
             train_set.samples.extend(joining);
         }
-        let order = epoch_order(base_len, train_set.len(), config.seed, epoch);
+        let mut order = epoch_order(base_len, train_set.len(), config.seed, epoch);
+        if config.reaction_contrast_weight > 0.0 && reaction_joined {
+            let keys: Vec<Option<u64>> = train_set.samples.iter().map(group_key).collect();
+            order = keep_groups_together(order, &keys);
+        }
         progress.epoch_start(epoch, order.len().div_ceil(config.batch_size));
         let epoch_start_model = model.clone();
         let (mut loss_sum, mut loss_n, mut skipped) = (0.0f64, 0usize, 0usize);
@@ -301,7 +305,18 @@ pub(crate) fn epoch_order(base_len: usize, len: usize, seed: u64, epoch: usize) 
 }
 
 /// The training loss of one batch (GMM NLL plus the weighted mode classification) on `model`.
-fn batch_loss(model: &Multipath, batch: &Batch, config: &TrainConfig) -> Tensor<1> {
+/// The step of the samples' futures for [`group_speed_contrast`]'s speeds: WOMD's 10 Hz,
+/// which the synthetic world shares (reaction siblings come only from it).
+const CONTRAST_STEP_SECS: f32 = 0.1;
+
+/// With [`TrainConfig::reaction_contrast_weight`] and reaction siblings of one scene among
+/// `samples` (the batch's), also their [`group_speed_contrast`].
+fn batch_loss(
+    model: &Multipath,
+    batch: &Batch,
+    samples: &[&AgentSample],
+    config: &TrainConfig,
+) -> Tensor<1> {
     let out = model.forward(batch);
     let mut loss = gmm_nll(&out, batch.future_xy.clone(), batch.future_valid.clone());
     if config.classification_weight != 0.0 {
@@ -309,7 +324,66 @@ fn batch_loss(model: &Multipath, batch: &Batch, config: &TrainConfig) -> Tensor<
             + mode_classification_loss(&out, batch.future_xy.clone(), batch.future_valid.clone())
                 * config.classification_weight;
     }
+    if config.reaction_contrast_weight > 0.0 {
+        let keys: Vec<Option<u64>> = samples.iter().map(|s| group_key(s)).collect();
+        let (centring, grouped) = group_centring(&keys);
+        if grouped > 0 {
+            let b = keys.len();
+            let centring = Tensor::<2>::from_data(
+                burn::tensor::TensorData::new(centring, [b, b]),
+                &batch.future_xy.device(),
+            );
+            let contrast = group_speed_contrast(
+                &out,
+                batch.future_xy.clone(),
+                centring,
+                grouped,
+                CONTRAST_STEP_SECS,
+            );
+            loss = loss + contrast * config.reaction_contrast_weight;
+        }
+    }
     loss
+}
+
+/// The group of a sample for [`group_speed_contrast`]: reaction siblings (samples whose
+/// condition is required) of one scene, window and target, fully valid, share one; every other
+/// sample has none.
+pub(crate) fn group_key(sample: &AgentSample) -> Option<u64> {
+    if !sample.condition_required || !sample.future_valid.iter().all(|&v| v) {
+        return None;
+    }
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in scbg_base::split::base_id(&sample.scenario_id).bytes() {
+        h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    Some(mix(
+        mix(h, sample.window.current_step as u64),
+        sample.target_track_id as u64,
+    ))
+}
+
+/// `order` with the members of each group moved up to where its first member stands (the
+/// rest keep their order), so that a group's samples share a batch unless it ends there.
+pub(crate) fn keep_groups_together(order: Vec<usize>, keys: &[Option<u64>]) -> Vec<usize> {
+    let mut members: std::collections::HashMap<u64, Vec<usize>> = Default::default();
+    for &i in &order {
+        if let Some(k) = keys[i] {
+            members.entry(k).or_default().push(i);
+        }
+    }
+    let mut out = Vec::with_capacity(order.len());
+    for i in order {
+        match keys[i] {
+            None => out.push(i),
+            Some(k) => {
+                if let Some(group) = members.remove(&k) {
+                    out.extend(group);
+                }
+            }
+        }
+    }
+    out
 }
 
 /// One step's loss value and gradients (`None` when the loss is not finite: the batch is
@@ -328,27 +402,28 @@ pub fn loss_and_grads(
     let chunk_len = refs.len().div_ceil(config.data_parallel_chunks.max(1));
     if chunk_len >= refs.len() {
         let batch = Batch::from_samples(refs, augment, rng, device);
-        let loss = batch_loss(model, &batch, config);
+        let loss = batch_loss(model, &batch, refs, config);
         let value: f32 = loss.clone().into_scalar();
         let grads = value
             .is_finite()
             .then(|| GradientsParams::from_grads(loss.backward(), model));
         return (value, grads);
     }
-    let work: Vec<(f32, Batch, Multipath)> = refs
+    let work: Vec<(f32, Batch, &[&AgentSample], Multipath)> = refs
         .chunks(chunk_len)
         .map(|c| {
             (
                 c.len() as f32 / refs.len() as f32,
                 Batch::from_samples(c, augment, rng, device),
+                c,
                 model.clone().fork(device),
             )
         })
         .collect();
     let mut parts: Vec<(f32, Option<(GradientsParams, Multipath)>)> = work
         .into_par_iter()
-        .map(|(share, batch, local)| {
-            let loss = batch_loss(&local, &batch, config).mul_scalar(share);
+        .map(|(share, batch, samples, local)| {
+            let loss = batch_loss(&local, &batch, samples, config).mul_scalar(share);
             let value: f32 = loss.clone().into_scalar();
             let grads = value
                 .is_finite()
