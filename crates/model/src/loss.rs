@@ -264,25 +264,15 @@ mod tests {
         assert_eq!(grouped, 2);
         assert_eq!(c, vec![0.5, -0.5, 0.0, -0.5, 0.5, 0.0, 0.0, 0.0, 0.0]);
         let c = || Tensor::<2>::from_data(TensorData::new(c.clone(), [3, 3]), &d);
+        let contrast = |predicted: [f32; 3]| -> f32 {
+            group_speed_contrast(&out(predicted), target([1.0, 2.0, 3.0]), c(), grouped, 1.0)
+                .into_scalar()
+        };
         // A prediction off by the same 5 m/s for both members, and anything for the loner: 0.
-        let level: f32 = group_speed_contrast(
-            &out([6.0, 7.0, 40.0]),
-            target([1.0, 2.0, 3.0]),
-            c(),
-            grouped,
-            1.0,
-        )
-        .into_scalar();
+        let level = contrast([6.0, 7.0, 40.0]);
         assert!(level.abs() < 1e-3, "{level}");
         // Equal predictions where the targets differ by 1 m/s: each member off by ½ → ¼.
-        let flat: f32 = group_speed_contrast(
-            &out([1.5, 1.5, 3.0]),
-            target([1.0, 2.0, 3.0]),
-            c(),
-            grouped,
-            1.0,
-        )
-        .into_scalar();
+        let flat = contrast([1.5, 1.5, 3.0]);
         assert!((flat - 0.25).abs() < 1e-3, "{flat}");
         // A group of one is no group.
         assert_eq!(group_centring(&[Some(1), Some(2)]), (vec![0.0; 4], 0));

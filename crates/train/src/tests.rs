@@ -299,6 +299,24 @@ fn counterfactual_siblings_add_conditional_samples_of_the_sdc_in_the_training_sp
     assert!(required.iter().all(|s| s.scenario_id.contains('~')));
 }
 
+/// The model of `config` on an autodiff device seeded 5, and no batch augmentation.
+fn seeded_model(
+    config: &TrainConfig,
+) -> (
+    scbg_model::Multipath,
+    burn::tensor::Device,
+    scbg_model::BatchAugment,
+) {
+    let device = burn::tensor::Device::flex().autodiff();
+    device.seed(5);
+    let model = config.model_config().unwrap().init(&device);
+    let augment = scbg_model::BatchAugment {
+        condition_dropout: 0.0,
+        history_mask_prob: 0.0,
+    };
+    (model, device, augment)
+}
+
 #[test]
 fn data_parallel_chunks_sum_to_the_whole_batch_gradient() {
     use burn::optim::SgdConfig;
@@ -310,14 +328,8 @@ fn data_parallel_chunks_sum_to_the_whole_batch_gradient() {
     let (train_set, _) = crate::data::load_samples(&dataset, &config).unwrap();
     let refs: Vec<&scbg_features::AgentSample> = train_set.samples.iter().take(11).collect();
     assert_eq!(refs.len(), 11, "a batch that 3 chunks split unevenly");
-    let device = burn::tensor::Device::flex().autodiff();
-    device.seed(5);
-    let model = config.model_config().unwrap().init(&device);
     // No augmentation: every chunking sees the same samples.
-    let augment = scbg_model::BatchAugment {
-        condition_dropout: 0.0,
-        history_mask_prob: 0.0,
-    };
+    let (model, device, augment) = seeded_model(&config);
     let step = |chunks: usize| {
         let config = TrainConfig {
             data_parallel_chunks: chunks,
@@ -424,13 +436,7 @@ fn reaction_siblings_of_one_role_share_a_group_and_a_batch() {
     let mut faster = sibling(2);
     faster.future_xy_m.iter_mut().for_each(|v| *v *= 1.5);
     let refs = [&sibling(1), &base, &faster];
-    let device = burn::tensor::Device::flex().autodiff();
-    device.seed(5);
-    let model = config.model_config().unwrap().init(&device);
-    let augment = scbg_model::BatchAugment {
-        condition_dropout: 0.0,
-        history_mask_prob: 0.0,
-    };
+    let (model, device, augment) = seeded_model(&config);
     let loss = |weight: f32, chunks: usize| {
         let config = TrainConfig {
             reaction_contrast_weight: weight,
