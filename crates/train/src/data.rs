@@ -25,19 +25,23 @@ pub fn split_of(scenario_id: &str, validation_fraction: f64) -> Split {
     if scbg_base::split::is_held_out(scenario_id) {
         return Split::Validation;
     }
-    let base = scbg_base::split::base_id(scenario_id);
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in base.bytes() {
-        h ^= u64::from(b);
-        h = h.wrapping_mul(0x0000_0100_0000_01b3);
-    }
     // FNV's high bits are poorly mixed for short, similar ids: finish with SplitMix64's mixer.
-    let h = scbg_base::seed::mix(h, 0);
+    let h = scbg_base::seed::mix(base_id_hash(scenario_id), 0);
     if ((h >> 11) as f64 / (1u64 << 53) as f64) < validation_fraction {
         Split::Validation
     } else {
         Split::Train
     }
+}
+
+/// FNV-1a of a scenario id's base (the part before the first `~`, shared by its variants).
+pub(crate) fn base_id_hash(scenario_id: &str) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for b in scbg_base::split::base_id(scenario_id).bytes() {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
 }
 
 /// Samples of one split: marginal samples and both directions of each pair (conditional).

@@ -154,6 +154,11 @@ pub fn train(
     let base_len = train_set.len();
     let batches = base_len.div_ceil(config.batch_size);
     let mut reaction_joined = false;
+    // With the speed contrast: each training sample's sibling group (again when siblings join).
+    let sibling_groups = |samples: &[AgentSample]| {
+        (config.reaction_contrast_weight > 0.0).then(|| samples.iter().map(group_key).collect())
+    };
+    let mut group_keys: Option<Vec<Option<u64>>> = sibling_groups(&train_set.samples);
     for epoch in state.epoch..config.epochs {
         let started = Instant::now();
         if let (Some(dir), Some(from)) = (&config.reaction_cache, config.reaction_from_epoch)
@@ -170,11 +175,11 @@ pub fn train(
                 joining.len()
             );
             train_set.samples.extend(joining);
+            group_keys = sibling_groups(&train_set.samples);
         }
         let mut order = epoch_order(base_len, train_set.len(), config.seed, epoch);
-        if config.reaction_contrast_weight > 0.0 && reaction_joined {
-            let keys: Vec<Option<u64>> = train_set.samples.iter().map(group_key).collect();
-            order = keep_groups_together(order, &keys);
+        if let Some(keys) = &group_keys {
+            order = keep_groups_together(order, keys);
         }
         progress.epoch_start(epoch, order.len().div_ceil(config.batch_size));
         let epoch_start_model = model.clone();
@@ -304,12 +309,12 @@ pub(crate) fn epoch_order(base_len: usize, len: usize, seed: u64, epoch: usize) 
     order
 }
 
-/// The training loss of one batch (GMM NLL plus the weighted mode classification) on `model`.
 /// The step of the samples' futures for [`group_speed_contrast`]'s speeds: WOMD's 10 Hz,
 /// which the synthetic world shares (reaction siblings come only from it).
 const CONTRAST_STEP_SECS: f32 = 0.1;
 
-/// With [`TrainConfig::reaction_contrast_weight`] and reaction siblings of one scene among
+/// The training loss of one batch (GMM NLL plus the weighted mode classification) on `model`;
+/// with [`TrainConfig::reaction_contrast_weight`] and reaction siblings of one role among
 /// `samples` (the batch's), also their [`group_speed_contrast`].
 fn batch_loss(
     model: &Multipath,
@@ -353,10 +358,7 @@ pub(crate) fn group_key(sample: &AgentSample) -> Option<u64> {
     if !sample.condition_required || !sample.future_valid.iter().all(|&v| v) {
         return None;
     }
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    for b in scbg_base::split::base_id(&sample.scenario_id).bytes() {
-        h = (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3);
-    }
+    let h = crate::data::base_id_hash(&sample.scenario_id);
     Some(mix(
         mix(h, sample.window.current_step as u64),
         sample.target_track_id as u64,
