@@ -65,8 +65,9 @@ pub struct PredictorConfig {
     pub reaction_siblings: usize,
     /// The last this-many epochs train with the reaction siblings.
     pub reaction_epochs: usize,
-    /// Weight of the speed contrast within each scene's reaction siblings (0: none).
-    pub reaction_contrast: f32,
+    /// Weight of the speed contrast within each scene's siblings, counterfactual and reaction
+    /// (0: none).
+    pub sibling_contrast: f32,
 }
 
 /// `[labels]`.

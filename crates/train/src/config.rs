@@ -48,10 +48,13 @@ pub struct TrainConfig {
     /// Weight of the mode-classification cross-entropy added to the GMM NLL
     /// (`scbg_model::loss::mode_classification_loss`; 0 = NLL only).
     pub classification_weight: f32,
-    /// Weight of the within-group speed contrast added for the reaction siblings of one scene
-    /// (`scbg_model::loss::group_speed_contrast`: how B's future moves A's expected average
-    /// speed, the difference the courtesy measure ranks by; 0 = none).
-    pub reaction_contrast_weight: f32,
+    /// Weight of the within-group speed contrast added for the conditional samples of one
+    /// scene, window, target and condition: the logged sample with its counterfactual and
+    /// reaction siblings (`scbg_model::loss::group_speed_contrast`: how B's future moves A's
+    /// expected average speed, the difference the courtesy measure ranks by; 0 = none).
+    /// Checkpoints written by earlier versions name it `reaction_contrast_weight`.
+    #[serde(alias = "reaction_contrast_weight")]
+    pub sibling_contrast_weight: f32,
     /// `flex`, `tch`, `cuda` or `vulkan` (each when built with it).
     pub backend: String,
     /// Data-parallel chunks per step: 1 (default) runs the batch in one graph; N > 1 splits
@@ -115,7 +118,7 @@ impl Default for TrainConfig {
             max_targets_per_window: 4,
             lr_schedule: "cosine".into(),
             classification_weight: 1.0,
-            reaction_contrast_weight: 0.0,
+            sibling_contrast_weight: 0.0,
             backend: "flex".into(),
             data_parallel_chunks: 1,
             counterfactual_cache: None,
@@ -171,9 +174,9 @@ impl TrainConfig {
                 self.lr_schedule
             )));
         }
-        if !self.reaction_contrast_weight.is_finite() || self.reaction_contrast_weight < 0.0 {
+        if !self.sibling_contrast_weight.is_finite() || self.sibling_contrast_weight < 0.0 {
             return Err(ConfigError::Invalid(
-                "reaction_contrast_weight must be finite and >= 0".into(),
+                "sibling_contrast_weight must be finite and >= 0".into(),
             ));
         }
         if !self.classification_weight.is_finite() || self.classification_weight < 0.0 {
@@ -265,5 +268,26 @@ mod tests {
             .validate()
             .is_ok()
         );
+    }
+
+    /// The speed contrast's weight reads under its name and under the one older checkpoints
+    /// carry; a negative weight is refused.
+    #[test]
+    fn sibling_contrast_weight_reads_both_names_and_is_checked() {
+        for text in [
+            "sibling_contrast_weight = 4.0",
+            "reaction_contrast_weight = 4.0",
+        ] {
+            assert_eq!(
+                TrainConfig::from_toml(text)
+                    .unwrap()
+                    .sibling_contrast_weight,
+                4.0
+            );
+        }
+        let err = TrainConfig::from_toml("sibling_contrast_weight = -1.0")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("sibling_contrast_weight"), "{err}");
     }
 }

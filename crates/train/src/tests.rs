@@ -386,7 +386,7 @@ fn an_epoch_with_joined_samples_keeps_its_length_and_takes_them_all() {
 }
 
 #[test]
-fn reaction_siblings_of_one_role_share_a_group_and_a_batch() {
+fn siblings_of_one_role_share_a_group_and_a_batch() {
     let dir = tempfile::tempdir().unwrap();
     tiny_cache(dir.path(), 3);
     let config = tiny_config(1);
@@ -398,21 +398,36 @@ fn reaction_siblings_of_one_role_share_a_group_and_a_batch() {
         .find(|s| s.has_condition() && s.future_valid.iter().all(|&v| v))
         .expect("a fully valid pair sample")
         .clone();
-    let sibling = |k: usize| scbg_features::AgentSample {
-        scenario_id: format!("{}~rx{k}", base.scenario_id),
-        condition_required: true,
+    let variant = |mark: &str| scbg_features::AgentSample {
+        scenario_id: format!("{}~{mark}", base.scenario_id),
         ..base.clone()
     };
+    let sibling = |k: usize| scbg_features::AgentSample {
+        condition_required: true,
+        ..variant(&format!("rx{k}"))
+    };
     use crate::trainer::group_key;
-    // The logged sample is in no group; its siblings are in one, another target in another.
-    assert_eq!(group_key(&base), None);
-    assert!(group_key(&sibling(1)).is_some());
+    // The logged sample, its counterfactual siblings and its reaction siblings share a group;
+    // another target, another condition, no condition or a partial future do not.
+    assert!(group_key(&base).is_some());
+    assert_eq!(group_key(&base), group_key(&variant("cf0")));
+    assert_eq!(group_key(&base), group_key(&sibling(1)));
     assert_eq!(group_key(&sibling(1)), group_key(&sibling(7)));
     let other = scbg_features::AgentSample {
         target_track_id: base.target_track_id + 1,
         ..sibling(1)
     };
     assert_ne!(group_key(&other), group_key(&sibling(1)));
+    let other_condition = scbg_features::AgentSample {
+        condition_track_id: base.condition_track_id.map(|id| id + 1),
+        ..sibling(1)
+    };
+    assert_ne!(group_key(&other_condition), group_key(&sibling(1)));
+    let marginal = scbg_features::AgentSample {
+        condition_track_id: None,
+        ..base.clone()
+    };
+    assert_eq!(group_key(&marginal), None);
     let mut partial = sibling(2);
     partial.future_valid[3] = false;
     assert_eq!(group_key(&partial), None);
@@ -433,27 +448,39 @@ fn reaction_siblings_of_one_role_share_a_group_and_a_batch() {
     assert_eq!(order, [7, 3, 5, 4, 1, 6, 0, 2]);
     // In a batch, two siblings whose A drives at different speeds add the contrast.
     let _guard = SEED_LOCK.lock().unwrap_or_else(|e| e.into_inner());
-    let mut faster = sibling(2);
-    faster.future_xy_m.iter_mut().for_each(|v| *v *= 1.5);
-    let refs = [&sibling(1), &base, &faster];
+    let faster = |s: &scbg_features::AgentSample| {
+        let mut s = s.clone();
+        s.future_xy_m.iter_mut().for_each(|v| *v *= 1.5);
+        s
+    };
     let (model, device, augment) = seeded_model(&config);
-    let loss = |weight: f32, chunks: usize| {
+    let loss = |refs: &[&scbg_features::AgentSample], weight: f32, chunks: usize, dropout: f64| {
         let config = TrainConfig {
-            reaction_contrast_weight: weight,
+            sibling_contrast_weight: weight,
             data_parallel_chunks: chunks,
             ..config.clone()
         };
+        let augment = scbg_model::BatchAugment {
+            condition_dropout: dropout,
+            ..augment
+        };
         let mut rng = <rand_pcg::Pcg64Mcg as rand::SeedableRng>::seed_from_u64(0);
-        crate::trainer::loss_and_grads(&model, &refs, &augment, &mut rng, &device, &config).0
+        crate::trainer::loss_and_grads(&model, refs, &augment, &mut rng, &device, &config).0
     };
-    let (plain, with) = (loss(0.0, 1), loss(1.0, 1));
+    let same = |a: f32, b: f32| (a - b).abs() <= 1e-4 * (1.0 + a.abs());
+    let refs = [&sibling(1), &marginal, &faster(&sibling(2))];
+    let (plain, with) = (loss(&refs, 0.0, 1, 0.0), loss(&refs, 1.0, 1, 0.0));
     assert!(with > plain + 1e-3, "{with} vs {plain}");
     // Split across chunks (one sibling in each), the group has nothing to compare with.
-    let split = loss(1.0, 2);
-    assert!(
-        (split - loss(0.0, 2)).abs() <= 1e-4 * (1.0 + split.abs()),
-        "{split}"
-    );
+    let split = loss(&refs, 1.0, 2, 0.0);
+    assert!(same(split, loss(&refs, 0.0, 2, 0.0)), "{split}");
+    // A logged sample and a counterfactual sibling count only while the batch keeps their
+    // condition (a reaction sibling's is never dropped).
+    let refs = [&base, &faster(&variant("cf0"))];
+    let with = loss(&refs, 1.0, 1, 0.0);
+    assert!(with > loss(&refs, 0.0, 1, 0.0) + 1e-3, "{with}");
+    let dropped = loss(&refs, 1.0, 1, 1.0);
+    assert!(same(dropped, loss(&refs, 0.0, 1, 1.0)), "{dropped}");
 }
 
 #[test]

@@ -156,7 +156,7 @@ pub fn train(
     let mut reaction_joined = false;
     // With the speed contrast: each training sample's sibling group (again when siblings join).
     let sibling_groups = |samples: &[AgentSample]| {
-        (config.reaction_contrast_weight > 0.0).then(|| samples.iter().map(group_key).collect())
+        (config.sibling_contrast_weight > 0.0).then(|| samples.iter().map(group_key).collect())
     };
     let mut group_keys: Option<Vec<Option<u64>>> = sibling_groups(&train_set.samples);
     for epoch in state.epoch..config.epochs {
@@ -310,12 +310,13 @@ pub(crate) fn epoch_order(base_len: usize, len: usize, seed: u64, epoch: usize) 
 }
 
 /// The step of the samples' futures for [`group_speed_contrast`]'s speeds: WOMD's 10 Hz,
-/// which the synthetic world shares (reaction siblings come only from it).
+/// which the synthetic world shares (siblings come only from it).
 const CONTRAST_STEP_SECS: f32 = 0.1;
 
 /// The training loss of one batch (GMM NLL plus the weighted mode classification) on `model`;
-/// with [`TrainConfig::reaction_contrast_weight`] and reaction siblings of one role among
-/// `samples` (the batch's), also their [`group_speed_contrast`].
+/// with [`TrainConfig::sibling_contrast_weight`] and siblings of one role among `samples` (the
+/// batch's; see [`group_key`]) whose condition the batch kept, also their
+/// [`group_speed_contrast`].
 fn batch_loss(
     model: &Multipath,
     batch: &Batch,
@@ -329,8 +330,19 @@ fn batch_loss(
             + mode_classification_loss(&out, batch.future_xy.clone(), batch.future_valid.clone())
                 * config.classification_weight;
     }
-    if config.reaction_contrast_weight > 0.0 {
-        let keys: Vec<Option<u64>> = samples.iter().map(|s| group_key(s)).collect();
+    if config.sibling_contrast_weight > 0.0 {
+        // A sample whose condition the batch dropped has no B future to compare by.
+        let kept = batch
+            .condition_flag
+            .clone()
+            .into_data()
+            .try_to_vec::<f32>()
+            .expect("the condition flags are f32");
+        let keys: Vec<Option<u64>> = samples
+            .iter()
+            .zip(&kept)
+            .map(|(s, &k)| if k > 0.5 { group_key(s) } else { None })
+            .collect();
         let (centring, grouped) = group_centring(&keys);
         if grouped > 0 {
             let b = keys.len();
@@ -345,23 +357,29 @@ fn batch_loss(
                 grouped,
                 CONTRAST_STEP_SECS,
             );
-            loss = loss + contrast * config.reaction_contrast_weight;
+            loss = loss + contrast * config.sibling_contrast_weight;
         }
     }
     loss
 }
 
-/// The group of a sample for [`group_speed_contrast`]: reaction siblings (samples whose
-/// condition is required) of one scene, window and target, fully valid, share one; every other
-/// sample has none.
+/// The group of a sample for [`group_speed_contrast`]: conditional samples of one scene
+/// (the logged one and its `~` variants, counterfactual and reaction siblings), window, target
+/// and condition, fully valid, share one; a sample without a condition or with a partial future
+/// has none. Only B's future differs within a group (the synthetic world's siblings share
+/// the history), so the contrast sees how B's future alone moves A's speed.
 pub(crate) fn group_key(sample: &AgentSample) -> Option<u64> {
-    if !sample.condition_required || !sample.future_valid.iter().all(|&v| v) {
+    let condition = sample.condition_track_id?;
+    if !sample.future_valid.iter().all(|&v| v) {
         return None;
     }
     let h = crate::data::base_id_hash(&sample.scenario_id);
     Some(mix(
-        mix(h, sample.window.current_step as u64),
-        sample.target_track_id as u64,
+        mix(
+            mix(h, sample.window.current_step as u64),
+            sample.target_track_id as u64,
+        ),
+        condition as u64,
     ))
 }
 

@@ -69,7 +69,7 @@ pub(super) fn train_predictors(
         learning_rate: options.config.predictor.learning_rate,
         reaction_cache: reacting.then(|| reaction_cache.clone()),
         reaction_from_epoch: reacting.then_some(reaction_from),
-        reaction_contrast_weight: options.config.predictor.reaction_contrast,
+        sibling_contrast_weight: options.config.predictor.sibling_contrast,
         ..Default::default()
     };
     let predictor_dir = out.join("predictor");
