@@ -25,6 +25,9 @@ pub struct Batch {
     pub condition: Tensor<3>,
     /// `[batch, 1]`: 1 = conditional mode, 0 = marginal.
     pub condition_flag: Tensor<2>,
+    /// `[batch]`: `condition_flag` on the host (true = conditional), for per-sample work
+    /// outside the graph without reading the tensor back from the device.
+    pub condition_kept: Vec<bool>,
     /// `[batch, future_steps, 2]`
     pub future_xy: Tensor<3>,
     /// `[batch, future_steps]`
@@ -125,7 +128,7 @@ impl Batch {
         let mut td = Vec::with_capacity(b * (steps - 1) * DIFF_FEATURES);
         let (mut oh, mut od, mut om) = (Vec::new(), Vec::new(), Vec::new());
         let (mut road, mut rm) = (Vec::new(), Vec::new());
-        let (mut cond, mut flag) = (Vec::with_capacity(b * future * 3), Vec::with_capacity(b));
+        let (mut cond, mut kept) = (Vec::with_capacity(b * future * 3), Vec::with_capacity(b));
         let (mut fxy, mut fv) = (
             Vec::with_capacity(b * future * 2),
             Vec::with_capacity(b * future),
@@ -179,7 +182,7 @@ impl Batch {
                 });
                 cond.push(f32::from(u8::from(v)));
             }
-            flag.push(f32::from(u8::from(keep)));
+            kept.push(keep);
             fxy.extend_from_slice(&s.future_xy_m);
             fv.extend(bools(&s.future_valid));
         }
@@ -195,7 +198,8 @@ impl Batch {
             road: t3(road, [b, segments, ROAD_FEATURES]),
             road_mask: t2(rm, [b, segments]),
             condition: t3(cond, [b, future, 3]),
-            condition_flag: t2(flag, [b, 1]),
+            condition_flag: t2(bools(&kept).collect(), [b, 1]),
+            condition_kept: kept,
             future_xy: t3(fxy, [b, future, 2]),
             future_valid: t2(fv, [b, future]),
             lane_path: with_lanes
@@ -226,10 +230,12 @@ impl Batch {
             Some(c) => {
                 self.condition = c;
                 self.condition_flag = Tensor::ones([n, 1], &device);
+                self.condition_kept = vec![true; n];
             }
             None => {
                 self.condition = self.condition.zeros_like();
                 self.condition_flag = Tensor::zeros([n, 1], &device);
+                self.condition_kept = vec![false; n];
             }
         }
         self
@@ -254,6 +260,7 @@ impl Batch {
             road_mask: rep(&self.road_mask, times),
             condition: rep(&self.condition, times),
             condition_flag: rep(&self.condition_flag, times),
+            condition_kept: self.condition_kept.repeat(times),
             future_xy: rep(&self.future_xy, times),
             future_valid: rep(&self.future_valid, times),
             lane_path: self

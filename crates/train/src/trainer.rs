@@ -332,16 +332,10 @@ fn batch_loss(
     }
     if config.sibling_contrast_weight > 0.0 {
         // A sample whose condition the batch dropped has no B future to compare by.
-        let kept = batch
-            .condition_flag
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .expect("the condition flags are f32");
         let keys: Vec<Option<u64>> = samples
             .iter()
-            .zip(&kept)
-            .map(|(s, &k)| if k > 0.5 { group_key(s) } else { None })
+            .zip(&batch.condition_kept)
+            .map(|(s, &kept)| if kept { group_key(s) } else { None })
             .collect();
         let (centring, grouped) = group_centring(&keys);
         if grouped > 0 {

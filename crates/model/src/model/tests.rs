@@ -429,12 +429,20 @@ fn a_required_condition_survives_condition_dropout() {
     };
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(0);
     let batch = Batch::from_samples(&refs, &augment, &mut rng, &Device::flex());
+    assert_eq!(batch.condition_kept, [false, true]);
     let flags = batch
         .condition_flag
+        .clone()
         .into_data()
         .try_to_vec::<f32>()
         .unwrap();
     assert_eq!(flags, vec![0.0, 1.0]);
+    // The host's copy follows the batch through a new condition and a repeat.
+    assert_eq!(batch.repeat(2).condition_kept, [false, true, false, true]);
+    assert_eq!(
+        batch.clone().with_condition(None).condition_kept,
+        [false; 2]
+    );
 }
 
 /// Equal up to float rounding (relative 1e-5).
